@@ -1,0 +1,46 @@
+# Two commands on a fresh machine (Python >= 3.11, pip, make):
+#   make run   -> install into .venv (pinned by constraints.txt) and run the whole pipeline on the bundled data
+#   make test  -> install and run the test suite
+PYTHON ?= python3
+VENV ?= .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.tissuemech-installed
+CORES ?= all
+export NUMBA_CACHE_DIR ?= $(CURDIR)/.numba_cache
+export MPLBACKEND ?= Agg
+export HDF5_USE_FILE_LOCKING ?= FALSE
+
+.PHONY: install run test test-fast lint regression-update lock clean
+
+install: $(STAMP)
+
+$(STAMP): pyproject.toml constraints.txt
+	$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "Python >= 3.11 required"'
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade "pip>=24"
+	$(PY) -m pip install --quiet -c constraints.txt -e ".[test,mesh]"
+	touch $(STAMP)
+
+run: install
+	$(VENV)/bin/snakemake --cores $(CORES)
+
+test: install
+	$(PY) -m pytest -q -n 2 --dist loadgroup
+
+test-fast: install
+	$(PY) -m pytest -q -m "not slow"
+
+lint: install
+	$(VENV)/bin/snakefmt --check Snakefile workflow/
+	$(VENV)/bin/snakemake -n --quiet
+
+# Regenerate the committed reference table of fitted parameters and show what moved.
+regression-update: install
+	$(PY) -m tissuemech.regression --update
+
+# Regenerate the pinned constraints from the current environment.
+lock: install
+	$(PY) -m pip freeze --exclude-editable | grep -v '^tissuemech' > constraints.txt
+
+clean:
+	rm -rf results logs benchmarks/runs .snakemake

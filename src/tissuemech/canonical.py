@@ -1,0 +1,146 @@
+"""Canonical run representation shared by every stage.
+
+A *run* is one test (one block/interval/step of an instrument export) on one sample. After ingest it is an
+:class:`xarray.Dataset` with a single dimension ``point`` and the variables below, always in SI units
+(temperature in degree Celsius, the unit every rheometer reports). Variables absent from an export are
+simply absent from the dataset. Oscillatory tests store *amplitudes* in ``shear_strain``/``shear_stress``.
+
+The table :data:`CANONICAL_VARIABLES` is the single source of names and units: readers map instrument
+labels onto it, the synthetic rheometer writes it, models and fits read it.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+#: canonical variable name -> (units, long name). Strain is dimensionless (0.01 = 1 %).
+CANONICAL_VARIABLES: dict[str, tuple[str, str]] = {
+    "time": ("s", "time since start of the test (interval/step)"),
+    "total_time": ("s", "time since start of the measurement session (elapsed time)"),
+    "shear_strain": ("1", "rim shear strain (amplitude for oscillation)"),
+    "shear_stress": ("Pa", "rim shear stress as reported by the instrument, 2M/(pi R^3) (amplitude for oscillation)"),
+    "shear_rate": ("1/s", "rim shear rate"),
+    "viscosity": ("Pa s", "shear viscosity"),
+    "torque": ("N m", "torque (amplitude for oscillation)"),
+    "deflection_angle": ("rad", "plate deflection angle (amplitude for oscillation)"),
+    "normal_force": ("N", "normal (axial) force, positive when the sample pushes the plates apart"),
+    "gap": ("m", "measuring gap"),
+    "temperature": ("degC", "sample temperature"),
+    "frequency": ("Hz", "oscillation frequency"),
+    "angular_frequency": ("rad/s", "oscillation angular frequency"),
+    "storage_modulus": ("Pa", "storage modulus G'"),
+    "loss_modulus": ("Pa", "loss modulus G''"),
+    "complex_modulus": ("Pa", "magnitude of the complex modulus |G*|"),
+    "loss_factor": ("1", "tan(delta) = G''/G'"),
+    "phase_angle": ("rad", "phase angle delta of the sample"),
+    "raw_phase": ("rad", "raw (uncorrected) phase between torque and displacement"),
+    "complex_viscosity": ("Pa s", "complex viscosity |eta*|"),
+    "relaxation_modulus": ("Pa", "relaxation modulus G(t) = stress / step strain"),
+    "creep_compliance": ("1/Pa", "creep compliance J(t) = strain / stress"),
+    "stretch": ("1", "stretch ratio lambda (uniaxial)"),
+    "nominal_stress": ("Pa", "first Piola-Kirchhoff (nominal) stress P11 (uniaxial) or P12 (simple shear)"),
+    "force": ("N", "indentation/uniaxial force"),
+    "displacement": ("m", "indenter or crosshead displacement"),
+}
+
+#: test kinds accepted in samples.csv ``test``
+TEST_KINDS: tuple[str, ...] = (
+    "amplitude_sweep",
+    "frequency_sweep",
+    "constant_shear_rate",
+    "stress_relaxation",
+    "creep_recovery",
+    "flow_curve",
+    "simple_shear",
+    "uniaxial",
+    "indentation",
+)
+
+#: run attributes always present after ingest
+REQUIRED_RUN_ATTRS: tuple[str, ...] = (
+    "dataset", "run", "test", "specimen", "sample", "order", "source_file", "source_sha256",
+)
+
+
+def sha256_of(path: str | os.PathLike) -> str:
+    """Hex SHA-256 of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def make_run_dataset(columns: Mapping[str, np.ndarray], attrs: Mapping[str, object]) -> xr.Dataset:
+    """Build a canonical run dataset.
+
+    Parameters
+    ----------
+    columns : mapping of canonical name -> 1-D array (SI units, see :data:`CANONICAL_VARIABLES`)
+    attrs : run attributes (test, specimen, sample, order, geometry ``radius_m``/``gap_m``, provenance ...).
+        ``None`` values are dropped; booleans are stored as int (netCDF has no bool attribute).
+
+    Returns
+    -------
+    xarray.Dataset with dimension ``point``.
+    """
+    data_vars = {}
+    for name, values in columns.items():
+        if name not in CANONICAL_VARIABLES:
+            raise KeyError(f"{name!r} is not a canonical variable; known: {sorted(CANONICAL_VARIABLES)}")
+        units, long_name = CANONICAL_VARIABLES[name]
+        data_vars[name] = ("point", np.asarray(values, dtype=float), {"units": units, "long_name": long_name})
+    ds = xr.Dataset(data_vars)
+    clean = {}
+    for k, v in attrs.items():
+        if v is None:
+            continue
+        if isinstance(v, (bool, np.bool_)):
+            v = int(v)
+        clean[k] = v
+    ds.attrs.update(clean)
+    return ds
+
+
+def atomic_write(path: str | os.PathLike, writer) -> Path:
+    """Write a file atomically: ``writer(tmp_path)`` writes a temporary sibling, then it is renamed.
+
+    An interrupted job therefore never leaves a half-written output under the final name.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        writer(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def write_netcdf(ds: xr.Dataset, path: str | os.PathLike) -> Path:
+    """Atomically write a dataset as netCDF4/HDF5 through h5netcdf."""
+    return atomic_write(path, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf"))
+
+
+def write_text(text: str, path: str | os.PathLike) -> Path:
+    """Atomically write a UTF-8 text file."""
+    def _w(tmp):
+        with open(tmp, "w", encoding="utf-8") as fh:
+            fh.write(text)
+    return atomic_write(path, _w)
+
+
+def read_netcdf(path: str | os.PathLike) -> xr.Dataset:
+    """Read a netCDF file fully into memory and close it (never keep an output path open lazily)."""
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        return ds.load()

@@ -1,0 +1,122 @@
+"""Common interface of every constitutive model in the library.
+
+A model is an instance of a :class:`ConstitutiveModel` subclass. Its *structure* (number of Prony terms,
+polynomial order, fixed relaxation times, the instantaneous law of a QLV model ...) is fixed at
+construction; its *parameters* are plain floats passed as a mapping ``{name: value}`` to every prediction
+method, so lmfit, the virtual rheometer, the cards and the FEM all call the same pure functions.
+
+Units: parameters carry their unit in :class:`ParamSpec`; stresses and moduli in Pa, times in s, strains
+dimensionless (0.01 = 1 %), rates in 1/s, angular frequency in rad/s.
+
+Response kinds (``ConstitutiveModel.responses``), each a method:
+
+===================  =====================================================================================
+``shear_history``    :meth:`shear_stress_history` -- homogeneous simple shear, arbitrary strain history
+``oscillation``      :meth:`complex_modulus` -- linear (small-amplitude) G*(omega)
+``flow``             :meth:`steady_shear_stress` -- steady flow curve tau(shear rate)
+``creep``            :meth:`creep_strain` -- strain under an imposed (piecewise) stress history
+``elastic_shear``    :meth:`elastic_shear_stress` -- instantaneous/elastic simple-shear law sigma_e(gamma)
+``normal_stress``    :meth:`normal_stress_differences` -- N1, N2 in simple shear (elastic)
+``uniaxial``         :meth:`uniaxial_nominal_stress` -- incompressible uniaxial nominal stress P(lambda)
+===================  =====================================================================================
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+Params = Mapping[str, float]
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One model parameter.
+
+    Attributes
+    ----------
+    name : lmfit-compatible identifier (``[A-Za-z_][A-Za-z0-9_]*``)
+    unit : physical unit, e.g. ``"Pa"``, ``"s"``, ``"Pa s^n"``, ``"1"``
+    init : default initial value
+    lower, upper : bounds (use ``-inf``/``inf`` when unbounded)
+    log : fit on a log scale (moduli, times, viscosities)
+    description : one line
+    """
+
+    name: str
+    unit: str
+    init: float
+    lower: float = -np.inf
+    upper: float = np.inf
+    log: bool = False
+    description: str = ""
+
+
+class ResponseNotSupported(NotImplementedError):
+    """Raised when a model is asked for a response kind it cannot describe."""
+
+
+@dataclass
+class ConstitutiveModel:
+    """Base class. Subclasses set ``name``, ``family``, ``param_specs`` and ``responses`` and implement the
+    methods of the responses they support.
+
+    ``family`` is one of ``viscous``, ``linear_viscoelastic``, ``fractional``, ``hyperelastic``, ``qlv``,
+    ``beyond_qlv``.
+    """
+
+    name: str = "base"
+    family: str = "base"
+    param_specs: tuple[ParamSpec, ...] = field(default_factory=tuple)
+    responses: frozenset[str] = frozenset()
+    #: extra structural settings recorded with every fit/card (e.g. fixed taus)
+    structure: dict = field(default_factory=dict)
+
+    # --- helpers -----------------------------------------------------------------------------------
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.param_specs)
+
+    def default_params(self) -> dict[str, float]:
+        return {p.name: float(p.init) for p in self.param_specs}
+
+    def supports(self, response: str) -> bool:
+        return response in self.responses
+
+    def _unsupported(self, response: str):
+        raise ResponseNotSupported(f"model {self.name!r} ({self.family}) does not describe {response!r}")
+
+    # --- responses ---------------------------------------------------------------------------------
+    def shear_stress_history(self, p: Params, time_s: np.ndarray, strain: np.ndarray) -> np.ndarray:
+        """Shear stress (Pa) for a homogeneous simple-shear strain history ``strain(time_s)``.
+
+        ``time_s`` strictly increasing, ``strain[0]`` is the strain at ``time_s[0]`` reached from a
+        virgin state (the history before ``time_s[0]`` is zero strain). Between samples the strain is
+        linear in time.
+        """
+        self._unsupported("shear_history")
+
+    def complex_modulus(self, p: Params, angular_frequency_rad_s: np.ndarray) -> np.ndarray:
+        """Complex shear modulus G*(omega) = G' + iG'' (Pa) in the linear (small amplitude) limit."""
+        self._unsupported("oscillation")
+
+    def steady_shear_stress(self, p: Params, shear_rate_1_s: np.ndarray) -> np.ndarray:
+        """Steady shear stress (Pa) at the given shear rates."""
+        self._unsupported("flow")
+
+    def creep_strain(self, p: Params, time_s: np.ndarray, stress_pa: np.ndarray) -> np.ndarray:
+        """Shear strain under an imposed stress history ``stress_pa(time_s)`` (stress control)."""
+        self._unsupported("creep")
+
+    def elastic_shear_stress(self, p: Params, strain: np.ndarray) -> np.ndarray:
+        """Instantaneous (elastic) simple-shear stress sigma_e(gamma) in Pa."""
+        self._unsupported("elastic_shear")
+
+    def normal_stress_differences(self, p: Params, strain: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Elastic first and second normal stress differences N1 = s11-s22, N2 = s22-s33 (Pa)."""
+        self._unsupported("normal_stress")
+
+    def uniaxial_nominal_stress(self, p: Params, stretch: np.ndarray) -> np.ndarray:
+        """Incompressible uniaxial nominal (1st Piola-Kirchhoff) stress P11(lambda) in Pa."""
+        self._unsupported("uniaxial")
