@@ -66,3 +66,90 @@ def qlv_stress(time_s: np.ndarray, elastic_stress: np.ndarray, g: np.ndarray, ta
     drive = g[:, None] * np.asarray(elastic_stress, float)[None, :]
     h = prony_branch_histories(np.asarray(time_s, float), drive, np.asarray(taus, float))
     return (1.0 - g.sum()) * elastic_stress + h.sum(axis=0)
+
+
+
+@njit(cache=True)
+def prony_branch_sum_batch(time_s: np.ndarray, branch_drive: np.ndarray, taus: np.ndarray) -> np.ndarray:
+    """Sum over branches of the hereditary states, for a batch of histories on one time grid.
+
+    The same exact exponential update as :func:`prony_branch_histories`, without storing each branch:
+    used by the parallel-plate quadrature (one history per Gauss radius) and the beyond-QLV models.
+
+    Parameters
+    ----------
+    time_s : (n,) increasing times in s (or any increasing "clock", e.g. a reduced time)
+    branch_drive : (k, m, n) elastic drive of branch ``i`` for history ``j`` (Pa); the first value is
+        applied as a step from zero
+    taus : (m,) relaxation times in the units of ``time_s``
+
+    Returns
+    -------
+    (k, n) ``sum_i h_i`` in Pa.
+    """
+    k_hist, m, n = branch_drive.shape
+    out = np.zeros((k_hist, n))
+    h = np.empty((k_hist, m))
+    e = np.empty(m)
+    f = np.empty(m)
+    for j in range(k_hist):
+        for i in range(m):
+            h[j, i] = branch_drive[j, i, 0]
+            out[j, 0] += h[j, i]
+    for k in range(n - 1):
+        for i in range(m):
+            e[i], f[i] = relaxation_factors(time_s[k + 1] - time_s[k], taus[i])
+        for j in range(k_hist):
+            acc = 0.0
+            for i in range(m):
+                h[j, i] = e[i] * h[j, i] + f[i] * (branch_drive[j, i, k + 1] - branch_drive[j, i, k])
+                acc += h[j, i]
+            out[j, k + 1] += acc
+    return out
+
+
+@njit(cache=True)
+def _qlv_batch_kernel(time_s, elastic_stress, g, taus):
+    k_hist, n = elastic_stress.shape
+    m = g.shape[0]
+    g_inf = 1.0 - g.sum()
+    out = g_inf * elastic_stress
+    h = np.empty((k_hist, m))
+    gf = np.empty(m)
+    e = np.empty(m)
+    for j in range(k_hist):
+        for i in range(m):
+            h[j, i] = g[i] * elastic_stress[j, 0]
+            out[j, 0] += h[j, i]
+    for k in range(n - 1):
+        # the factors depend on the time step only: once per step for every history
+        for i in range(m):
+            e[i], f = relaxation_factors(time_s[k + 1] - time_s[k], taus[i])
+            gf[i] = g[i] * f
+        for j in range(k_hist):
+            ds = elastic_stress[j, k + 1] - elastic_stress[j, k]
+            acc = 0.0
+            for i in range(m):
+                h[j, i] = e[i] * h[j, i] + gf[i] * ds
+                acc += h[j, i]
+            out[j, k + 1] += acc
+    return out
+
+
+def qlv_stress_batch(time_s: np.ndarray, elastic_stress: np.ndarray, g: np.ndarray, taus: np.ndarray) -> np.ndarray:
+    """:func:`qlv_stress` for a batch of elastic-stress histories sharing one time grid.
+
+    Parameters
+    ----------
+    time_s : (n,) s
+    elastic_stress : (k, n) instantaneous elastic stress histories in Pa (e.g. one per plate radius)
+    g : (m,) Prony weights, ``sum(g) < 1``
+    taus : (m,) relaxation times in s
+
+    Returns
+    -------
+    (k, n) QLV stress in Pa.
+    """
+    return _qlv_batch_kernel(np.ascontiguousarray(time_s, dtype=float),
+                             np.ascontiguousarray(np.atleast_2d(elastic_stress), dtype=float),
+                             np.ascontiguousarray(g, dtype=float), np.ascontiguousarray(taus, dtype=float))

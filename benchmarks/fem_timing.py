@@ -1,0 +1,121 @@
+"""TLED throughput: element updates per second and real-time factor vs mesh size, law and precision.
+
+Each case runs undamped explicit steps of a cube (bottom fixed, initial shear-velocity field) and reports
+
+* ``Mupd/s``: element updates per wall second (n_elements x steps / s), the hardware-independent figure;
+* ``steps/s`` and ``RT factor``: simulated seconds per wall second with the critical step of a brain-like
+  material (mu = 1 kPa, nu = 0.49, rho = 1040 kg/m^3) on that mesh (>1 = faster than real time).
+
+The machine this runs on may be shared: compare rows measured in the same run (ratios), not absolute
+figures between runs. On an oversubscribed machine use ``--threads 1``: every parallel region (3-5 per
+step) waits for its slowest, possibly descheduled, thread. Usage::
+
+    python benchmarks/fem_timing.py                       # CI-sized: 1e3 ... 1e5 tets, CPU
+    python benchmarks/fem_timing.py --max-elements 1e6 --threads 2
+    python benchmarks/fem_timing.py --gpu                 # numba-cuda kernel (tissuemech.fem.cuda)
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("NUMBA_CACHE_DIR", str(Path(__file__).resolve().parents[1] / ".numba_cache"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+
+import numpy as np  # noqa: E402
+
+from tissuemech.fem.materials import make_material  # noqa: E402
+from tissuemech.fem.mesh import block_mesh  # noqa: E402
+from tissuemech.fem.tled import build_model, critical_time_step, fixed_group, numba_threads, run_explicit  # noqa: E402
+
+LAWS = {
+    "SVK": ("saint_venant_kirchhoff", {"mu": 1000.0}, (), ()),
+    "NH": ("neo_hookean", {"mu": 1000.0}, (), ()),
+    "LP2": ("lopez_pamies2", {"mu1": 900.0, "alpha1": 1.2, "mu2": 100.0, "alpha2": 3.0}, (), ()),
+    "QLV4-NH": ("neo_hookean", {"mu": 1000.0}, (0.3, 0.2, 0.1, 0.05), (0.01, 0.1, 1.0, 10.0)),
+}
+
+
+def cube_with_n_elements(n_elements: float):
+    """Unit-ish cube (10 mm) with about ``n_elements`` tets (6 per hex cell)."""
+    cells = max(1, int(round((n_elements / 6.0) ** (1.0 / 3.0))))
+    return block_mesh((1e-2, 1e-2, 1e-2), (cells, cells, cells))
+
+
+def setup(mesh, law: str, precision: str, anp: bool):
+    key, params, g, tau = LAWS[law]
+    mat = make_material(key, params, poisson_ratio=0.49, density_kg_m3=1040.0, prony_g=g, prony_tau_s=tau)
+    x = mesh.nodes
+    model = build_model(mesh, mat, [fixed_group("bottom", np.flatnonzero(np.isclose(x[:, 2], 0.0)))],
+                        anp=anp, precision=precision)
+    v0 = np.zeros_like(x)
+    v0[:, 0] = 1e-3 * x[:, 2] / x[:, 2].max()
+    return model, v0
+
+
+def time_cpu(model, v0, n_steps: int, threads: int | None) -> float:
+    """Wall seconds of ``n_steps`` explicit steps (after a warm-up run that also compiles)."""
+    dt = critical_time_step(model, 0.7)
+    with numba_threads(threads):
+        run_explicit(model, 3 * dt, dt_s=dt, v0_m_s=v0, n_outputs=1)
+        t0 = time.perf_counter()
+        run_explicit(model, n_steps * dt, dt_s=dt, v0_m_s=v0, n_outputs=1)
+        return time.perf_counter() - t0
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--min-elements", type=float, default=1e3)
+    ap.add_argument("--max-elements", type=float, default=1e5)
+    ap.add_argument("--laws", default="SVK,NH,LP2,QLV4-NH")
+    ap.add_argument("--precisions", default="float64,float32")
+    ap.add_argument("--threads", type=int, default=None, help="numba threads (default: numba's setting)")
+    ap.add_argument("--no-anp", action="store_true", help="plain linear tets (no average nodal pressure)")
+    ap.add_argument("--updates", type=float, default=2e7, help="element updates per measurement")
+    ap.add_argument("--gpu", action="store_true", help="also time tissuemech.fem.cuda on the GPU")
+    ap.add_argument("--gpu-batch", type=int, default=200, help="steps per persistent-kernel launch")
+    ap.add_argument("--out", default=None, help="also write the table as CSV to this path")
+    args = ap.parse_args(argv)
+
+    sizes = [s for s in (1e3, 1e4, 1e5, 1e6, 1e7) if args.min_elements <= s <= args.max_elements]
+    anp = not args.no_anp
+    print(f"# TLED explicit step throughput ({'ANP' if anp else 'plain'} linear tets); threads = "
+          f"{args.threads or 'numba default'}")
+    print(f"{'tets':>9} {'law':>8} {'prec':>8} {'device':>6} {'steps':>7} {'wall s':>8} {'Mupd/s':>8} "
+          f"{'steps/s':>9} {'dt_cr s':>9} {'RT factor':>9}")
+    table = []
+    for size in sizes:
+        mesh = cube_with_n_elements(size)
+        ne = mesh.n_elements
+        for law in args.laws.split(","):
+            for precision in args.precisions.split(","):
+                model, v0 = setup(mesh, law, precision, anp)
+                dt_cr = critical_time_step(model, 0.7)
+                n_steps = max(20, int(args.updates / ne))
+                rows = [("cpu", time_cpu(model, v0, n_steps, args.threads))]
+                if args.gpu:
+                    from tissuemech.fem import cuda as fem_cuda
+
+                    rows.append(("gpu", fem_cuda.time_steps(model, v0, n_steps, dt_cr, batch=args.gpu_batch)))
+                for device, wall in rows:
+                    sps = n_steps / wall
+                    table.append({"n_elements": ne, "law": law, "precision": precision, "device": device,
+                                  "anp": anp, "steps": n_steps, "wall_s": wall,
+                                  "element_updates_per_s": ne * sps, "steps_per_s": sps,
+                                  "critical_dt_s": dt_cr, "real_time_factor": sps * dt_cr})
+                    print(f"{ne:>9d} {law:>8} {precision:>8} {device:>6} {n_steps:>7d} {wall:>8.3f} "
+                          f"{ne * sps / 1e6:>8.2f} {sps:>9.0f} {dt_cr:>9.2e} {sps * dt_cr:>9.3f}", flush=True)
+
+
+    if args.out:
+        import pandas as pd
+
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        pd.DataFrame(table).to_csv(args.out, index=False)
+
+
+if __name__ == "__main__":
+    main()

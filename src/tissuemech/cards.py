@@ -1,0 +1,556 @@
+"""Material cards: canonical JSON, Abaqus input blocks and FEBio material blocks from fitted models.
+
+Card shape (JSON, SI units)::
+
+    {"model": key, "family": ..., "parameters": {...}, "units": {...}, "standard_errors": {...},
+     "elastic_law": law key, "elastic_parameters": {...}, "initial_shear_modulus": Pa,
+     "prony": {"g": [...], "tau": [...], "g_inf": ..., "normalisation": ..., "source": ...} | null,
+     "poisson_ratio": 0.49, "bulk_modulus": Pa, "validity": {...}, "provenance": {...},
+     "fit_quality": {...}, "abaqus_form": ..., "febio_form": ..., "notes": [...]}
+
+``elastic_law``/``elastic_parameters`` are the (instantaneous) hyperelastic law a FE code needs -- for a
+QLV model the instantaneous law, for a linear viscoelastic model a linear law with the instantaneous
+modulus G0 (a neo-Hookean law is exactly linear in simple shear).
+
+Conventions (checked by :func:`abaqus_simple_shear_stress`, an independent evaluation of the Abaqus energy
+forms, against the fitted model):
+
+* Abaqus polynomial forms: W = sum C_ij (I1-3)^i (I2-3)^j + sum 1/D_i (J-1)^(2i); C10 = mu/2 for
+  neo-Hooke; D1 = 2/K with K = 2 mu0 (1 + nu) / (3 (1 - 2 nu)) and mu0 the initial shear modulus; D_i = 0
+  for i > 1.
+* Abaqus Ogden: W = sum 2 mu_i / alpha_i^2 (l1^a_i + l2^a_i + l3^a_i - 3) -- the same "2 mu / alpha^2" form
+  as Budday et al. and the project's Ogden law, so mu_i, alpha_i pass unchanged (mu0 = sum mu_i). A
+  classical-form Ogden W = sum mu_i/alpha_i (...) converts with mu_i(Abaqus) = mu_i alpha_i / 2.
+* Abaqus Arruda-Boyce: W = mu sum C_i / lambda_m^(2i-2) (I1^i - 3^i), C = 1/2, 1/20, 11/1050, 19/7000,
+  519/673750.
+* Abaqus ``*VISCOELASTIC, TIME=PRONY`` data lines ``g_i, k_i, tau_i``: g_i are *relative* shear moduli of the
+  instantaneous modulus, g_R(t) = 1 - sum g_i (1 - exp(-t/tau_i)) = g_inf + sum g_i exp(-t/tau_i) -- the QLV
+  reduced relaxation function unchanged. Shear-only relaxation (rheometer data say nothing about bulk
+  relaxation): k_i = 0. The elastic constants are written with ``MODULI=INSTANTANEOUS`` so the hyperelastic
+  constants are read as the instantaneous response (the Abaqus default is long-term).
+* Laws without a native Abaqus form (Lopez-Pamies, Gent, Nunes, Amin, ...) are written as ``MARLOW`` with
+  ``*UNIAXIAL TEST DATA`` generated from the *fitted simple-shear law* through the I1-only equivalence
+  W'(I1 = 3 + gamma^2) = sigma(gamma) / (2 gamma), P(lambda) = 2 (lambda - lambda^-2) W'(lambda^2 + 2/lambda):
+  exact in simple shear over the validity range; an I2 dependence of the original law is not carried over.
+* FEBio (uncoupled materials, nearly incompressible ``k`` = bulk modulus): ``Mooney-Rivlin`` c1 = C10,
+  c2 = C01 (neo-Hooke: c2 = 0); ``Ogden`` W = sum c_i/m_i^2 (...) so c_i = 2 mu_i, m_i = alpha_i;
+  viscoelasticity as ``uncoupled viscoelastic`` with S = g0 S_e + sum g_i H_i (FEBio's own update, see
+  FEUncoupledViscoElasticMaterial.cpp) where the elastic base is the instantaneous law: g0 = g_inf,
+  g_i = Prony g_i, t_i = tau_i (at most 6 terms). FEBio's Arruda-Boyce uses a different series
+  (W1 = mu (1/2 + 0.2 I1/N + ...)) than Arruda-Boyce/Abaqus, so no FEBio block is written for it; polynomial
+  forms have no native FEBio material either -- the card says so instead of writing an approximation.
+"""
+from __future__ import annotations
+
+import json
+import math
+import re
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from .canonical import write_text
+from .fitting import FitResult, _jsonable
+from .models.base import ConstitutiveModel
+
+#: default Poisson ratio of nearly incompressible soft tissue
+DEFAULT_POISSON = 0.49
+#: Abaqus Arruda-Boyce series coefficients
+ARRUDA_BOYCE_C = (0.5, 1.0 / 20.0, 11.0 / 1050.0, 19.0 / 7000.0, 519.0 / 673750.0)
+#: number of points of a MARLOW uniaxial table
+MARLOW_POINTS = 40
+
+
+# ------------------------------------------------------------------------------------------------
+# the elastic law and the Prony series of a fitted model
+# ------------------------------------------------------------------------------------------------
+def _law_and_params(model: ConstitutiveModel, p: Mapping[str, float]) -> tuple[ConstitutiveModel | None, dict]:
+    """The (instantaneous) elastic law of a model and its parameters; ``(None, {})`` when there is none."""
+    if model.family == "hyperelastic":
+        return model, {k: float(p[k]) for k in model.param_names}
+    inst = getattr(model, "instantaneous", None)
+    if model.family == "qlv" and inst is not None:
+        return inst, {k: float(p[k]) for k in inst.param_names}
+    return None, {}
+
+
+def initial_shear_modulus(law: ConstitutiveModel, p: Mapping[str, float], step: float = 1e-6) -> float:
+    """d sigma / d gamma at gamma = 0 of an elastic shear law (central difference), Pa."""
+    s = np.asarray(law.elastic_shear_stress(p, np.array([-step, step])), float)
+    return float((s[1] - s[0]) / (2 * step))
+
+
+def prony_from_step_response(model: ConstitutiveModel, p: Mapping[str, float], taus: np.ndarray,
+                             t_min_s: float, t_max_s: float, strain: float = 1e-3) -> dict:
+    """Prony series of a linear(ised) viscoelastic model by NNLS on its step relaxation modulus.
+
+    G(t) = sigma(t)/strain of an ideal step (small strain) on ``[t_min_s, t_max_s]`` (log-spaced) is fitted
+    with G_inf + sum G_i exp(-t/tau_i), G_i >= 0. Exact for generalized-Maxwell models on their own taus; an
+    approximation for fractional models (``fit_rel_error`` reports the relative RMS misfit).
+    """
+    from scipy.optimize import nnls
+
+    t = np.r_[0.0, np.geomspace(t_min_s, t_max_s, 200)]
+    stress = np.asarray(model.shear_stress_history(p, t, np.full(t.size, strain)), float)
+    g_t = stress[1:] / strain
+    tt = t[1:]
+    A = np.column_stack([np.ones_like(tt), np.exp(-tt[:, None] / taus[None, :])])
+    w = 1.0 / np.maximum(np.abs(g_t), 1e-12 * np.max(np.abs(g_t)))  # relative misfit
+    coef, _ = nnls(A * w[:, None], g_t * w)
+    fitted = A @ coef
+    g0 = float(coef.sum())
+    return {"g_inf": float(coef[0] / g0), "g": (coef[1:] / g0).tolist(), "tau": np.asarray(taus, float).tolist(),
+            "G0": g0, "fit_rel_error": float(np.sqrt(np.mean(((fitted - g_t) / g_t) ** 2)))}
+
+
+def prony_from_complex_modulus(model: ConstitutiveModel, p: Mapping[str, float], taus: np.ndarray,
+                               omega_min: float, omega_max: float) -> dict:
+    """Prony series of a linear viscoelastic model by NNLS on its G'(omega), G''(omega) (relative misfit) over
+    ``[omega_min, omega_max]`` rad/s -- for models that define only the oscillatory response."""
+    from scipy.optimize import nnls
+
+    w = np.geomspace(omega_min, omega_max, 120)
+    gs = np.asarray(model.complex_modulus(p, w))
+    x = w[:, None] * np.asarray(taus, float)[None, :]
+    re = np.column_stack([np.ones_like(w), x ** 2 / (1 + x ** 2)])
+    im = np.column_stack([np.zeros_like(w), x / (1 + x ** 2)])
+    A = np.vstack([re / np.abs(gs.real)[:, None], im / np.abs(gs.imag)[:, None]])
+    b = np.r_[np.ones(w.size), np.ones(w.size)]
+    coef, _ = nnls(A, b)
+    fitted = np.r_[re @ coef, im @ coef]
+    target = np.r_[gs.real, gs.imag]
+    g0 = float(coef.sum())
+    return {"g_inf": float(coef[0] / g0), "g": (coef[1:] / g0).tolist(), "tau": np.asarray(taus, float).tolist(),
+            "G0": g0, "fit_rel_error": float(np.sqrt(np.mean(((fitted - target) / target) ** 2)))}
+
+
+def _model_taus(model: ConstitutiveModel, p: Mapping[str, float]) -> np.ndarray | None:
+    for key in ("taus_s", "taus", "tau_s"):
+        v = model.structure.get(key) if isinstance(model.structure, Mapping) else None
+        if v is not None:
+            return np.asarray(v, float)
+    names = sorted((n for n in model.param_names if re.fullmatch(r"tau_?\d+", n)), key=lambda s: int(re.sub(r"\D", "", s)))
+    if names:
+        return np.array([float(p[n]) for n in names])
+    return None
+
+
+# ------------------------------------------------------------------------------------------------
+# native Abaqus forms
+# ------------------------------------------------------------------------------------------------
+def _indexed(p: Mapping[str, float], stem: str) -> list[float]:
+    """Values of ``stem1, stem2, ...`` or ``stem_1, stem_2, ...`` in order."""
+    found = {}
+    for k, v in p.items():
+        m = re.fullmatch(rf"{stem}_?(\d+)", k)
+        if m:
+            found[int(m.group(1))] = float(v)
+    return [found[i] for i in sorted(found)]
+
+
+def abaqus_hyperelastic_form(law_key: str, lp: Mapping[str, float]) -> tuple[str, list[float]] | None:
+    """Native Abaqus ``*HYPERELASTIC`` option and its constants (without D_i) for a law, or ``None``.
+
+    Returns e.g. ``("REDUCED POLYNOMIAL, N=3", [C10, C20, C30])``.
+    """
+    key = law_key
+    try:
+        if key.startswith("linear_elastic") or key in ("linear_elastic_shear", "hooke"):
+            g0 = lp.get("G0", lp.get("G", lp.get("mu")))
+            return "NEO HOOKE", [0.5 * float(g0)]
+        if key.startswith("neo_hook"):
+            return "NEO HOOKE", [float(lp["C10"]) if "C10" in lp else 0.5 * float(lp["mu"])]
+        if key.startswith("mooney_rivlin"):
+            return "MOONEY-RIVLIN", [float(lp["C10"]), float(lp["C01"])]
+        if key.startswith("yeoh"):
+            return "YEOH", [float(lp["C10"]), float(lp["C20"]), float(lp["C30"])]
+        m = re.fullmatch(r"reduced_polynomial(\d+)", key)
+        if m:
+            n = int(m.group(1))
+            if n > 6:
+                return None
+            return f"REDUCED POLYNOMIAL, N={n}", [float(lp[f"C{i}0"]) for i in range(1, n + 1)]
+        m = re.fullmatch(r"polynomial(\d+)", key)
+        if m:
+            n = int(m.group(1))
+            if n > 6:
+                return None
+            vals = []
+            for total in range(1, n + 1):  # Abaqus order: C10, C01, C20, C11, C02, C30, C21, ...
+                for j in range(0, total + 1):
+                    vals.append(float(lp.get(f"C{total - j}{j}", 0.0)))
+            return f"POLYNOMIAL, N={n}", vals
+        m = re.fullmatch(r"ogden(\d+)", key)
+        if m:
+            mus, alphas = _indexed(lp, "mu"), _indexed(lp, "alpha")
+            if len(mus) != int(m.group(1)) or len(alphas) != len(mus):
+                return None
+            vals = [x for pair in zip(mus, alphas) for x in pair]
+            return f"OGDEN, N={len(mus)}", vals
+        if key.startswith("arruda_boyce"):
+            mu = float(lp["mu"])
+            lam_m = float(lp["lambda_m"]) if "lambda_m" in lp else math.sqrt(float(lp["N"]))
+            return "ARRUDA-BOYCE", [mu, lam_m]
+    except KeyError:
+        return None
+    return None
+
+
+def _abaqus_d_terms(form: str, bulk_modulus: float) -> list[float]:
+    """D_i of an Abaqus form: D1 = 2/K, higher D_i = 0 (polynomial forms have N of them)."""
+    d1 = 2.0 / bulk_modulus
+    m = re.search(r"N=(\d+)", form)
+    n = int(m.group(1)) if m and not form.startswith("OGDEN") else 1
+    if form.startswith("OGDEN"):
+        n = int(m.group(1))
+    if form == "YEOH":
+        n = 3
+    return [d1] + [0.0] * (n - 1)
+
+
+def _data_lines(values: list[float], per_line: int = 8) -> str:
+    return "\n".join(", ".join(f"{v:.10g}" for v in values[i:i + per_line]) for i in range(0, len(values), per_line))
+
+
+def marlow_uniaxial_table(law: ConstitutiveModel, lp: Mapping[str, float], strain_max: float,
+                          n_points: int = MARLOW_POINTS) -> tuple[np.ndarray, np.ndarray]:
+    """Uniaxial nominal stress (Pa) vs nominal strain table equivalent in simple shear to an elastic law.
+
+    Uses the I1-only equivalence W'(I1) = sigma(gamma) / (2 gamma) at I1 = 3 + gamma^2, with the stretch range
+    chosen so that lambda^2 + 2/lambda - 3 covers gamma up to ``strain_max``.
+    """
+    from scipy.optimize import brentq
+
+    i1_max = 3.0 + strain_max ** 2
+    lam_max = brentq(lambda lam: lam ** 2 + 2.0 / lam - i1_max, 1.0 + 1e-12, 10.0 + strain_max * 10)
+    lam = np.linspace(1.0, lam_max, n_points)[1:]
+    gamma = np.sqrt(np.maximum(lam ** 2 + 2.0 / lam - 3.0, 0.0))
+    w1 = np.asarray(law.elastic_shear_stress(lp, gamma), float) / (2.0 * gamma)
+    nominal = 2.0 * (lam - lam ** -2) * w1
+    return np.r_[0.0, lam - 1.0], np.r_[0.0, nominal]
+
+
+# ------------------------------------------------------------------------------------------------
+# the card
+# ------------------------------------------------------------------------------------------------
+def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float = DEFAULT_POISSON,
+              dataset: str = "", fit_file: str = "", strain_margin: float = 1.2) -> dict:
+    """Canonical card of a fitted model (see the module docstring for the shape and conventions)."""
+    p = result.params
+    notes: list[str] = []
+    card = {"model": result.model_key, "family": result.family, "parameters": dict(p), "units": dict(result.units),
+            "standard_errors": dict(result.stderr), "structure": result.structure}
+    law, lp = _law_and_params(model, p)
+    prony = None
+    strain_max = result.ranges.get("strain_max", float("nan"))
+    strain_max = float(strain_max) if np.isfinite(strain_max) else 0.5
+    if model.family == "qlv" and hasattr(model, "prony_weights"):
+        g_inf, g, taus = model.prony_weights(p)
+        prony = {"g": [float(x) for x in g], "tau": [float(x) for x in taus], "g_inf": float(g_inf),
+                 "source": "QLV reduced relaxation function"}
+    elif model.family in ("linear_viscoelastic", "fractional") and (model.supports("shear_history")
+                                                                      or model.supports("oscillation")):
+        taus = _model_taus(model, p)
+        t_lo = result.ranges.get("time_min_s", np.nan)
+        t_hi = result.ranges.get("time_max_s", np.nan)
+        w_rng = (result.ranges.get("omega_min_rad_per_s", np.nan), result.ranges.get("omega_max_rad_per_s", np.nan))
+        if not np.isfinite(t_lo) and np.all(np.isfinite(w_rng)):  # frequency-sweep fits: times = 1/omega
+            t_lo, t_hi = 1.0 / w_rng[1], 1.0 / w_rng[0]
+        t_lo = float(t_lo) if np.isfinite(t_lo) and t_lo > 0 else 1e-2
+        t_hi = float(t_hi) if np.isfinite(t_hi) and t_hi > t_lo else 1e3
+        if taus is None:
+            taus = np.geomspace(t_lo, t_hi, max(int(round(math.log10(t_hi / t_lo))) + 1, 2))
+        if model.supports("shear_history"):
+            pr = prony_from_step_response(model, p, taus, t_lo, t_hi)
+            source = f"NNLS on the model's step relaxation modulus over [{t_lo:g}, {t_hi:g}] s"
+        else:
+            w_lo, w_hi = 1.0 / t_hi, 1.0 / t_lo
+            pr = prony_from_complex_modulus(model, p, taus, w_lo, w_hi)
+            source = f"NNLS on the model's G'(omega), G''(omega) over [{w_lo:g}, {w_hi:g}] rad/s"
+        prony = {"g": pr["g"], "tau": pr["tau"], "g_inf": pr["g_inf"], "fit_rel_error": pr["fit_rel_error"],
+                 "source": source}
+        if pr["fit_rel_error"] > 0.02:
+            notes.append(f"Prony approximation of the model has {100 * pr['fit_rel_error']:.1f} % relative RMS error")
+        from .models.qlv import LinearElasticShear
+
+        law, lp = LinearElasticShear(), {"G0": pr["G0"]}
+        if pr["g_inf"] < 1e-6:
+            notes.append("no long-term modulus (fluid-like): not a solid material law; no FE block written")
+            law = None
+    if prony is not None:
+        prony["normalisation"] = ("g_i relative to the instantaneous shear modulus: "
+                                  "G(t) = G0 (g_inf + sum g_i exp(-t/tau_i)), g_inf = 1 - sum g_i (Abaqus g_i)")
+        if len(prony["g"]) > 6:
+            notes.append("more than 6 Prony terms: the FEBio block cannot hold them")
+    card["prony"] = prony
+    mu0 = initial_shear_modulus(law, lp) if law is not None else float("nan")
+    card["elastic_law"] = None if law is None else law.name
+    card["elastic_parameters"] = lp
+    if law is not None and law.name.startswith("linear_elastic"):
+        # a linear shear law is written as the neo-Hookean law with mu = G0: identical in simple shear at any
+        # strain, and a finite-strain law every FE code (and the project's FEM) knows
+        card["elastic_law"], card["elastic_parameters"] = "neo_hookean", {"mu": mu0}
+        notes.append("linear elastic shear law written as neo-Hookean (mu = G0; identical in simple shear)")
+    card["initial_shear_modulus"] = mu0
+    card["poisson_ratio"] = float(poisson_ratio)
+    card["bulk_modulus"] = (2.0 * mu0 * (1 + poisson_ratio) / (3.0 * (1 - 2 * poisson_ratio))
+                            if np.isfinite(mu0) else float("nan"))
+    card["validity"] = {**result.ranges, "plate_target": result.target,
+                        "marlow_strain_max": strain_max * strain_margin}
+    card["provenance"] = {"dataset": dataset, "scope": result.scope, "target": result.target,
+                          "curves": result.curve_labels, "fit_file": fit_file, "software": "tissuemech"}
+    card["fit_quality"] = {"success": result.success, "chisqr": result.chisqr, "rmse": result.rmse,
+                           "nrmse": result.nrmse, "aicc": result.aicc, "bic": result.bic, "n": result.n,
+                           "n_eff": result.n_eff, "k": result.k, "flags": list(result.flags)}
+    if law is None:
+        card["abaqus_form"] = None
+        if model.family == "viscous":
+            notes.append("viscous flow law: no solid material card")
+        elif model.family == "beyond_qlv":
+            notes.append("beyond-QLV law: no native Abaqus/FEBio form; needs a user material (UMAT/VUMAT or a "
+                         "FEBio plugin); the project's TLED solver implements it")
+    else:
+        card["_law"] = law
+        native = abaqus_hyperelastic_form(card["elastic_law"], card["elastic_parameters"])
+        options = []
+        if native is not None:
+            options.append(native)
+            if native[0].startswith("OGDEN"):
+                # a classical-form Ogden law W = sum mu_i/alpha_i (...) converts with mu_i alpha_i / 2
+                c = list(native[1])
+                options.append((native[0], [c[k] * c[k + 1] / 2.0 if k % 2 == 0 else c[k] for k in range(len(c))]))
+        card["abaqus_form"], card["abaqus_constants"] = "MARLOW", []
+        gamma = np.linspace(strain_max / 20.0, strain_max, 20)
+        target = np.asarray(law.elastic_shear_stress(lp, gamma), float)
+        for form, consts in options:
+            # self-check: the Abaqus energy with these constants must reproduce the fitted law (1 %)
+            trial = {**card, "abaqus_form": form, "abaqus_constants": consts}
+            err = np.max(np.abs(abaqus_simple_shear_stress(abaqus_block(trial), gamma) - target) / np.abs(target))
+            if err <= 0.01:
+                card["abaqus_form"], card["abaqus_constants"] = form, consts
+                card["abaqus_check_max_rel_error"] = float(err)
+                break
+            notes.append(f"native {form} constants do not reproduce the law ({100 * err:.2g} % off); not used")
+        if card["abaqus_form"] == "MARLOW":
+            notes.append("no native Abaqus form: MARLOW with uniaxial data equivalent in simple shear (I1-only)")
+    card["febio_form"] = _febio_form(card)
+    card["notes"] = notes
+    card["_law"] = law  # runtime only (not serialised)
+    return card
+
+
+def card_json(card: Mapping) -> str:
+    """Canonical JSON text of a card (sorted keys, runtime objects dropped)."""
+    clean = {k: v for k, v in card.items() if not k.startswith("_")}
+    return json.dumps(_jsonable(clean), indent=2, sort_keys=True, allow_nan=True)
+
+
+# ------------------------------------------------------------------------------------------------
+# Abaqus
+# ------------------------------------------------------------------------------------------------
+def abaqus_block(card: Mapping, material_name: str | None = None) -> str | None:
+    """Abaqus ``*MATERIAL`` block (``None`` when the card has no solid law)."""
+    law = card.get("_law")
+    if card.get("abaqus_form") is None or law is None:
+        return None
+    name = material_name or re.sub(r"[^A-Za-z0-9_]", "_", str(card["model"])).upper()
+    lines = [f"** tissuemech material card: model {card['model']} ({card['family']}), units N, m, s, Pa",
+             f"** initial shear modulus {card['initial_shear_modulus']:.6g} Pa, nu = {card['poisson_ratio']}, "
+             f"K = {card['bulk_modulus']:.6g} Pa",
+             f"*MATERIAL, NAME={name}"]
+    form = card["abaqus_form"]
+    moduli = ", MODULI=INSTANTANEOUS" if card.get("prony") else ""
+    if form == "MARLOW":
+        smax = float(card["validity"]["marlow_strain_max"])
+        strain, stress = marlow_uniaxial_table(law, card["elastic_parameters"], smax)
+        # compressibility of the Marlow form through its POISSON parameter (no data line)
+        lines.append(f"*HYPERELASTIC, MARLOW, POISSON={card['poisson_ratio']:g}{moduli}")
+        lines.append("*UNIAXIAL TEST DATA")
+        lines += [f"{s:.10g}, {e:.10g}" for e, s in zip(strain, stress)]
+    else:
+        form, consts = card["abaqus_form"], list(card["abaqus_constants"])
+        d_terms = _abaqus_d_terms(form, card["bulk_modulus"])
+        lines.append(f"*HYPERELASTIC, {form}{moduli}")
+        lines.append(_data_lines(consts + d_terms))
+    if card.get("prony"):
+        lines.append("*VISCOELASTIC, TIME=PRONY")
+        lines += [f"{g:.10g}, 0., {tau:.10g}" for g, tau in zip(card["prony"]["g"], card["prony"]["tau"])]
+    return "\n".join(lines) + "\n"
+
+
+def parse_abaqus_block(text: str) -> dict:
+    """Parse a block written by :func:`abaqus_block` (keyword lines -> list of numeric data rows)."""
+    out: dict[str, list[list[float]]] = {}
+    key = None
+    for raw in text.splitlines():
+        line = raw.strip()
+        if not line or line.startswith("**"):
+            continue
+        if line.startswith("*"):
+            key = line
+            out[key] = []
+            continue
+        if key is None:
+            raise ValueError(f"data line before any keyword: {line!r}")
+        out[key].append([float(x) for x in line.split(",") if x.strip()])
+    return out
+
+
+def abaqus_simple_shear_stress(block: str, strain: np.ndarray) -> np.ndarray:
+    """Incompressible simple-shear stress of an Abaqus hyperelastic block, evaluated from Abaqus's own energy
+    forms (an independent check of the parameter conversions). sigma_12 = 2 gamma (W1 + W2) for invariant
+    forms; Ogden sigma_12 = sum (2 mu_i/alpha_i)(l^a - l^-a)/(l + 1/l); Marlow: W'(I1) from the uniaxial table."""
+    parsed = parse_abaqus_block(block)
+    g = np.asarray(strain, float)
+    x = g ** 2  # I1 - 3 = I2 - 3 in simple shear
+    hyper = next(k for k in parsed if k.startswith("*HYPERELASTIC"))
+    values = [v for row in parsed[hyper] for v in row]
+    opts = hyper.upper()
+    if "MARLOW" in opts:
+        table_key = next(k for k in parsed if k.startswith("*UNIAXIAL TEST DATA"))
+        stress, nom_strain = np.array(parsed[table_key]).T
+        lam = 1.0 + nom_strain[1:]
+        w1 = stress[1:] / (2.0 * (lam - lam ** -2))
+        i1 = lam ** 2 + 2.0 / lam
+        # W'(I1) at I1 -> 3 is the limit of the table (linear extrapolation of the first points)
+        i1 = np.r_[3.0, i1]
+        w1 = np.r_[w1[0] - (w1[1] - w1[0]) * (i1[1] - 3.0) / (i1[2] - i1[1]), w1]
+        return 2.0 * g * np.interp(3.0 + x, i1, w1)
+    n = int(re.search(r"N=(\d+)", opts).group(1)) if "N=" in opts else 1
+    if "NEO HOOKE" in opts:
+        return 2.0 * g * values[0]
+    if "MOONEY-RIVLIN" in opts:
+        return 2.0 * g * (values[0] + values[1])
+    if "REDUCED POLYNOMIAL" in opts or "YEOH" in opts:
+        n = 3 if "YEOH" in opts else n
+        return 2.0 * g * sum(i * values[i - 1] * x ** (i - 1) for i in range(1, n + 1))
+    if "POLYNOMIAL" in opts:
+        s, idx = 0.0, 0
+        for total in range(1, n + 1):
+            for j in range(0, total + 1):
+                i = total - j
+                c = values[idx]
+                idx += 1
+                # d/dI1 + d/dI2 of C_ij x^i y^j at x = y
+                s = s + c * (i * x ** (i - 1 + j) if i else 0.0) + c * (j * x ** (i + j - 1) if j else 0.0)
+        return 2.0 * g * s
+    if "OGDEN" in opts:
+        lam = g / 2.0 + np.sqrt(1.0 + g ** 2 / 4.0)
+        return sum(2.0 * values[2 * k] / values[2 * k + 1] * (lam ** values[2 * k + 1] - lam ** -values[2 * k + 1])
+                   / (lam + 1.0 / lam) for k in range(n))
+    if "ARRUDA-BOYCE" in opts:
+        mu, lam_m = values[0], values[1]
+        i1 = 3.0 + x
+        w1 = mu * sum((i + 1) * ARRUDA_BOYCE_C[i] * i1 ** i / lam_m ** (2 * i) for i in range(5))
+        return 2.0 * g * w1
+    raise ValueError(f"cannot evaluate Abaqus option {hyper!r}")
+
+
+# ------------------------------------------------------------------------------------------------
+# FEBio
+# ------------------------------------------------------------------------------------------------
+def _febio_form(card: Mapping) -> str | None:
+    form = card.get("abaqus_form")
+    if form is None:
+        return None
+    if form in ("NEO HOOKE", "MOONEY-RIVLIN"):
+        return "Mooney-Rivlin"
+    if form.startswith("OGDEN") and int(re.search(r"N=(\d+)", form).group(1)) <= 6:
+        return "Ogden"
+    return None
+
+
+def febio_block(card: Mapping, material_id: int = 1, material_name: str | None = None) -> str | None:
+    """FEBio ``<material>`` XML element (FEBio 3/4 spec) or ``None`` when FEBio has no native form."""
+    import xml.etree.ElementTree as ET
+
+    form = card.get("febio_form")
+    if form is None:
+        return None
+    prony = card.get("prony")
+    if prony and len(prony["g"]) > 6:
+        return None
+    name = material_name or str(card["model"])
+    k = float(card["bulk_modulus"])
+    consts = list(card["abaqus_constants"])
+
+    def elastic(parent, tag, attrs):
+        el = ET.SubElement(parent, tag, attrs)
+        if form == "Mooney-Rivlin":
+            c1, c2 = (consts[0], 0.0) if len(consts) == 1 else (consts[0], consts[1])
+            for pname, v in (("c1", c1), ("c2", c2), ("k", k)):
+                ET.SubElement(el, pname).text = f"{v:.10g}"
+        else:  # Ogden: c_i = 2 mu_i, m_i = alpha_i
+            for i in range(len(consts) // 2):
+                ET.SubElement(el, f"c{i + 1}").text = f"{2.0 * consts[2 * i]:.10g}"
+                ET.SubElement(el, f"m{i + 1}").text = f"{consts[2 * i + 1]:.10g}"
+            ET.SubElement(el, "k").text = f"{k:.10g}"
+        return el
+
+    if prony:
+        mat = ET.Element("material", {"id": str(material_id), "name": name, "type": "uncoupled viscoelastic"})
+        ET.SubElement(mat, "k").text = "0"
+        ET.SubElement(mat, "g0").text = f"{prony['g_inf']:.10g}"
+        for i, (g, tau) in enumerate(zip(prony["g"], prony["tau"])):
+            ET.SubElement(mat, f"g{i + 1}").text = f"{g:.10g}"
+            ET.SubElement(mat, f"t{i + 1}").text = f"{tau:.10g}"
+        elastic(mat, "elastic", {"type": form})
+    else:
+        mat = ET.Element("material", {"id": str(material_id), "name": name, "type": form})
+        tmp = elastic(ET.Element("tmp"), "x", {})
+        for child in list(tmp):
+            mat.append(child)
+    ET.indent(mat)
+    return ET.tostring(mat, encoding="unicode") + "\n"
+
+
+def febio_simple_shear_stress(xml_text: str, strain: np.ndarray) -> np.ndarray:
+    """Instantaneous incompressible simple-shear stress of a FEBio block (Mooney-Rivlin or Ogden), from
+    FEBio's energy forms; the viscoelastic wrapper scales by g0 + sum g_i at t = 0+ (= 1 for QLV cards)."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.fromstring(xml_text)
+    scale = 1.0
+    el = root
+    if root.get("type") == "uncoupled viscoelastic":
+        scale = float(root.findtext("g0")) + sum(float(c.text) for c in root if re.fullmatch(r"g[1-9]", c.tag))
+        el = root.find("elastic")
+    g = np.asarray(strain, float)
+    if el.get("type") == "Mooney-Rivlin":
+        return scale * 2.0 * g * (float(el.findtext("c1")) + float(el.findtext("c2")))
+    if el.get("type") == "Ogden":
+        lam = g / 2.0 + np.sqrt(1.0 + g ** 2 / 4.0)
+        out = np.zeros_like(g)
+        i = 1
+        while el.find(f"c{i}") is not None:
+            c, m = float(el.findtext(f"c{i}")), float(el.findtext(f"m{i}"))
+            out += (c / m) * (lam ** m - lam ** -m) / (lam + 1.0 / lam)
+            i += 1
+        return scale * out
+    raise ValueError(f"cannot evaluate FEBio material type {el.get('type')!r}")
+
+
+# ------------------------------------------------------------------------------------------------
+# files
+# ------------------------------------------------------------------------------------------------
+def write_card_files(card: Mapping, folder, stem: str | None = None) -> dict[str, Path]:
+    """Write ``<stem>.json``, ``<stem>.inp`` (Abaqus) and ``<stem>.feb.xml`` (FEBio) where they exist.
+
+    Returns the written paths by kind (``json``, ``abaqus``, ``febio``).
+    """
+    folder = Path(folder)
+    stem = stem or str(card["model"])
+    out = {"json": write_text(card_json(card) + "\n", folder / f"{stem}.json")}
+    ab = abaqus_block(card)
+    if ab is not None:
+        out["abaqus"] = write_text(ab, folder / f"{stem}.inp")
+    fb = febio_block(card)
+    if fb is not None:
+        out["febio"] = write_text(fb, folder / f"{stem}.feb.xml")
+    return out
+
+
+__all__ = ["make_card", "card_json", "abaqus_block", "parse_abaqus_block", "abaqus_simple_shear_stress",
+           "abaqus_hyperelastic_form", "marlow_uniaxial_table", "febio_block", "febio_simple_shear_stress",
+           "prony_from_step_response", "prony_from_complex_modulus", "initial_shear_modulus", "write_card_files", "DEFAULT_POISSON"]

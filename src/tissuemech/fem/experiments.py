@@ -1,0 +1,164 @@
+"""Virtual experiments with the TLED solver: rheometer torsion and flat-punch indentation.
+
+Both are quasi-static (inertia is irrelevant at rheometer/indenter speeds): at every output time the
+solver relaxes to equilibrium (dynamic relaxation) while the viscoelastic states advance between the
+times with the exact Prony recursion, so the time history (rate, hold) is honoured.
+
+A material is given as a card dict (the JSON shape written by ``tissuemech.cards``)::
+
+    {"model": "neo_hookean", "parameters": {"mu": 900.0},
+     "prony": {"g": [0.4, 0.2], "tau": [0.3, 6.0]},          # optional (QLV on the isochoric stress)
+     "poisson_ratio": 0.49}                                  # or "bulk_modulus" (Pa); optional "density"
+
+Outputs are canonical run datasets (:func:`tissuemech.canonical.make_run_dataset`, dim ``point``, SI units).
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from ..canonical import make_run_dataset
+from .materials import Material, material_from_card
+from .mesh import TetMesh, cylinder_mesh, graded_layers, graded_ring_radii, mesh_quality, write_mesh
+from .tled import build_model, fixed_group, rotation_group, solve_quasistatic, translation_group
+
+RHEOMETER_RADIUS_M = 12.5e-3
+RHEOMETER_GAP_M = 2.0e-3
+
+
+def card_material(card: Mapping, default_poisson_ratio: float = 0.49) -> Material:
+    """Material of a card; cards without ``bulk_modulus``/``poisson_ratio`` get ``default_poisson_ratio``."""
+    if "bulk_modulus" not in card and "poisson_ratio" not in card:
+        card = {**card, "poisson_ratio": default_poisson_ratio}
+    return material_from_card(card)
+
+
+def constant_shear_rate_history(rate_1_s: float, max_strain: float, n_points: int = 40) -> tuple[np.ndarray, np.ndarray]:
+    """Rim-strain ramp ``gamma_R = rate t`` up to ``max_strain``: ``(time_s, rim_strain)`` without t = 0."""
+    t_end = max_strain / rate_1_s
+    t = np.linspace(0.0, t_end, n_points + 1)[1:]
+    return t, rate_1_s * t
+
+
+def relaxation_history(strain: float, rise_time_s: float, hold_time_s: float,
+                       n_rise: int = 5, n_hold: int = 40) -> tuple[np.ndarray, np.ndarray]:
+    """Ramp to ``strain`` in ``rise_time_s`` then hold, log-spaced hold times (``(time_s, rim_strain)``)."""
+    t_rise = np.linspace(0.0, rise_time_s, n_rise + 1)[1:]
+    t_hold = rise_time_s + np.geomspace(rise_time_s * 1e-2, hold_time_s, n_hold)
+    t = np.concatenate([t_rise, t_hold])
+    return t, np.where(t <= rise_time_s, strain * t / rise_time_s, strain)
+
+
+def rheometer_sample_mesh(radius_m: float = RHEOMETER_RADIUS_M, gap_m: float = RHEOMETER_GAP_M,
+                          element_size_m: float = 1.5e-3) -> TetMesh:
+    """Cylinder mesh of the parallel-plate sample with about ``element_size_m`` edges (at least 2 layers)."""
+    n_rings = max(3, int(np.ceil(radius_m / element_size_m)))
+    n_layers = max(2, int(np.ceil(gap_m / element_size_m)))
+    return cylinder_mesh(radius_m, gap_m, n_rings=n_rings, n_layers=n_layers)
+
+
+def rheometer_torsion(card: Mapping, time_s, rim_strain, *, radius_m: float = RHEOMETER_RADIUS_M,
+                      gap_m: float = RHEOMETER_GAP_M, element_size_m: float = 1.5e-3,
+                      default_poisson_ratio: float = 0.49, test: str = "torsion", anp: bool = True,
+                      vtu_path: str | Path | None = None, n_threads: int | None = None) -> xr.Dataset:
+    """Torsion of the bonded cylindrical sample between parallel plates, driven by a rim-strain history.
+
+    The lower plate is fixed, the upper plate rotates by ``theta = gamma_R gap / R`` at fixed gap. Torque is
+    the z-moment the upper plate applies to the sample; normal force is positive when the sample pushes
+    the plates apart (rheometer convention).
+
+    Parameters
+    ----------
+    card : material card dict (see module docstring)
+    time_s, rim_strain : increasing times (s, > 0) and rim shear strain (1) at those times; the history
+        starts from the undeformed state at t = 0 and is linear between the points
+    radius_m, gap_m : sample geometry (default 25 mm plate, 2 mm gap)
+    element_size_m : target element edge (m)
+    vtu_path : optional VTU file for the final displacement field
+    n_threads : numba threads (None: numba's setting; 1 is faster on a loaded shared machine)
+
+    Returns
+    -------
+    canonical dataset with ``time``, ``shear_strain`` (rim), ``deflection_angle``, ``torque``,
+    ``normal_force``, ``shear_stress`` (apparent 2M/(pi R^3)) and ``gap``.
+    """
+    t = np.asarray(time_s, float)
+    gamma = np.asarray(rim_strain, float)
+    if t.shape != gamma.shape or t.ndim != 1 or np.any(np.diff(t) <= 0) or t[0] <= 0:
+        raise ValueError("time_s must be increasing, positive and of the same length as rim_strain")
+    material = card_material(card, default_poisson_ratio)
+    mesh = rheometer_sample_mesh(radius_m, gap_m, element_size_m)
+    z = mesh.nodes[:, 2]
+    angle = gamma * gap_m / radius_m
+    groups = [rotation_group("upper_plate", np.flatnonzero(np.isclose(z, gap_m)), np.concatenate([[0.0], t]),
+                             np.concatenate([[0.0], angle])),
+              fixed_group("lower_plate", np.flatnonzero(np.isclose(z, 0.0)))]
+    res = solve_quasistatic(build_model(mesh, material, groups, anp=anp), t, n_threads=n_threads)
+    torque = res.torque_nm["upper_plate"]
+    normal = -res.reaction_force_n["upper_plate"][:, 2]
+    if vtu_path is not None:
+        write_mesh(vtu_path, mesh, {"displacement": np.asarray(res.displacement_m, float)})
+    return make_run_dataset(
+        {"time": t, "shear_strain": gamma, "deflection_angle": angle, "torque": torque, "normal_force": normal,
+         "shear_stress": 2.0 * torque / (np.pi * radius_m**3), "gap": np.full(t.size, gap_m)},
+        {"test": test, "radius_m": radius_m, "gap_m": gap_m, "source": "tissuemech.fem TLED (dynamic relaxation)",
+         **_provenance(card, material, mesh, res.iterations)})
+
+
+def flat_punch_indentation(card: Mapping, punch_diameter_m: float = 8e-3, max_depth_m: float = 2e-3,
+                           speed_m_s: float = 1e-4, *, sample_radius_m: float = 20e-3, sample_height_m: float = 10e-3,
+                           element_size_m: float | None = None, growth: float = 1.3, bonded_punch: bool = False,
+                           n_increments: int = 20, default_poisson_ratio: float = 0.49, anp: bool = True,
+                           vtu_path: str | Path | None = None, n_threads: int | None = None) -> xr.Dataset:
+    """Rigid flat cylindrical punch pressed at constant speed into a sample bonded to a rigid base.
+
+    The sample is a cylinder (radius ``sample_radius_m``) so that the punch edge coincides with a node ring;
+    elements are ``element_size_m`` under the punch (default: punch radius / 4) and grow by ``growth``
+    towards the rim and the base.
+
+    Parameters
+    ----------
+    punch_diameter_m : 8 or 15 mm in the thesis protocol
+    max_depth_m, speed_m_s : final depth (m) and constant indentation speed (m/s)
+    bonded_punch : punch face bonded (no lateral slip) instead of frictionless
+    vtu_path, n_threads : as in :func:`rheometer_torsion`
+
+    Returns
+    -------
+    canonical dataset with ``time``, ``displacement`` (depth, m) and ``force`` (N, positive = compressive
+    force on the punch).
+    """
+    a = 0.5 * punch_diameter_m
+    if not 0 < a < sample_radius_m:
+        raise ValueError("the punch must be narrower than the sample")
+    h = a / 4.0 if element_size_m is None else min(float(element_size_m), a / 2.0)
+    n_inner = max(2, int(np.ceil(a / h)))
+    mesh = cylinder_mesh(sample_radius_m, sample_height_m, ring_radii_m=graded_ring_radii(sample_radius_m, a, n_inner, growth),
+                         z_m=graded_layers(sample_height_m, a / n_inner, growth))
+    material = card_material(card, default_poisson_ratio)
+    x = mesh.nodes
+    punch = np.flatnonzero(np.isclose(x[:, 2], sample_height_m) & (np.hypot(x[:, 0], x[:, 1]) <= a * (1 + 1e-9)))
+    t_end = max_depth_m / speed_m_s
+    t = np.linspace(0.0, t_end, n_increments + 1)[1:]
+    dofs = (True, True, True) if bonded_punch else (False, False, True)
+    groups = [translation_group("punch", punch, (0, 0, -1), [0.0, t_end], [0.0, max_depth_m], dofs=dofs),
+              fixed_group("base", np.flatnonzero(np.isclose(x[:, 2], 0.0)))]
+    res = solve_quasistatic(build_model(mesh, material, groups, anp=anp), t, n_threads=n_threads)
+    if vtu_path is not None:
+        write_mesh(vtu_path, mesh, {"displacement": np.asarray(res.displacement_m, float)})
+    return make_run_dataset(
+        {"time": t, "displacement": speed_m_s * t, "force": -res.reaction_force_n["punch"][:, 2]},
+        {"test": "indentation", "punch_diameter_m": punch_diameter_m, "speed_m_s": speed_m_s,
+         "sample_radius_m": sample_radius_m, "sample_height_m": sample_height_m, "bonded_punch": bonded_punch,
+         "source": "tissuemech.fem TLED (dynamic relaxation)", **_provenance(card, material, mesh, res.iterations)})
+
+
+def _provenance(card: Mapping, material: Material, mesh: TetMesh, iterations: np.ndarray) -> dict:
+    q = mesh_quality(mesh)
+    return {"model": str(card["model"]), "fem_n_elements": int(mesh.n_elements), "fem_n_nodes": int(mesh.n_nodes),
+            "fem_min_altitude_m": q["min_altitude_m"], "fem_bulk_modulus_pa": material.bulk_modulus_pa,
+            "fem_shear_modulus_pa": material.shear_modulus_pa, "fem_prony_terms": int(material.prony_g.size),
+            "fem_dr_iterations_total": int(np.sum(iterations))}

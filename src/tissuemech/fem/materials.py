@@ -1,0 +1,465 @@
+"""3-D hyperelastic and viscoelastic material routines for the TLED solver.
+
+Stress is evaluated per element from the deformation gradient ``F`` with the usual isochoric/volumetric
+split (nearly incompressible): ``W = W_iso(I1bar, I2bar) + U(J)``, ``U = kappa/2 (J - 1)^2`` (the FElupe /
+NiftySim choice), ``I1bar = J^(-2/3) I1``, ``I2bar = J^(-4/3) I2``. The isochoric Kirchhoff stress is
+
+    tau_iso = 2 dev[(W1 + I1bar W2) bbar - W2 bbar^2]           (invariant laws)
+    tau_iso = sum_a (beta_a - mean(beta)) n_a (x) n_a,  beta_a = lbar_a dW/dlbar_a   (stretch laws, Ogden)
+
+and the first Piola-Kirchhoff stress ``P = (tau_iso + J p I) F^-T`` with ``p = U'(J)`` (or the averaged
+nodal pressure of the ANP element). Saint Venant-Kirchhoff is the compressible ``S = lambda tr(E) I + 2 mu E``.
+
+The scalar laws are the *same* numba functions the 1-D fitting code uses (``models.hyperelastic
+.HYPERELASTIC_LAWS``: ``dW/dI1(params, I1, I2)``, ``dW/dI2(params, I1, I2)`` or Ogden stretch
+derivatives); until that module exists the equivalent laws below are used. They reach the compiled TLED
+kernels as first-class function pointers (numba ``cfunc``), so one cached kernel serves every law.
+
+Viscoelasticity (QLV / Prony) acts on the isochoric 2nd Piola-Kirchhoff stress as in NiftySim's
+``tledMaterialNHV``: ``S_iso = g_inf S_e + sum_i h_i`` with the exact recursion of
+:mod:`tissuemech.models.recursion` (``relaxation_factors``) per element and term; the volumetric response
+stays elastic.
+"""
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import cfunc, njit, types
+
+KIND_INVARIANT = 0
+KIND_STRETCH = 1
+KIND_SVK = 2
+
+#: numba signatures of the scalar laws passed to the kernels
+INVARIANT_SIG = types.float64(types.float64[::1], types.float64, types.float64)
+STRETCH_SIG = types.float64(types.float64[::1], types.float64)
+
+FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+
+
+# --------------------------------------------------------------------------------------------------
+# scalar laws (fallback until models/hyperelastic.py provides HYPERELASTIC_LAWS)
+# --------------------------------------------------------------------------------------------------
+@njit(cache=True)
+def _zero_w(p, i1, i2):
+    return 0.0
+
+
+@njit(cache=True)
+def _zero_wl(p, lam):
+    return 0.0
+
+
+@njit(cache=True)
+def neo_hookean_dw_di1(p, i1, i2):
+    """W = mu/2 (I1 - 3); p = [mu (Pa)]."""
+    return 0.5 * p[0]
+
+
+@njit(cache=True)
+def mooney_rivlin_dw_di1(p, i1, i2):
+    """W = C10 (I1 - 3) + C01 (I2 - 3); p = [C10, C01] (Pa)."""
+    return p[0]
+
+
+@njit(cache=True)
+def mooney_rivlin_dw_di2(p, i1, i2):
+    return p[1]
+
+
+@njit(cache=True)
+def reduced_polynomial_dw_di1(p, i1, i2):
+    """W = sum_i C_i0 (I1 - 3)^i; p = [C10, C20, ...] (Pa)."""
+    x = i1 - 3.0
+    s = 0.0
+    xp = 1.0
+    for i in range(p.size):
+        s += (i + 1) * p[i] * xp
+        xp *= x
+    return s
+
+
+@njit(cache=True)
+def lopez_pamies_dw_di1(p, i1, i2):
+    """W = sum_r 3^(1-a_r)/(2 a_r) mu_r (I1^a_r - 3^a_r); p = [mu_1, a_1, mu_2, a_2, ...]."""
+    s = 0.0
+    for r in range(p.size // 2):
+        mu, a = p[2 * r], p[2 * r + 1]
+        s += 0.5 * 3.0 ** (1.0 - a) * mu * i1 ** (a - 1.0)
+    return s
+
+
+@njit(cache=True)
+def ogden_dw_dlambda(p, lam):
+    """W = sum_p 2 mu_p/a_p^2 (l1^a_p + l2^a_p + l3^a_p - 3); per-stretch derivative; p = [mu_1, a_1, ...]."""
+    s = 0.0
+    for r in range(p.size // 2):
+        mu, a = p[2 * r], p[2 * r + 1]
+        s += 2.0 * mu / a * lam ** (a - 1.0)
+    return s
+
+
+@dataclass(frozen=True)
+class LawSpec:
+    """A hyperelastic law as the kernels see it.
+
+    Attributes
+    ----------
+    kind : ``"invariant"``, ``"stretch"`` or ``"svk"``
+    dw_di1, dw_di2 : njit ``(params, I1bar, I2bar) -> float`` (invariant laws)
+    dw_dlambda : njit ``(params, lambda_bar) -> float`` (stretch laws, Valanis-Landel form)
+    param_names : order of the parameter vector
+    """
+
+    kind: str
+    param_names: tuple[str, ...]
+    dw_di1: object = _zero_w
+    dw_di2: object = _zero_w
+    dw_dlambda: object = _zero_wl
+
+
+def _fallback_laws() -> dict[str, LawSpec]:
+    laws = {
+        "neo_hookean": LawSpec("invariant", ("mu",), neo_hookean_dw_di1),
+        "mooney_rivlin": LawSpec("invariant", ("C10", "C01"), mooney_rivlin_dw_di1, mooney_rivlin_dw_di2),
+        "saint_venant_kirchhoff": LawSpec("svk", ("mu",)),
+    }
+    for n in (1, 2, 3):
+        laws[f"reduced_polynomial{n}"] = LawSpec(
+            "invariant", tuple(f"C{i}0" for i in range(1, n + 1)), reduced_polynomial_dw_di1)
+        names = tuple(x for r in range(1, n + 1) for x in (f"mu{r}", f"alpha{r}"))
+        laws[f"lopez_pamies{n}"] = LawSpec("invariant", names, lopez_pamies_dw_di1)
+        laws[f"ogden{n}"] = LawSpec("stretch", names, dw_dlambda=ogden_dw_dlambda)
+    return laws
+
+
+@functools.lru_cache(maxsize=1)
+def available_laws() -> dict[str, LawSpec]:
+    """Law table: ``models.hyperelastic.HYPERELASTIC_LAWS`` when present (entries whose functions compile
+    with the kernel signatures ``(params, I1bar, I2bar)`` / ``(params, lambda_bar)``), completed by the
+    fallbacks of this module. Cached: call ``available_laws.cache_clear()`` after changing the table."""
+    laws = _fallback_laws()
+    try:
+        from ..models import hyperelastic
+    except ImportError:
+        return laws
+    table = getattr(hyperelastic, "HYPERELASTIC_LAWS", {})
+    for key, entry in table.items():
+        spec = _law_from_table_entry(entry)
+        if spec is not None and _compiles(spec):
+            laws[key] = spec
+    return laws
+
+
+def _compiles(spec: LawSpec) -> bool:
+    """True when the law's functions compile with the kernels' signatures (else the entry is not usable)."""
+    try:
+        if spec.kind == "invariant":
+            _as_cfunc(spec.dw_di1, INVARIANT_SIG)
+            _as_cfunc(spec.dw_di2, INVARIANT_SIG)
+        elif spec.kind == "stretch":
+            _as_cfunc(spec.dw_dlambda, STRETCH_SIG)
+    except Exception:  # noqa: BLE001 - numba typing errors of a foreign signature
+        return False
+    return True
+
+
+def _law_from_table_entry(entry) -> LawSpec | None:
+    """Adapt one ``HYPERELASTIC_LAWS`` entry to a :class:`LawSpec`.
+
+    Accepted shapes: a mapping with ``kind`` and ``dW_dI1``/``dW_dI2`` or ``dW_dlambda`` plus
+    ``param_names``; or a tuple ``(kind, f1[, f2], param_names)`` / ``(kind, (f1, f2), param_names)``.
+    Entries of another shape (or of another kind) are skipped: the fallback law of the same key, if any,
+    is kept.
+    """
+    if isinstance(entry, Mapping):
+        kind = entry.get("kind")
+        names = tuple(entry.get("param_names", entry.get("params", ())))
+        if kind == "invariant" and "dW_dI1" in entry:
+            return LawSpec("invariant", names, entry["dW_dI1"], entry.get("dW_dI2") or _zero_w)
+        if kind == "stretch" and "dW_dlambda" in entry:
+            return LawSpec("stretch", names, dw_dlambda=entry["dW_dlambda"])
+        return None
+    if not isinstance(entry, tuple) or len(entry) < 3 or entry[0] not in ("invariant", "stretch"):
+        return None
+    kind, names = entry[0], entry[-1]
+    if not all(isinstance(n, str) for n in names):
+        return None
+    funcs = [f for part in entry[1:-1] for f in (part if isinstance(part, (tuple, list)) else (part,))]
+    funcs = [f for f in funcs if f is not None]
+    if not funcs or not all(callable(f) for f in funcs):
+        return None
+    if kind == "invariant":
+        return LawSpec("invariant", tuple(names), funcs[0], funcs[1] if len(funcs) > 1 else _zero_w)
+    return LawSpec("stretch", tuple(names), dw_dlambda=funcs[0])
+
+
+@functools.lru_cache(maxsize=None)
+def _as_cfunc(fn, signature):
+    """Compile a numba law into a C function pointer the kernels accept as a first-class function."""
+    py = getattr(fn, "py_func", fn)
+    return cfunc(signature, cache=True)(py)
+
+
+# --------------------------------------------------------------------------------------------------
+# material record
+# --------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Material:
+    """Everything the kernels need about a material (SI units).
+
+    Attributes
+    ----------
+    law_key : key of the hyperelastic law
+    kind : KIND_INVARIANT, KIND_STRETCH or KIND_SVK
+    params : float64 parameter vector in the law's order (Pa, 1)
+    bulk_modulus_pa : kappa of ``U = kappa/2 (J-1)^2`` (for SVK: lambda = kappa - 2 mu/3)
+    density_kg_m3 : mass density
+    prony_g, prony_tau_s : QLV Prony weights (sum < 1) and relaxation times of the isochoric stress
+    shear_modulus_pa : instantaneous small-strain shear modulus (computed; sets the wave speed)
+    branch_law_key : beyond-QLV branch energy law (invariant law key) or None
+    branch_params : (n_terms, n_params) branch-law parameters, one row per relaxation time (empty: QLV)
+    """
+
+    law_key: str
+    kind: int
+    params: np.ndarray
+    bulk_modulus_pa: float
+    density_kg_m3: float = 1040.0
+    prony_g: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    prony_tau_s: np.ndarray = field(default_factory=lambda: np.ones(0))
+    shear_modulus_pa: float = float("nan")
+    branch_law_key: str | None = None
+    branch_params: np.ndarray = field(default_factory=lambda: np.zeros((0, 1)))
+
+    @property
+    def law(self) -> LawSpec:
+        return available_laws()[self.law_key]
+
+    def functions(self):
+        """The three C function pointers ``(dw_di1, dw_di2, dw_dlambda)`` for the kernels."""
+        law = self.law
+        return (_as_cfunc(law.dw_di1, INVARIANT_SIG), _as_cfunc(law.dw_di2, INVARIANT_SIG),
+                _as_cfunc(law.dw_dlambda, STRETCH_SIG))
+
+    def branch_function(self):
+        """C function pointer of the branch law's ``dW/dI1`` (a zero law when there are no branches)."""
+        fn = _zero_w if self.branch_law_key is None else available_laws()[self.branch_law_key].dw_di1
+        return _as_cfunc(fn, INVARIANT_SIG)
+
+    @property
+    def dilatational_modulus_pa(self) -> float:
+        """``lambda + 2 mu = kappa + 4 mu/3`` (small strain), for the wave speed."""
+        return self.bulk_modulus_pa + 4.0 / 3.0 * self.shear_modulus_pa
+
+
+def make_material(law_key: str, parameters: Mapping[str, float] | np.ndarray, *,
+                  bulk_modulus_pa: float | None = None, poisson_ratio: float | None = None,
+                  density_kg_m3: float = 1040.0, prony_g=(), prony_tau_s=(), branch_law: str | None = None,
+                  branch_parameters=None) -> Material:
+    """Build a :class:`Material`; give either ``bulk_modulus_pa`` or ``poisson_ratio``.
+
+    ``kappa = 2 mu (1 + nu) / (3 (1 - 2 nu))`` with ``mu`` the instantaneous small-strain shear modulus.
+
+    Beyond QLV (science.md 1.1 "3D/TLED", Holzapfel/Simo overstress with branch energies): give
+    ``branch_law`` (an invariant law whose ``dW/dI1`` is used, e.g. ``"reduced_polynomial2"`` for the
+    branch-specific RP2 ``R_i = 2 c_i1 gamma + 4 c_i2 gamma^3``) and ``branch_parameters``, one mapping per
+    relaxation time in ``prony_tau_s``; the main law is then the long-term (equilibrium) law and
+    ``prony_g`` must be empty.
+    """
+    laws = available_laws()
+    if law_key not in laws:
+        raise KeyError(f"unknown hyperelastic law {law_key!r}; known: {', '.join(sorted(laws))}")
+    law = laws[law_key]
+    if isinstance(parameters, Mapping):
+        missing = [n for n in law.param_names if n not in parameters]
+        if missing:
+            raise KeyError(f"law {law_key!r} needs parameters {law.param_names}; missing {missing}")
+        params = np.array([float(parameters[n]) for n in law.param_names])
+    else:
+        params = np.asarray(parameters, float).copy()
+    kind = {"invariant": KIND_INVARIANT, "stretch": KIND_STRETCH, "svk": KIND_SVK}[law.kind]
+    g = np.asarray(prony_g, float)
+    tau = np.asarray(prony_tau_s, float)
+    if g.shape != tau.shape and not (branch_law is not None and g.size == 0):
+        raise ValueError("prony g and tau must have the same length")
+    if g.size and (g.sum() >= 1.0 or np.any(g < 0) or np.any(tau <= 0)):
+        raise ValueError("Prony weights must be >= 0 with sum < 1 and times > 0")
+    branch_params = np.zeros((0, 1))
+    if branch_law is not None:
+        if branch_law not in laws or laws[branch_law].kind != "invariant":
+            raise KeyError(f"branch law {branch_law!r} must be an invariant law; known: {', '.join(sorted(laws))}")
+        if g.size:
+            raise ValueError("with branch energies the Prony weights come from the branch laws: leave prony_g empty")
+        names = laws[branch_law].param_names
+        rows = list(branch_parameters or [])
+        if len(rows) != tau.size or tau.size == 0:
+            raise ValueError("give one branch parameter set per relaxation time in prony_tau_s")
+        branch_params = np.array([[float(r[n]) for n in names] for r in rows])
+        g = np.zeros(tau.size)
+    provisional = Material(law_key, kind, params, 1.0, density_kg_m3, g, tau, branch_law_key=branch_law,
+                           branch_params=branch_params)
+    mu = small_strain_shear_modulus(provisional)
+    if branch_law is not None:  # instantaneous modulus: equilibrium + every branch (2 W_i'(3))
+        dw = laws[branch_law].dw_di1
+        mu += sum(2.0 * dw(np.ascontiguousarray(row), 3.0, 3.0) for row in branch_params)
+    if not mu > 0:
+        raise ValueError(f"law {law_key!r} with parameters {params} has non-positive shear modulus {mu}")
+    if (bulk_modulus_pa is None) == (poisson_ratio is None):
+        raise ValueError("give exactly one of bulk_modulus_pa and poisson_ratio")
+    if bulk_modulus_pa is None:
+        if not -1.0 < poisson_ratio < 0.5:
+            raise ValueError("poisson_ratio must lie in (-1, 0.5)")
+        bulk_modulus_pa = 2.0 * mu * (1.0 + poisson_ratio) / (3.0 * (1.0 - 2.0 * poisson_ratio))
+    return Material(law_key, kind, params, float(bulk_modulus_pa), density_kg_m3, g, tau, float(mu), branch_law,
+                    branch_params)
+
+
+def material_from_card(card: Mapping) -> Material:
+    """Material from a card dict (SI units).
+
+    Accepted: the minimal shape ``{"model": law key, "parameters": {...}, "prony": {"g", "tau"} | None,
+    "bulk_modulus" | "poisson_ratio", "density"?}`` and the full ``tissuemech.cards`` card, whose
+    ``"elastic_law"``/``"elastic_parameters"`` (the instantaneous hyperelastic law of a QLV or linear
+    viscoelastic fit) take precedence over ``"model"``/``"parameters"``. A finite ``bulk_modulus`` wins over
+    ``poisson_ratio`` when both are given (the cards write both, consistently). Beyond-QLV branch energies:
+    ``"branches": {"law": invariant law key, "parameters": [{...} per term], "tau": [...]}`` (then the main
+    law is the equilibrium law and ``"prony"`` must be absent).
+    """
+    if card.get("elastic_law"):
+        law_key, params = card["elastic_law"], card.get("elastic_parameters") or {}
+    else:
+        law_key, params = card["model"], card["parameters"]
+    prony = card.get("prony") or {}
+    bulk = card.get("bulk_modulus")
+    nu = card.get("poisson_ratio")
+    if bulk is not None and np.isfinite(float(bulk)):
+        nu = None
+    else:
+        bulk = None
+    branches = card.get("branches") or {}
+    if branches and prony:
+        raise ValueError("a card has either 'prony' (QLV) or 'branches' (beyond QLV), not both")
+    return make_material(
+        law_key, params, bulk_modulus_pa=None if bulk is None else float(bulk),
+        poisson_ratio=None if nu is None else float(nu), density_kg_m3=float(card.get("density", 1040.0)),
+        prony_g=prony.get("g", ()), prony_tau_s=branches.get("tau", prony.get("tau", ())),
+        branch_law=branches.get("law"), branch_parameters=branches.get("parameters"))
+
+
+def small_strain_shear_modulus(material: Material) -> float:
+    """Initial shear modulus (Pa): the simple-shear Cauchy stress at gamma = 1e-6 divided by gamma."""
+    gamma = 1e-6
+    F = np.eye(3)
+    F[0, 1] = gamma
+    sigma = cauchy_stress(material, F)
+    return float(sigma[0, 1] / gamma)
+
+
+# --------------------------------------------------------------------------------------------------
+# element stress (scalar code, inlined into the kernels)
+# --------------------------------------------------------------------------------------------------
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _iso_from_bbar(kind, w1fn, w2fn, wlfn, p, b11, b22, b33, b12, b23, b13):
+    """Isochoric Kirchhoff stress (6 comps: 11 22 33 12 23 13) from the isochoric left Cauchy-Green tensor."""
+    if kind == KIND_INVARIANT:
+        i1 = b11 + b22 + b33
+        # bbar^2 components
+        q11 = b11 * b11 + b12 * b12 + b13 * b13
+        q22 = b12 * b12 + b22 * b22 + b23 * b23
+        q33 = b13 * b13 + b23 * b23 + b33 * b33
+        q12 = b11 * b12 + b12 * b22 + b13 * b23
+        q23 = b12 * b13 + b22 * b23 + b23 * b33
+        q13 = b11 * b13 + b12 * b23 + b13 * b33
+        i2 = 0.5 * (i1 * i1 - (q11 + q22 + q33))
+        w1 = w1fn(p, i1, i2)
+        w2 = w2fn(p, i1, i2)
+        a = 2.0 * (w1 + i1 * w2)
+        c = -2.0 * w2
+        t11 = a * b11 + c * q11
+        t22 = a * b22 + c * q22
+        t33 = a * b33 + c * q33
+        m = (t11 + t22 + t33) / 3.0
+        return (t11 - m, t22 - m, t33 - m, a * b12 + c * q12, a * b23 + c * q23, a * b13 + c * q13)
+    # stretch-based (Valanis-Landel): spectral decomposition of bbar
+    bb = np.empty((3, 3))
+    bb[0, 0], bb[1, 1], bb[2, 2] = b11, b22, b33
+    bb[0, 1] = bb[1, 0] = b12
+    bb[1, 2] = bb[2, 1] = b23
+    bb[0, 2] = bb[2, 0] = b13
+    lam2, vec = np.linalg.eigh(bb)
+    beta = np.empty(3)
+    for k in range(3):
+        lk = math.sqrt(lam2[k])
+        beta[k] = lk * wlfn(p, lk)
+    m = (beta[0] + beta[1] + beta[2]) / 3.0
+    t = np.zeros(6)
+    for k in range(3):
+        d = beta[k] - m
+        n0, n1, n2 = vec[0, k], vec[1, k], vec[2, k]
+        t[0] += d * n0 * n0
+        t[1] += d * n1 * n1
+        t[2] += d * n2 * n2
+        t[3] += d * n0 * n1
+        t[4] += d * n1 * n2
+        t[5] += d * n0 * n2
+    return (t[0], t[1], t[2], t[3], t[4], t[5])
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def kirchhoff_deviatoric(kind, w1fn, w2fn, wlfn, p, kappa, f11, f12, f13, f21, f22, f23, f31, f32, f33, J):
+    """Kirchhoff stress without the volumetric pressure term (6 comps).
+
+    For split laws this is the isochoric part; for Saint Venant-Kirchhoff (compressible, no split) it is the
+    whole ``tau = F S F^T`` and the caller must not add a pressure.
+    """
+    b11 = f11 * f11 + f12 * f12 + f13 * f13
+    b22 = f21 * f21 + f22 * f22 + f23 * f23
+    b33 = f31 * f31 + f32 * f32 + f33 * f33
+    b12 = f11 * f21 + f12 * f22 + f13 * f23
+    b23 = f21 * f31 + f22 * f32 + f23 * f33
+    b13 = f11 * f31 + f12 * f32 + f13 * f33
+    if kind == KIND_SVK:
+        mu = p[0]
+        lam = kappa - 2.0 * mu / 3.0
+        # tau = F S F^T = lam tr(E) b + mu (b^2 - b),  E = (C - I)/2
+        tre = 0.5 * (b11 + b22 + b33 - 3.0)
+        q11 = b11 * b11 + b12 * b12 + b13 * b13
+        q22 = b12 * b12 + b22 * b22 + b23 * b23
+        q33 = b13 * b13 + b23 * b23 + b33 * b33
+        q12 = b11 * b12 + b12 * b22 + b13 * b23
+        q23 = b12 * b13 + b22 * b23 + b23 * b33
+        q13 = b11 * b13 + b12 * b23 + b13 * b33
+        a = lam * tre - mu
+        return (a * b11 + mu * q11, a * b22 + mu * q22, a * b33 + mu * q33,
+                a * b12 + mu * q12, a * b23 + mu * q23, a * b13 + mu * q13)
+    cr = np.cbrt(J)
+    jm23 = 1.0 / (cr * cr)
+    return _iso_from_bbar(kind, w1fn, w2fn, wlfn, p, jm23 * b11, jm23 * b22, jm23 * b33,
+                          jm23 * b12, jm23 * b23, jm23 * b13)
+
+
+@njit(cache=True)
+def _cauchy_kernel(kind, w1fn, w2fn, wlfn, p, kappa, F):
+    J = (F[0, 0] * (F[1, 1] * F[2, 2] - F[1, 2] * F[2, 1]) - F[0, 1] * (F[1, 0] * F[2, 2] - F[1, 2] * F[2, 0])
+         + F[0, 2] * (F[1, 0] * F[2, 1] - F[1, 1] * F[2, 0]))
+    t = kirchhoff_deviatoric(kind, w1fn, w2fn, wlfn, p, kappa, F[0, 0], F[0, 1], F[0, 2], F[1, 0], F[1, 1],
+                             F[1, 2], F[2, 0], F[2, 1], F[2, 2], J)
+    pr = 0.0 if kind == KIND_SVK else kappa * (J - 1.0) * J
+    s = np.empty((3, 3))
+    s[0, 0], s[1, 1], s[2, 2] = t[0] + pr, t[1] + pr, t[2] + pr
+    s[0, 1] = s[1, 0] = t[3]
+    s[1, 2] = s[2, 1] = t[4]
+    s[0, 2] = s[2, 0] = t[5]
+    return s / J
+
+
+def cauchy_stress(material: Material, F: np.ndarray) -> np.ndarray:
+    """Elastic Cauchy stress (Pa) of a homogeneous deformation gradient ``F`` (3x3), for checks and cards."""
+    w1, w2, wl = material.functions()
+    return _cauchy_kernel(material.kind, w1, w2, wl, material.params, material.bulk_modulus_pa,
+                          np.ascontiguousarray(F, dtype=np.float64))

@@ -1,0 +1,1066 @@
+"""Total Lagrangian explicit dynamics (TLED) on linear tetrahedra, numba CPU kernels.
+
+Method (Miller, Joldes, Lance & Wittek 2007; Taylor, Cheng & Ourselin 2008; NiftySim):
+
+* precomputed reference shape-function derivatives ``dN_a/dX`` and volumes ``V0`` per element;
+* per step, per element: ``F = I + sum_a u_a (x) dN_a/dX``, stress (``materials``), nodal forces
+  ``f_a = V0 tau (F^-T dN_a/dX)`` (``tau`` Kirchhoff) accumulated in per-thread force buffers (one fused
+  element pass, no atomics), then one node pass that reduces the buffers and advances the nodes;
+* lumped mass, central difference with mass-proportional damping ``alpha`` (NiftySim's
+  ``u+ = A (R - F) + B u + C u-`` form), automatic critical step ``min altitude / c_d`` times a safety
+  factor, ``c_d = sqrt((kappa + 4 mu/3)/rho)``;
+* dynamic relaxation (Joldes, Wittek & Miller 2009/2011) for quasi-static solutions: mass scaled per element
+  to a unit stable step, damping ``c = 2 sqrt(lambda_min)`` re-estimated from the Rayleigh quotient of the
+  iteration, stop when the Joldes error bound ``rho/(1-rho) ||du||_inf`` drops below a tolerance;
+* average nodal pressure (ANP, Bonet & Burton 1998 / Joldes et al. 2009) against volumetric locking:
+  element pressures ``kappa (J_e - 1)`` averaged to the nodes (reference-volume weighted) and back;
+* prescribed displacement / rotation-about-z histories on node groups (fixed nodes = zero history, flat
+  punch = prescribed group), frictionless rigid sphere / cylinder contact by projection;
+* element inversion (``J <= 0``) or a non-finite state stops the run and raises
+  :class:`ElementInversionError` with the element id, step and time.
+
+The whole time loop runs inside one compiled function (no Python per step). Reaction forces are sums of
+internal nodal forces over a constrained group; torques are about the z axis through the group's centre.
+Storage precision is float64 or float32; in float32 the arithmetic of an element is done in registers at
+double precision and stored in single precision (halves the memory traffic, which bounds the CPU rate).
+"""
+from __future__ import annotations
+
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+import numba
+import numpy as np
+from numba import njit, prange
+
+from ..models.recursion import relaxation_factors
+from .materials import FASTMATH, KIND_SVK, Material, kirchhoff_deviatoric
+from .mesh import TetMesh, element_min_altitudes, element_volumes
+
+STATUS_OK = 0
+STATUS_INVERTED = 1
+STATUS_NOT_FINITE = 2
+STATUS_NOT_CONVERGED = 3
+
+
+class ElementInversionError(RuntimeError):
+    """An element reached ``J <= 0`` (or the state became non-finite) during a TLED run."""
+
+    def __init__(self, message: str, element: int, step: int, time_s: float):
+        super().__init__(message)
+        self.element, self.step, self.time_s = element, step, time_s
+
+
+class DynamicRelaxationError(RuntimeError):
+    """Dynamic relaxation did not converge within the iteration limit."""
+
+
+# --------------------------------------------------------------------------------------------------
+# compiled passes
+# --------------------------------------------------------------------------------------------------
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
+def _anp_element_pass(u, elements, dndx, vol0, chunk_lo, pbuf, kappa, bad):
+    """Accumulate ``kappa (J_e - 1) V0_e`` into per-chunk nodal pressure buffers."""
+    nchunk = chunk_lo.size - 1
+    for c in prange(nchunk):
+        for e in range(chunk_lo[c], chunk_lo[c + 1]):
+            n0, n1, n2, n3 = elements[e, 0], elements[e, 1], elements[e, 2], elements[e, 3]
+            f11 = 1.0 + u[n0, 0] * dndx[e, 0] + u[n1, 0] * dndx[e, 3] + u[n2, 0] * dndx[e, 6] + u[n3, 0] * dndx[e, 9]
+            f12 = u[n0, 0] * dndx[e, 1] + u[n1, 0] * dndx[e, 4] + u[n2, 0] * dndx[e, 7] + u[n3, 0] * dndx[e, 10]
+            f13 = u[n0, 0] * dndx[e, 2] + u[n1, 0] * dndx[e, 5] + u[n2, 0] * dndx[e, 8] + u[n3, 0] * dndx[e, 11]
+            f21 = u[n0, 1] * dndx[e, 0] + u[n1, 1] * dndx[e, 3] + u[n2, 1] * dndx[e, 6] + u[n3, 1] * dndx[e, 9]
+            f22 = 1.0 + u[n0, 1] * dndx[e, 1] + u[n1, 1] * dndx[e, 4] + u[n2, 1] * dndx[e, 7] + u[n3, 1] * dndx[e, 10]
+            f23 = u[n0, 1] * dndx[e, 2] + u[n1, 1] * dndx[e, 5] + u[n2, 1] * dndx[e, 8] + u[n3, 1] * dndx[e, 11]
+            f31 = u[n0, 2] * dndx[e, 0] + u[n1, 2] * dndx[e, 3] + u[n2, 2] * dndx[e, 6] + u[n3, 2] * dndx[e, 9]
+            f32 = u[n0, 2] * dndx[e, 1] + u[n1, 2] * dndx[e, 4] + u[n2, 2] * dndx[e, 7] + u[n3, 2] * dndx[e, 10]
+            f33 = 1.0 + u[n0, 2] * dndx[e, 2] + u[n1, 2] * dndx[e, 5] + u[n2, 2] * dndx[e, 8] + u[n3, 2] * dndx[e, 11]
+            J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
+            if not J > 0.0:
+                bad[c] = e
+            pv = kappa * (J - 1.0) * vol0[e]
+            pbuf[c, n0] += pv
+            pbuf[c, n1] += pv
+            pbuf[c, n2] += pv
+            pbuf[c, n3] += pv
+
+
+@njit(parallel=True, cache=True)
+def _anp_node_pass(pbuf, vnode, p_node):
+    nchunk = pbuf.shape[0]
+    for n in prange(p_node.size):
+        s = 0.0
+        for c in range(nchunk):
+            s += pbuf[c, n]
+            pbuf[c, n] = 0.0
+        p_node[n] = s / vnode[n]
+
+
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
+def _element_force_pass(u, elements, dndx, vol0, chunk_lo, fbuf, kind, w1fn, w2fn, wlfn, params, kappa,
+                        use_anp, p_node, prony_g, prony_e, prony_f, h_state, s_prev, bfn, branch_params, w_prev, commit, bad):
+    """Internal nodal forces of all elements into per-chunk buffers ``fbuf[chunk, node, dof]``.
+
+    QLV (``prony_g.size > 0``): isochoric 2nd PK ``S = g_inf S_e + sum_i h_i``, ``h_i`` advanced with the
+    exact factors ``prony_e = exp(-dt/tau)``, ``prony_f = (1 - exp(-dt/tau))/(dt/tau)``; the new states are
+    written only when ``commit`` (dynamic relaxation evaluates trial states without committing).
+    Beyond QLV (``branch_params`` with one row per term): branch energies ``W_i(I1bar)`` through ``bfn``,
+    drive ``S_i = 2 W_i' dI1bar/dC``; ``s_prev`` then holds ``2 F^-1 dev(bbar) F^-T`` and ``w_prev`` the
+    previous ``W_i'``.
+    """
+    nchunk = chunk_lo.size - 1
+    nterm = prony_g.size
+    g_inf = 1.0
+    for i in range(nterm):
+        g_inf -= prony_g[i]
+    for c in prange(nchunk):
+        for e in range(chunk_lo[c], chunk_lo[c + 1]):
+            n0, n1, n2, n3 = elements[e, 0], elements[e, 1], elements[e, 2], elements[e, 3]
+            d0x, d0y, d0z = dndx[e, 0], dndx[e, 1], dndx[e, 2]
+            d1x, d1y, d1z = dndx[e, 3], dndx[e, 4], dndx[e, 5]
+            d2x, d2y, d2z = dndx[e, 6], dndx[e, 7], dndx[e, 8]
+            d3x, d3y, d3z = dndx[e, 9], dndx[e, 10], dndx[e, 11]
+            ux0, ux1, ux2, ux3 = u[n0, 0], u[n1, 0], u[n2, 0], u[n3, 0]
+            uy0, uy1, uy2, uy3 = u[n0, 1], u[n1, 1], u[n2, 1], u[n3, 1]
+            uz0, uz1, uz2, uz3 = u[n0, 2], u[n1, 2], u[n2, 2], u[n3, 2]
+            f11 = 1.0 + ux0 * d0x + ux1 * d1x + ux2 * d2x + ux3 * d3x
+            f12 = ux0 * d0y + ux1 * d1y + ux2 * d2y + ux3 * d3y
+            f13 = ux0 * d0z + ux1 * d1z + ux2 * d2z + ux3 * d3z
+            f21 = uy0 * d0x + uy1 * d1x + uy2 * d2x + uy3 * d3x
+            f22 = 1.0 + uy0 * d0y + uy1 * d1y + uy2 * d2y + uy3 * d3y
+            f23 = uy0 * d0z + uy1 * d1z + uy2 * d2z + uy3 * d3z
+            f31 = uz0 * d0x + uz1 * d1x + uz2 * d2x + uz3 * d3x
+            f32 = uz0 * d0y + uz1 * d1y + uz2 * d2y + uz3 * d3y
+            f33 = 1.0 + uz0 * d0z + uz1 * d1z + uz2 * d2z + uz3 * d3z
+            # cofactor matrix of F (cof = J F^-T)
+            c11 = f22 * f33 - f23 * f32
+            c12 = f23 * f31 - f21 * f33
+            c13 = f21 * f32 - f22 * f31
+            c21 = f13 * f32 - f12 * f33
+            c22 = f11 * f33 - f13 * f31
+            c23 = f12 * f31 - f11 * f32
+            c31 = f12 * f23 - f13 * f22
+            c32 = f13 * f21 - f11 * f23
+            c33 = f11 * f22 - f12 * f21
+            J = f11 * c11 + f12 * c12 + f13 * c13
+            if not J > 0.0:
+                bad[c] = e
+                continue
+            t11, t22, t33, t12, t23, t13 = kirchhoff_deviatoric(kind, w1fn, w2fn, wlfn, params, kappa,
+                                                                f11, f12, f13, f21, f22, f23, f31, f32, f33, J)
+            if nterm > 0:
+                # S_e = F^-1 tau F^-T, F^-1 = cof^T / J
+                ij = 1.0 / J
+                a11, a12, a13 = c11 * ij, c21 * ij, c31 * ij
+                a21, a22, a23 = c12 * ij, c22 * ij, c32 * ij
+                a31, a32, a33 = c13 * ij, c23 * ij, c33 * ij
+                # m = F^-1 tau
+                m11 = a11 * t11 + a12 * t12 + a13 * t13
+                m12 = a11 * t12 + a12 * t22 + a13 * t23
+                m13 = a11 * t13 + a12 * t23 + a13 * t33
+                m21 = a21 * t11 + a22 * t12 + a23 * t13
+                m22 = a21 * t12 + a22 * t22 + a23 * t23
+                m23 = a21 * t13 + a22 * t23 + a23 * t33
+                m31 = a31 * t11 + a32 * t12 + a33 * t13
+                m32 = a31 * t12 + a32 * t22 + a33 * t23
+                m33 = a31 * t13 + a32 * t23 + a33 * t33
+                se0 = m11 * a11 + m12 * a12 + m13 * a13
+                se1 = m21 * a21 + m22 * a22 + m23 * a23
+                se2 = m31 * a31 + m32 * a32 + m33 * a33
+                se3 = m11 * a21 + m12 * a22 + m13 * a23
+                se4 = m21 * a31 + m22 * a32 + m23 * a33
+                se5 = m11 * a31 + m12 * a32 + m13 * a33
+                if branch_params.shape[0] > 0:
+                    # beyond QLV: branch energies W_i(I1bar), S_i = 2 W_i' dI1bar/dC = 2 W_i' F^-1 dev(bbar) F^-T;
+                    # the drive increments are S_i(C_n+1) - S_i(C_n) (science.md 1.1 "3D/TLED"), the
+                    # equilibrium stress S_e is the main law in full (g_inf = 1)
+                    bb11 = f11 * f11 + f12 * f12 + f13 * f13
+                    bb22 = f21 * f21 + f22 * f22 + f23 * f23
+                    bb33 = f31 * f31 + f32 * f32 + f33 * f33
+                    bb12 = f11 * f21 + f12 * f22 + f13 * f23
+                    bb23 = f21 * f31 + f22 * f32 + f23 * f33
+                    bb13 = f11 * f31 + f12 * f32 + f13 * f33
+                    crj = np.cbrt(J)
+                    jm23 = 1.0 / (crj * crj)
+                    bb11 *= jm23
+                    bb22 *= jm23
+                    bb33 *= jm23
+                    bb12 *= jm23
+                    bb23 *= jm23
+                    bb13 *= jm23
+                    bi1 = bb11 + bb22 + bb33
+                    bi2 = 0.5 * (bi1 * bi1 - (bb11 * bb11 + bb22 * bb22 + bb33 * bb33
+                                              + 2.0 * (bb12 * bb12 + bb23 * bb23 + bb13 * bb13)))
+                    mb = bi1 / 3.0
+                    v11, v22, v33 = bb11 - mb, bb22 - mb, bb33 - mb
+                    n11 = a11 * v11 + a12 * bb12 + a13 * bb13
+                    n12 = a11 * bb12 + a12 * v22 + a13 * bb23
+                    n13 = a11 * bb13 + a12 * bb23 + a13 * v33
+                    n21 = a21 * v11 + a22 * bb12 + a23 * bb13
+                    n22 = a21 * bb12 + a22 * v22 + a23 * bb23
+                    n23 = a21 * bb13 + a22 * bb23 + a23 * v33
+                    n31 = a31 * v11 + a32 * bb12 + a33 * bb13
+                    n32 = a31 * bb12 + a32 * v22 + a33 * bb23
+                    n33 = a31 * bb13 + a32 * bb23 + a33 * v33
+                    q0 = 2.0 * (n11 * a11 + n12 * a12 + n13 * a13)
+                    q1 = 2.0 * (n21 * a21 + n22 * a22 + n23 * a23)
+                    q2 = 2.0 * (n31 * a31 + n32 * a32 + n33 * a33)
+                    q3 = 2.0 * (n11 * a21 + n12 * a22 + n13 * a23)
+                    q4 = 2.0 * (n21 * a31 + n22 * a32 + n23 * a33)
+                    q5 = 2.0 * (n11 * a31 + n12 * a32 + n13 * a33)
+                    s0, s1, s2, s3, s4, s5 = se0, se1, se2, se3, se4, se5
+                    for i in range(nterm):
+                        ee = prony_e[i]
+                        ff = prony_f[i]
+                        wb = bfn(branch_params[i], bi1, bi2)
+                        wo = w_prev[e, i]
+                        h0 = ee * h_state[e, i, 0] + ff * (wb * q0 - wo * s_prev[e, 0])
+                        h1 = ee * h_state[e, i, 1] + ff * (wb * q1 - wo * s_prev[e, 1])
+                        h2 = ee * h_state[e, i, 2] + ff * (wb * q2 - wo * s_prev[e, 2])
+                        h3 = ee * h_state[e, i, 3] + ff * (wb * q3 - wo * s_prev[e, 3])
+                        h4 = ee * h_state[e, i, 4] + ff * (wb * q4 - wo * s_prev[e, 4])
+                        h5 = ee * h_state[e, i, 5] + ff * (wb * q5 - wo * s_prev[e, 5])
+                        s0 += h0
+                        s1 += h1
+                        s2 += h2
+                        s3 += h3
+                        s4 += h4
+                        s5 += h5
+                        if commit:
+                            h_state[e, i, 0] = h0
+                            h_state[e, i, 1] = h1
+                            h_state[e, i, 2] = h2
+                            h_state[e, i, 3] = h3
+                            h_state[e, i, 4] = h4
+                            h_state[e, i, 5] = h5
+                            w_prev[e, i] = wb
+                    if commit:
+                        s_prev[e, 0] = q0
+                        s_prev[e, 1] = q1
+                        s_prev[e, 2] = q2
+                        s_prev[e, 3] = q3
+                        s_prev[e, 4] = q4
+                        s_prev[e, 5] = q5
+                else:
+                    d0 = se0 - s_prev[e, 0]
+                    d1 = se1 - s_prev[e, 1]
+                    d2 = se2 - s_prev[e, 2]
+                    d3 = se3 - s_prev[e, 3]
+                    d4 = se4 - s_prev[e, 4]
+                    d5 = se5 - s_prev[e, 5]
+                    s0, s1, s2 = g_inf * se0, g_inf * se1, g_inf * se2
+                    s3, s4, s5 = g_inf * se3, g_inf * se4, g_inf * se5
+                    for i in range(nterm):
+                        ee = prony_e[i]
+                        gf = prony_g[i] * prony_f[i]
+                        h0 = ee * h_state[e, i, 0] + gf * d0
+                        h1 = ee * h_state[e, i, 1] + gf * d1
+                        h2 = ee * h_state[e, i, 2] + gf * d2
+                        h3 = ee * h_state[e, i, 3] + gf * d3
+                        h4 = ee * h_state[e, i, 4] + gf * d4
+                        h5 = ee * h_state[e, i, 5] + gf * d5
+                        s0 += h0
+                        s1 += h1
+                        s2 += h2
+                        s3 += h3
+                        s4 += h4
+                        s5 += h5
+                        if commit:
+                            h_state[e, i, 0] = h0
+                            h_state[e, i, 1] = h1
+                            h_state[e, i, 2] = h2
+                            h_state[e, i, 3] = h3
+                            h_state[e, i, 4] = h4
+                            h_state[e, i, 5] = h5
+                    if commit:
+                        s_prev[e, 0] = se0
+                        s_prev[e, 1] = se1
+                        s_prev[e, 2] = se2
+                        s_prev[e, 3] = se3
+                        s_prev[e, 4] = se4
+                        s_prev[e, 5] = se5
+                # tau = F S F^T
+                q11 = f11 * s0 + f12 * s3 + f13 * s5
+                q12 = f11 * s3 + f12 * s1 + f13 * s4
+                q13 = f11 * s5 + f12 * s4 + f13 * s2
+                q21 = f21 * s0 + f22 * s3 + f23 * s5
+                q22 = f21 * s3 + f22 * s1 + f23 * s4
+                q23 = f21 * s5 + f22 * s4 + f23 * s2
+                q31 = f31 * s0 + f32 * s3 + f33 * s5
+                q32 = f31 * s3 + f32 * s1 + f33 * s4
+                q33 = f31 * s5 + f32 * s4 + f33 * s2
+                t11 = q11 * f11 + q12 * f12 + q13 * f13
+                t22 = q21 * f21 + q22 * f22 + q23 * f23
+                t33 = q31 * f31 + q32 * f32 + q33 * f33
+                t12 = q11 * f21 + q12 * f22 + q13 * f23
+                t23 = q21 * f31 + q22 * f32 + q23 * f33
+                t13 = q11 * f31 + q12 * f32 + q13 * f33
+            if kind != KIND_SVK:
+                if use_anp:
+                    pr = 0.25 * (p_node[n0] + p_node[n1] + p_node[n2] + p_node[n3])
+                else:
+                    pr = kappa * (J - 1.0)
+                jp = J * pr
+                t11 += jp
+                t22 += jp
+                t33 += jp
+            # f_a = V0 tau (cof dN_a) / J
+            sc = vol0[e] / J
+            for a in range(4):
+                dx, dy, dz = dndx[e, 3 * a], dndx[e, 3 * a + 1], dndx[e, 3 * a + 2]
+                gx = (c11 * dx + c12 * dy + c13 * dz) * sc
+                gy = (c21 * dx + c22 * dy + c23 * dz) * sc
+                gz = (c31 * dx + c32 * dy + c33 * dz) * sc
+                na = elements[e, a]
+                fbuf[c, na, 0] += t11 * gx + t12 * gy + t13 * gz
+                fbuf[c, na, 1] += t12 * gx + t22 * gy + t23 * gz
+                fbuf[c, na, 2] += t13 * gx + t23 * gy + t33 * gz
+
+
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
+def _reduce_forces(fbuf, fint):
+    """``fint[n] = sum_chunks fbuf[chunk, n]`` and clear the buffers for the next pass."""
+    nchunk = fbuf.shape[0]
+    for n in prange(fint.shape[0]):
+        for i in range(3):
+            s = 0.0
+            for c in range(nchunk):
+                s += fbuf[c, n, i]
+                fbuf[c, n, i] = 0.0
+            fint[n, i] = s
+
+
+@njit(cache=True)
+def _first_bad(bad):
+    for c in range(bad.size):
+        if bad[c] >= 0:
+            return bad[c]
+    return -1
+
+
+@njit(cache=True)
+def _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind, w1fn, w2fn,
+                     wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f, h_state, s_prev, bfn, branch_params, w_prev, commit, bad,
+                     reduce=True):
+    """One complete internal-force evaluation (optional ANP passes + element pass + optional reduction
+    into ``fint``; without it the forces stay in ``fbuf`` for a fused node pass).
+
+    Returns the id of an inverted element or -1.
+    """
+    bad[:] = -1
+    if use_anp:
+        _anp_element_pass(u, elements, dndx, vol0, chunk_lo, pbuf, kappa, bad)
+        _anp_node_pass(pbuf, vnode, p_node)
+    _element_force_pass(u, elements, dndx, vol0, chunk_lo, fbuf, kind, w1fn, w2fn, wlfn, params, kappa,
+                        use_anp, p_node, prony_g, prony_e, prony_f, h_state, s_prev, bfn, branch_params, w_prev, commit, bad)
+    if reduce:
+        _reduce_forces(fbuf, fint)
+    return _first_bad(bad)
+
+
+@njit(cache=True)
+def _history_values(t, hist_time, hist_vals, out):
+    for r in range(hist_vals.shape[0]):
+        out[r] = np.interp(t, hist_time, hist_vals[r])
+
+
+@njit(cache=True)
+def _apply_bcs(u, X, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups):
+    """Set prescribed dofs: ``u = s_g dir`` (+ rotation about z by angle theta_g around the group centre)."""
+    for k in range(bc_nodes.size):
+        n = bc_nodes[k]
+        g = bc_group[k]
+        s = hv[g]
+        ux = s * bc_dir[k, 0]
+        uy = s * bc_dir[k, 1]
+        uz = s * bc_dir[k, 2]
+        if bc_rotate[k]:
+            th = hv[n_groups + g]
+            ct, st = np.cos(th), np.sin(th)
+            rx, ry = X[n, 0] - rot_center[g, 0], X[n, 1] - rot_center[g, 1]
+            ux += ct * rx - st * ry - rx
+            uy += st * rx + ct * ry - ry
+        if bc_mask[k, 0]:
+            u[n, 0] = ux
+        if bc_mask[k, 1]:
+            u[n, 1] = uy
+        if bc_mask[k, 2]:
+            u[n, 2] = uz
+
+
+@njit(cache=True)
+def _reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_out, torque_out):
+    """Reaction force (sum of internal forces) and z-torque about the group centre, per group."""
+    force_out[:] = 0.0
+    torque_out[:] = 0.0
+    for k in range(bc_nodes.size):
+        n = bc_nodes[k]
+        g = bc_group[k]
+        fx, fy, fz = fint[n, 0], fint[n, 1], fint[n, 2]
+        force_out[g, 0] += fx
+        force_out[g, 1] += fy
+        force_out[g, 2] += fz
+        x = X[n, 0] + u[n, 0] - rot_center[g, 0]
+        y = X[n, 1] + u[n, 1] - rot_center[g, 1]
+        torque_out[g] += x * fy - y * fx
+
+
+@njit(cache=True)
+def _contact_project(u, X, contact_nodes, in_contact, contact_kind, cparams, s_contact):
+    """Project nodes inside a rigid sphere (kind 1) or infinite cylinder (kind 2) onto its surface.
+
+    ``cparams = [c0x, c0y, c0z, dx, dy, dz, radius, ax, ay, az]``: centre at ``c0 + s d``; cylinder axis ``a``.
+    Frictionless: the projection is along the surface normal. Returns the number of nodes in contact.
+    """
+    cx = cparams[0] + s_contact * cparams[3]
+    cy = cparams[1] + s_contact * cparams[4]
+    cz = cparams[2] + s_contact * cparams[5]
+    r = cparams[6]
+    ax, ay, az = cparams[7], cparams[8], cparams[9]
+    count = 0
+    for k in range(contact_nodes.size):
+        n = contact_nodes[k]
+        px = X[n, 0] + u[n, 0] - cx
+        py = X[n, 1] + u[n, 1] - cy
+        pz = X[n, 2] + u[n, 2] - cz
+        if contact_kind == 2:
+            along = px * ax + py * ay + pz * az
+            px -= along * ax
+            py -= along * ay
+            pz -= along * az
+        d = np.sqrt(px * px + py * py + pz * pz)
+        if d < r and d > 0.0:
+            fac = (r - d) / d
+            u[n, 0] += fac * px
+            u[n, 1] += fac * py
+            u[n, 2] += fac * pz
+            in_contact[k] = 1
+            count += 1
+        else:
+            in_contact[k] = 0
+    return count
+
+
+@njit(cache=True)
+def _contact_force(fint, contact_nodes, in_contact, out):
+    out[:] = 0.0
+    for k in range(contact_nodes.size):
+        if in_contact[k]:
+            n = contact_nodes[k]
+            out[0] += fint[n, 0]
+            out[1] += fint[n, 1]
+            out[2] += fint[n, 2]
+
+
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
+def _cd_node_pass(fbuf, fint, fext_ref, s_ext, u, u_old, u_new, coef_a, coef_b, coef_c, free):
+    """Reduce the chunk force buffers into ``fint`` (clearing them) and advance the free dofs."""
+    nchunk = fbuf.shape[0]
+    for n in prange(u.shape[0]):
+        a, b, cc = coef_a[n], coef_b[n], coef_c[n]
+        for i in range(3):
+            f = 0.0
+            for c in range(nchunk):
+                f += fbuf[c, n, i]
+                fbuf[c, n, i] = 0.0
+            fint[n, i] = f
+            if free[n, i]:
+                u_new[n, i] = a * (s_ext * fext_ref[n, i] - f) + b * u[n, i] + cc * u_old[n, i]
+            else:
+                u_new[n, i] = u[n, i]
+
+
+@njit(cache=True)
+def _run_explicit(X, elements, dndx, vol0, chunk_lo, vnode, mass, kind, w1fn, w2fn, wlfn, params, kappa,
+                  use_anp, prony_g, prony_tau, h_state, s_prev, bfn, branch_params, w_prev, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate,
+                  rot_center, n_groups, free, hist_time, hist_vals, fext_ref, contact_kind, cparams,
+                  contact_nodes, dt, n_steps, damping, out_every, u, u_old, fbuf, pbuf):
+    """Central-difference time loop. ``u``/``u_old`` hold the state at steps 0 and -1 on entry and the
+    last two states on exit (``u`` newest)."""
+    nn = X.shape[0]
+    n_out = n_steps // out_every + 1
+    out_t = np.zeros(n_out)
+    out_force = np.zeros((n_out, n_groups, 3))
+    out_torque = np.zeros((n_out, n_groups))
+    out_contact = np.zeros((n_out, 3))
+    out_ke = np.zeros(n_out)
+    fint = np.zeros((nn, 3), dtype=u.dtype)
+    u_new = np.empty_like(u)
+    p_node = np.zeros(nn)
+    hv = np.zeros(hist_vals.shape[0])
+    in_contact = np.zeros(contact_nodes.size, dtype=np.uint8)
+    bad = np.full(chunk_lo.size - 1, -1, dtype=np.int64)
+    force_g = np.zeros((n_groups, 3))
+    torque_g = np.zeros(n_groups)
+    cforce = np.zeros(3)
+    coef_a = np.empty(nn)
+    coef_b = np.empty(nn)
+    coef_c = np.empty(nn)
+    for n in range(nn):
+        m = mass[n]
+        a = 1.0 / (m / dt**2 + damping * m / (2.0 * dt))
+        coef_a[n] = a
+        coef_b[n] = 2.0 * m * a / dt**2
+        coef_c[n] = damping * m * a / (2.0 * dt) - 0.5 * coef_b[n]
+    nterm = prony_g.size
+    prony_e = np.empty(nterm)
+    prony_f = np.empty(nterm)
+    for i in range(nterm):
+        prony_e[i], prony_f[i] = relaxation_factors(dt, prony_tau[i])
+    k_out = 0
+    for step in range(n_steps + 1):
+        t = step * dt
+        bad_e = _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind,
+                                 w1fn, w2fn, wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f, h_state,
+                                 s_prev, bfn, branch_params, w_prev, True, bad, False)
+        if bad_e >= 0:
+            return STATUS_INVERTED, bad_e, step, u, u_old, out_t[:k_out], out_force[:k_out], \
+                out_torque[:k_out], out_contact[:k_out], out_ke[:k_out]
+        _history_values(t + dt, hist_time, hist_vals, hv)
+        # reduces fbuf into fint and computes u_new on the free dofs
+        _cd_node_pass(fbuf, fint, fext_ref, hv[2 * n_groups + 1], u, u_old, u_new, coef_a, coef_b, coef_c, free)
+        if step % out_every == 0:
+            _reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_g, torque_g)
+            _contact_force(fint, contact_nodes, in_contact, cforce)
+            ke = 0.0
+            for n in range(nn):
+                for i in range(3):
+                    v = (u[n, i] - u_old[n, i]) / dt
+                    ke += 0.5 * mass[n] * v * v
+            if not np.isfinite(ke):
+                return STATUS_NOT_FINITE, -1, step, u, u_old, out_t[:k_out], out_force[:k_out], \
+                    out_torque[:k_out], out_contact[:k_out], out_ke[:k_out]
+            out_t[k_out] = t
+            out_force[k_out] = force_g
+            out_torque[k_out] = torque_g
+            out_contact[k_out] = cforce
+            out_ke[k_out] = ke
+            k_out += 1
+        if step == n_steps:
+            break
+        _apply_bcs(u_new, X, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups)
+        if contact_kind > 0:
+            _contact_project(u_new, X, contact_nodes, in_contact, contact_kind, cparams, hv[2 * n_groups])
+        u_old, u, u_new = u, u_new, u_old
+    return STATUS_OK, -1, n_steps, u, u_old, out_t[:k_out], out_force[:k_out], out_torque[:k_out], \
+        out_contact[:k_out], out_ke[:k_out]
+
+
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
+def _dr_node_pass(fint, fext_ref, s_ext, u, u_old, u_new, inv_mass, alpha, beta, free):
+    for n in prange(u.shape[0]):
+        am = alpha * inv_mass[n]
+        for i in range(3):
+            if free[n, i]:
+                u_new[n, i] = u[n, i] + beta * (u[n, i] - u_old[n, i]) + am * (s_ext * fext_ref[n, i] - fint[n, i])
+            else:
+                u_new[n, i] = u[n, i]
+
+
+@njit(cache=True)
+def _run_dr(X, elements, dndx, vol0, chunk_lo, vnode, dr_mass, kind, w1fn, w2fn, wlfn, params, kappa, use_anp,
+            prony_g, prony_tau, h_state, s_prev, bfn, branch_params, w_prev, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center,
+            n_groups, free, hist_time, hist_vals, fext_ref, contact_kind, cparams, contact_nodes, times,
+            tol_m, min_iter, max_iter, u, fbuf, pbuf):
+    """Dynamic relaxation to static equilibrium at each time in ``times`` (quasi-static loading path).
+
+    Unit fictitious time step; ``dr_mass`` makes every element's stable step ~2 (lambda_max ~ 1). The
+    viscoelastic states advance between consecutive times with ``dt = times[k] - times[k-1]`` and are
+    committed after convergence. Returns status, failing increment, iterations used per increment and
+    the reactions/torques/contact forces per increment.
+    """
+    nn = X.shape[0]
+    nk = times.size
+    out_force = np.zeros((nk, n_groups, 3))
+    out_torque = np.zeros((nk, n_groups))
+    out_contact = np.zeros((nk, 3))
+    iters = np.zeros(nk, dtype=np.int64)
+    fint = np.zeros((nn, 3), dtype=u.dtype)
+    fint_prev = np.zeros((nn, 3), dtype=u.dtype)
+    u_old = u.copy()
+    u_new = u.copy()
+    p_node = np.zeros(nn)
+    hv = np.zeros(hist_vals.shape[0])
+    in_contact = np.zeros(contact_nodes.size, dtype=np.uint8)
+    bad = np.full(chunk_lo.size - 1, -1, dtype=np.int64)
+    force_g = np.zeros((n_groups, 3))
+    torque_g = np.zeros(n_groups)
+    cforce = np.zeros(3)
+    inv_mass = 1.0 / dr_mass
+    nterm = prony_g.size
+    prony_e = np.empty(nterm)
+    prony_f = np.empty(nterm)
+    lam_max = 1.0
+    t_prev = 0.0
+    for k in range(nk):
+        dt = times[k] - t_prev
+        for i in range(nterm):
+            if dt > 0.0:
+                prony_e[i], prony_f[i] = relaxation_factors(dt, prony_tau[i])
+            else:
+                prony_e[i], prony_f[i] = 1.0, 1.0
+        _history_values(times[k], hist_time, hist_vals, hv)
+        _apply_bcs(u, X, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups)
+        if contact_kind > 0:
+            _contact_project(u, X, contact_nodes, in_contact, contact_kind, cparams, hv[2 * n_groups])
+        u_old[:] = u
+        lam_min = 1e-6
+        c = 2.0 * np.sqrt(lam_min)
+        alpha = 2.0 / (2.0 + c)
+        beta = (2.0 - c) / (2.0 + c)
+        n_ok = 0
+        converged = False
+        it = 0
+        while it < max_iter:
+            bad_e = _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind,
+                                     w1fn, w2fn, wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f,
+                                     h_state, s_prev, bfn, branch_params, w_prev, False, bad)
+            if bad_e >= 0:
+                return STATUS_INVERTED, bad_e, k, u, iters, out_force, out_torque, out_contact
+            if it > 0:
+                # Rayleigh quotient of the last increment: lowest-mode estimate (Joldes et al. 2011)
+                num = 0.0
+                den = 0.0
+                for n in range(nn):
+                    for i in range(3):
+                        if free[n, i]:
+                            du = u[n, i] - u_old[n, i]
+                            num += du * (fint[n, i] - fint_prev[n, i])
+                            den += du * du * dr_mass[n]
+                if den > 0.0 and num > 0.0:
+                    est = num / den
+                    if est < lam_max:
+                        lam_min = est
+                        c = 2.0 * np.sqrt(lam_min)
+                        alpha = 2.0 / (2.0 + c)
+                        beta = (2.0 - c) / (2.0 + c)
+            _dr_node_pass(fint, fext_ref, hv[2 * n_groups + 1], u, u_old, u_new, inv_mass, alpha, beta, free)
+            if contact_kind > 0:
+                _contact_project(u_new, X, contact_nodes, in_contact, contact_kind, cparams, hv[2 * n_groups])
+            dmax = 0.0
+            for n in range(nn):
+                for i in range(3):
+                    d = abs(u_new[n, i] - u[n, i])
+                    if d > dmax:
+                        dmax = d
+            if not np.isfinite(dmax):
+                return STATUS_NOT_FINITE, -1, k, u, iters, out_force, out_torque, out_contact
+            sq = np.sqrt(lam_min / lam_max)
+            rho = (1.0 - sq) / (1.0 + sq)
+            err = rho / (1.0 - rho) * dmax
+            fint_prev, fint = fint, fint_prev
+            u_old, u, u_new = u, u_new, u_old
+            it += 1
+            if it >= min_iter and err < tol_m:
+                n_ok += 1
+                if n_ok >= 3:
+                    converged = True
+                    break
+            else:
+                n_ok = 0
+        iters[k] = it
+        if not converged:
+            return STATUS_NOT_CONVERGED, -1, k, u, iters, out_force, out_torque, out_contact
+        # commit viscoelastic states at the converged configuration and record reactions
+        _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind, w1fn, w2fn,
+                         wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f, h_state, s_prev, bfn, branch_params, w_prev, True, bad)
+        _reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_g, torque_g)
+        _contact_force(fint, contact_nodes, in_contact, cforce)
+        out_force[k] = force_g
+        out_torque[k] = torque_g
+        out_contact[k] = cforce
+        t_prev = times[k]
+    return STATUS_OK, -1, nk, u, iters, out_force, out_torque, out_contact
+
+
+# --------------------------------------------------------------------------------------------------
+# Python API: model assembly, boundary conditions, runs
+# --------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class BoundaryGroup:
+    """A group of nodes with prescribed displacements; reactions are reported per group.
+
+    The prescribed displacement of node ``X`` at time ``t`` is ``s(t) d + [R_z(theta(t)) (X - c) - (X - c)]``
+    on the dofs flagged in ``dofs`` (the rotation term only when ``angle_rad`` is given); ``s``/``theta``
+    are piecewise linear in ``time_s``. Fixed nodes: ``s = 0``, no rotation.
+
+    Attributes
+    ----------
+    name : label of the reaction outputs
+    nodes : node indices
+    dofs : which of (x, y, z) are prescribed (the others are free, e.g. a frictionless punch prescribes z)
+    direction : (3,) unit vector (or (n, 3) per node) multiplying ``s(t)``
+    time_s, displacement_m : history of ``s`` (m)
+    angle_rad : history of the rotation about the z axis (rad), or None
+    center_xy_m : rotation centre in the xy plane (m); also the torque reference point
+    """
+
+    name: str
+    nodes: np.ndarray
+    dofs: tuple[bool, bool, bool] = (True, True, True)
+    direction: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    time_s: np.ndarray = field(default_factory=lambda: np.zeros(1))
+    displacement_m: np.ndarray = field(default_factory=lambda: np.zeros(1))
+    angle_rad: np.ndarray | None = None
+    center_xy_m: tuple[float, float] = (0.0, 0.0)
+
+
+def fixed_group(name: str, nodes, dofs=(True, True, True)) -> BoundaryGroup:
+    """Nodes held at zero displacement on ``dofs``."""
+    return BoundaryGroup(name, np.asarray(nodes, np.int64), tuple(bool(d) for d in dofs))
+
+
+def translation_group(name: str, nodes, direction, time_s, displacement_m, dofs=(True, True, True)) -> BoundaryGroup:
+    """Nodes moved by ``displacement_m(time_s)`` along ``direction`` (normalised)."""
+    d = np.asarray(direction, float)
+    d = d / np.linalg.norm(d)
+    return BoundaryGroup(name, np.asarray(nodes, np.int64), tuple(bool(x) for x in dofs), d,
+                         np.asarray(time_s, float), np.asarray(displacement_m, float))
+
+
+def rotation_group(name: str, nodes, time_s, angle_rad, center_xy_m=(0.0, 0.0)) -> BoundaryGroup:
+    """Nodes rotated rigidly about the z axis through ``center_xy_m`` by ``angle_rad(time_s)``, z held fixed
+    (the upper rheometer plate, bonded sample)."""
+    t = np.asarray(time_s, float)
+    return BoundaryGroup(name, np.asarray(nodes, np.int64), (True, True, True), np.zeros(3), t, np.zeros_like(t),
+                         np.asarray(angle_rad, float), tuple(center_xy_m))
+
+
+@dataclass(frozen=True)
+class RigidContact:
+    """Frictionless rigid sphere or infinite cylinder moving along ``direction`` by ``displacement_m(time_s)``.
+
+    Attributes
+    ----------
+    shape : ``"sphere"`` or ``"cylinder"``
+    center_m : initial centre (m); for a cylinder a point on its axis
+    radius_m : radius (m)
+    direction : motion direction (normalised)
+    time_s, displacement_m : motion history
+    nodes : candidate slave nodes (None: all boundary nodes)
+    axis : cylinder axis (normalised)
+    """
+
+    shape: str
+    center_m: tuple[float, float, float]
+    radius_m: float
+    direction: tuple[float, float, float] = (0.0, 0.0, -1.0)
+    time_s: np.ndarray = field(default_factory=lambda: np.zeros(1))
+    displacement_m: np.ndarray = field(default_factory=lambda: np.zeros(1))
+    nodes: np.ndarray | None = None
+    axis: tuple[float, float, float] = (1.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class TLEDModel:
+    """Precomputed arrays of a TLED problem (build with :func:`build_model`)."""
+
+    mesh: TetMesh
+    material: Material
+    groups: tuple[BoundaryGroup, ...]
+    contact: RigidContact | None
+    use_anp: bool
+    dtype: np.dtype
+    dndx: np.ndarray
+    vol0: np.ndarray
+    vnode: np.ndarray
+    mass: np.ndarray
+    dr_mass: np.ndarray
+    min_altitude_m: float
+    chunk_lo: np.ndarray
+    bc_nodes: np.ndarray
+    bc_group: np.ndarray
+    bc_mask: np.ndarray
+    bc_dir: np.ndarray
+    bc_rotate: np.ndarray
+    rot_center: np.ndarray
+    free: np.ndarray
+    hist_time: np.ndarray
+    hist_vals: np.ndarray
+    fext_ref: np.ndarray
+    contact_kind: int
+    cparams: np.ndarray
+    contact_nodes: np.ndarray
+
+    @property
+    def group_names(self) -> list[str]:
+        return [g.name for g in self.groups]
+
+
+def shape_derivatives(nodes: np.ndarray, elements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Reference gradients of the linear shape functions and element volumes.
+
+    Returns
+    -------
+    dndx : (n_elements, 12) ``dN_a/dX_j`` at index ``3 a + j`` (1/m)
+    vol0 : (n_elements,) volumes (m^3)
+    """
+    x = nodes[elements]
+    D = np.stack([x[:, 1] - x[:, 0], x[:, 2] - x[:, 0], x[:, 3] - x[:, 0]], axis=1)  # rows = edges
+    # N_a (a=1..3) = rows of inv(D^T)^T: grad N_a = inv(D)[:, a-1]
+    inv = np.linalg.inv(D)
+    g = np.empty((len(elements), 4, 3))
+    g[:, 1:, :] = np.transpose(inv, (0, 2, 1))
+    g[:, 0, :] = -g[:, 1:, :].sum(axis=1)
+    return g.reshape(len(elements), 12), element_volumes(nodes, elements)
+
+
+def build_model(mesh: TetMesh, material: Material, groups: list[BoundaryGroup] | tuple = (),
+                contact: RigidContact | None = None, *, anp: bool = True, precision: str = "float64",
+                external_force_n: np.ndarray | None = None, external_time_s=(0.0,), external_scale=(1.0,),
+                n_chunks: int | None = None) -> TLEDModel:
+    """Assemble the arrays of a TLED problem.
+
+    Parameters
+    ----------
+    mesh, material : geometry (m) and material
+    groups : prescribed-displacement groups; a node must not appear in two groups
+    contact : optional rigid contact
+    anp : average nodal pressure (recommended for nearly incompressible materials; ignored for SVK)
+    precision : ``"float64"`` or ``"float32"`` storage of displacements, forces and element data
+    external_force_n : optional (n_nodes, 3) nodal forces (N) scaled by ``external_scale(external_time_s)``
+    n_chunks : element chunks with private force buffers (default: numba threads)
+    """
+    dtype = np.dtype(precision)
+    if dtype not in (np.float32, np.float64):
+        raise ValueError("precision must be 'float32' or 'float64'")
+    nodes, elements = mesh.nodes, np.ascontiguousarray(mesh.elements, dtype=np.int32)
+    nn, ne = mesh.n_nodes, mesh.n_elements
+    dndx, vol0 = shape_derivatives(nodes, elements)
+    if np.any(vol0 <= 0):
+        raise ValueError(f"mesh has {int((vol0 <= 0).sum())} elements with non-positive volume "
+                         f"(first: {int(np.argmax(vol0 <= 0))})")
+    alt = element_min_altitudes(nodes, elements)
+    vnode = np.bincount(elements.ravel(), weights=np.repeat(vol0, 4), minlength=nn)
+    if np.any(vnode <= 0):
+        raise ValueError("mesh has nodes not attached to any element")
+    mass = 0.25 * material.density_kg_m3 * vnode
+    # dynamic-relaxation mass: element density making the element's stable step 2 (lambda_max ~ 1)
+    rho_dr = 4.0 * material.dilatational_modulus_pa / alt**2
+    dr_mass = np.bincount(elements.ravel(), weights=np.repeat(0.25 * rho_dr * vol0, 4), minlength=nn)
+
+    groups = tuple(groups)
+    ng = max(1, len(groups))
+    seen = np.zeros(nn, bool)
+    bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate = [], [], [], [], []
+    rot_center = np.zeros((ng, 2))
+    times = [np.zeros(1)]
+    for gi, g in enumerate(groups):
+        nodes_g = np.asarray(g.nodes, np.int64)
+        if nodes_g.size == 0:
+            raise ValueError(f"boundary group {g.name!r} has no nodes")
+        if np.any(seen[nodes_g]):
+            raise ValueError(f"boundary group {g.name!r} shares nodes with an earlier group")
+        seen[nodes_g] = True
+        bc_nodes.append(nodes_g)
+        bc_group.append(np.full(nodes_g.size, gi))
+        bc_mask.append(np.tile(np.asarray(g.dofs, np.uint8), (nodes_g.size, 1)))
+        d = np.asarray(g.direction, float)
+        bc_dir.append(np.tile(d, (nodes_g.size, 1)) if d.ndim == 1 else d)
+        bc_rotate.append(np.full(nodes_g.size, g.angle_rad is not None, np.uint8))
+        rot_center[gi] = g.center_xy_m
+        times.append(np.asarray(g.time_s, float))
+    if contact is not None:
+        times.append(np.asarray(contact.time_s, float))
+    times.append(np.asarray(external_time_s, float))
+    hist_time = np.unique(np.concatenate(times))
+    if hist_time.size == 1:
+        hist_time = np.array([hist_time[0], hist_time[0] + 1.0])
+    hist_vals = np.zeros((2 * ng + 2, hist_time.size))
+    for gi, g in enumerate(groups):
+        hist_vals[gi] = np.interp(hist_time, g.time_s, g.displacement_m)
+        if g.angle_rad is not None:
+            hist_vals[ng + gi] = np.interp(hist_time, g.time_s, g.angle_rad)
+    if contact is not None:
+        hist_vals[2 * ng] = np.interp(hist_time, contact.time_s, contact.displacement_m)
+    hist_vals[2 * ng + 1] = np.interp(hist_time, np.asarray(external_time_s, float), np.asarray(external_scale, float))
+
+    def cat(parts, shape, dt):
+        return np.ascontiguousarray(np.concatenate(parts) if parts else np.zeros(shape, dt), dtype=dt)
+
+    bc_nodes_a = cat(bc_nodes, (0,), np.int64)
+    bc_mask_a = cat(bc_mask, (0, 3), np.uint8).reshape(-1, 3)
+    free = np.ones((nn, 3), np.uint8)
+    free[bc_nodes_a[:, None], np.arange(3)[None, :]] = 1 - bc_mask_a
+
+    if contact is not None:
+        kind = {"sphere": 1, "cylinder": 2}[contact.shape]
+        d = np.asarray(contact.direction, float)
+        a = np.asarray(contact.axis, float)
+        cparams = np.concatenate([contact.center_m, d / np.linalg.norm(d), [contact.radius_m], a / np.linalg.norm(a)])
+        from .mesh import boundary_nodes
+        cnodes = boundary_nodes(elements) if contact.nodes is None else np.asarray(contact.nodes)
+        cnodes = cnodes[free[cnodes].all(axis=1)]
+    else:
+        kind, cparams, cnodes = 0, np.zeros(10), np.zeros(0, np.int64)
+
+    nchunk = int(n_chunks or numba.get_num_threads())
+    nchunk = max(1, min(nchunk, ne))
+    chunk_lo = np.linspace(0, ne, nchunk + 1).round().astype(np.int64)
+    fext = np.zeros((nn, 3)) if external_force_n is None else np.asarray(external_force_n, float)
+    return TLEDModel(
+        mesh=mesh, material=material, groups=groups, contact=contact,
+        use_anp=bool(anp and material.kind != KIND_SVK), dtype=dtype,
+        dndx=np.ascontiguousarray(dndx, dtype=dtype), vol0=np.ascontiguousarray(vol0, dtype=dtype),
+        vnode=vnode, mass=mass, dr_mass=dr_mass, min_altitude_m=float(alt.min()), chunk_lo=chunk_lo,
+        bc_nodes=bc_nodes_a, bc_group=cat(bc_group, (0,), np.int64), bc_mask=bc_mask_a,
+        bc_dir=cat(bc_dir, (0, 3), np.float64).reshape(-1, 3), bc_rotate=cat(bc_rotate, (0,), np.uint8),
+        rot_center=rot_center, free=free, hist_time=hist_time, hist_vals=hist_vals,
+        fext_ref=np.ascontiguousarray(fext, dtype=dtype), contact_kind=kind, cparams=cparams,
+        contact_nodes=np.ascontiguousarray(cnodes, np.int64))
+
+
+def critical_time_step(model: TLEDModel, safety: float = 0.7) -> float:
+    """``safety * min altitude / c_d`` with ``c_d = sqrt((kappa + 4 mu / 3) / rho)`` (s)."""
+    c_d = np.sqrt(model.material.dilatational_modulus_pa / model.material.density_kg_m3)
+    return float(safety * model.min_altitude_m / c_d)
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """Outputs of a TLED run (explicit: per output step; quasi-static: per load increment).
+
+    Attributes
+    ----------
+    time_s : (nt,) output times
+    reaction_force_n : {group: (nt, 3)} sum of internal nodal forces on the group (N); the force the
+        body exerts on whatever holds the nodes is its negative
+    torque_nm : {group: (nt,)} z-torque of the internal forces about the group centre (N m)
+    contact_force_n : (nt, 3) sum of internal forces on the nodes in rigid contact (N)
+    kinetic_energy_j : (nt,) (explicit runs; NaN for quasi-static)
+    displacement_m : (n_nodes, 3) final displacement
+    previous_displacement_m : (n_nodes, 3) displacement one step earlier (explicit) or a copy
+    time_step_s : explicit step (NaN for quasi-static)
+    iterations : (nt,) dynamic-relaxation iterations per increment (quasi-static) else empty
+    state : final viscoelastic element states ``(h_state, s_prev, w_prev)`` (pass as ``state=`` to continue)
+    """
+
+    time_s: np.ndarray
+    reaction_force_n: dict
+    torque_nm: dict
+    contact_force_n: np.ndarray
+    kinetic_energy_j: np.ndarray
+    displacement_m: np.ndarray
+    previous_displacement_m: np.ndarray
+    time_step_s: float
+    iterations: np.ndarray
+    state: tuple
+
+
+def _state(model: TLEDModel, state: tuple | None):
+    """Viscoelastic element states ``(h_state, s_prev, w_prev)``: virgin or copies of a previous run's."""
+    nt, ne = model.material.prony_g.size, model.mesh.n_elements
+    if state is None:
+        return np.zeros((ne, nt, 6), model.dtype), np.zeros((ne, 6), model.dtype), np.zeros((ne, nt), model.dtype)
+    return state[0].copy(), state[1].copy(), state[2].copy()
+
+
+@contextmanager
+def numba_threads(n_threads: int | None):
+    """Temporarily run the parallel kernels on ``n_threads`` threads (None: leave numba's setting).
+
+    On a loaded shared machine one thread is often faster: every parallel region waits for its slowest
+    (possibly descheduled) thread, several regions per step.
+    """
+    if n_threads is None:
+        yield
+        return
+    old = numba.get_num_threads()
+    numba.set_num_threads(max(1, min(int(n_threads), numba.config.NUMBA_NUM_THREADS)))
+    try:
+        yield
+    finally:
+        numba.set_num_threads(old)
+
+
+def _check_status(status, bad, where, time_s):
+    if status == STATUS_INVERTED:
+        raise ElementInversionError(f"element {bad} inverted (J <= 0) at {where}, t = {time_s:.6g} s", bad,
+                                    int(where.split()[-1]), time_s)
+    if status == STATUS_NOT_FINITE:
+        raise ElementInversionError(f"non-finite state at {where}, t = {time_s:.6g} s (unstable time step?)",
+                                    -1, int(where.split()[-1]), time_s)
+
+
+def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None, safety: float = 0.7,
+                 damping_1_s: float = 0.0, n_outputs: int = 100, u0_m: np.ndarray | None = None,
+                 v0_m_s: np.ndarray | None = None, state: tuple | None = None,
+                 n_threads: int | None = None) -> RunResult:
+    """Explicit dynamic run from ``t = 0`` to ``t_end_s``.
+
+    Parameters
+    ----------
+    dt_s : time step (s); default :func:`critical_time_step` with ``safety``
+    damping_1_s : mass-proportional damping coefficient alpha (1/s)
+    n_outputs : approximate number of recorded outputs
+    u0_m, v0_m_s : initial displacement (m) and velocity (m/s) fields
+    state : viscoelastic ``RunResult.state`` to start from (default virgin)
+    n_threads : numba threads for this run (None: numba's current setting)
+    """
+    m = model.material
+    dt = critical_time_step(model, safety) if dt_s is None else float(dt_s)
+    n_steps = max(1, int(np.ceil(t_end_s / dt - 1e-9)))
+    out_every = max(1, n_steps // max(1, n_outputs))
+    u = np.zeros((model.mesh.n_nodes, 3), model.dtype) if u0_m is None else np.array(u0_m, dtype=model.dtype)
+    u_old = u.copy() if v0_m_s is None else (u - dt * np.asarray(v0_m_s)).astype(model.dtype)
+    h_state, s_prev, w_prev = _state(model, state)
+    nchunk = model.chunk_lo.size - 1
+    fbuf = np.zeros((nchunk, model.mesh.n_nodes, 3), model.dtype)
+    pbuf = np.zeros((nchunk, model.mesh.n_nodes))
+    w1, w2, wl = m.functions()
+    bfn = m.branch_function()
+    ng = max(1, len(model.groups))
+    with numba_threads(n_threads):
+        res = _run_explicit(model.mesh.nodes, model.mesh.elements, model.dndx, model.vol0, model.chunk_lo,
+                        model.vnode, model.mass, m.kind, w1, w2, wl, m.params, m.bulk_modulus_pa, model.use_anp,
+                        m.prony_g, m.prony_tau_s, h_state, s_prev, bfn, m.branch_params, w_prev, model.bc_nodes, model.bc_group, model.bc_mask,
+                        model.bc_dir, model.bc_rotate, model.rot_center, ng, model.free, model.hist_time,
+                        model.hist_vals, model.fext_ref, model.contact_kind, model.cparams, model.contact_nodes,
+                        dt, n_steps, damping_1_s, out_every, u, u_old, fbuf, pbuf)
+    status, bad, step, u, u_old, t, force, torque, cforce, ke = res
+    _check_status(status, bad, f"step {step}", step * dt)
+    names = model.group_names
+    return RunResult(t, {n: force[:, i] for i, n in enumerate(names)}, {n: torque[:, i] for i, n in enumerate(names)},
+                     cforce, ke, u, u_old, dt, np.zeros(0, np.int64), (h_state, s_prev, w_prev))
+
+
+def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, min_iter: int = 20,
+                      max_iter: int = 200_000, u0_m: np.ndarray | None = None, state: tuple | None = None,
+                      n_threads: int | None = None) -> RunResult:
+    """Static equilibrium by dynamic relaxation at each time of ``times_s`` (loads from the histories).
+
+    Parameters
+    ----------
+    times_s : increasing times; the boundary histories are evaluated there and the viscoelastic states
+        advance between them (quasi-static viscoelasticity: inertia neglected)
+    tol_m : displacement error bound for the Joldes termination criterion (default 1e-6 of the smallest
+        element altitude)
+    n_threads : numba threads for this run (None: numba's current setting)
+    """
+    m = model.material
+    times = np.atleast_1d(np.asarray(times_s, float))
+    if np.any(np.diff(times) < 0):
+        raise ValueError("times_s must be non-decreasing")
+    tol = 1e-6 * model.min_altitude_m if tol_m is None else float(tol_m)
+    u = np.zeros((model.mesh.n_nodes, 3), model.dtype) if u0_m is None else np.array(u0_m, dtype=model.dtype)
+    h_state, s_prev, w_prev = _state(model, state)
+    nchunk = model.chunk_lo.size - 1
+    fbuf = np.zeros((nchunk, model.mesh.n_nodes, 3), model.dtype)
+    pbuf = np.zeros((nchunk, model.mesh.n_nodes))
+    w1, w2, wl = m.functions()
+    bfn = m.branch_function()
+    ng = max(1, len(model.groups))
+    with numba_threads(n_threads):
+        res = _run_dr(model.mesh.nodes, model.mesh.elements, model.dndx, model.vol0, model.chunk_lo, model.vnode,
+                  model.dr_mass, m.kind, w1, w2, wl, m.params, m.bulk_modulus_pa, model.use_anp, m.prony_g,
+                  m.prony_tau_s, h_state, s_prev, bfn, m.branch_params, w_prev, model.bc_nodes, model.bc_group, model.bc_mask, model.bc_dir,
+                  model.bc_rotate, model.rot_center, ng, model.free, model.hist_time, model.hist_vals,
+                  model.fext_ref, model.contact_kind, model.cparams, model.contact_nodes, times, tol, min_iter,
+                  max_iter, u, fbuf, pbuf)
+    status, bad, k, u, iters, force, torque, cforce = res
+    if status == STATUS_NOT_CONVERGED:
+        raise DynamicRelaxationError(f"dynamic relaxation did not converge in {max_iter} iterations at "
+                                     f"increment {k} (t = {times[k]:.6g} s)")
+    _check_status(status, bad, f"increment {k}", float(times[min(k, times.size - 1)]))
+    names = model.group_names
+    return RunResult(times, {n: force[:, i] for i, n in enumerate(names)}, {n: torque[:, i] for i, n in enumerate(names)},
+                     cforce, np.full(times.size, np.nan), u, u.copy(), float("nan"), iters, (h_state, s_prev, w_prev))

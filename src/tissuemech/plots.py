@@ -1,0 +1,513 @@
+"""Report figures (matplotlib, object-oriented API on the Agg canvas; no pyplot global state).
+
+Every ``plot_*`` function takes data (numpy arrays, xarray datasets, pandas frames) and an output path, builds
+the figure with the matching ``figure_*`` function (public so callers and tests can inspect it) and writes
+``<path>.png`` and ``<path>.svg`` atomically (temporary name + rename; a suffix on ``path`` is replaced). SVG
+output is deterministic (fixed hash salt, no date) so a rebuild with unchanged data gives identical files; SVG text stays text (searchable).
+
+Axes follow the field's conventions: log-log for relaxation moduli, sweeps and flow curves, log time for
+relaxation/creep, linear strain for ramps (see :data:`tissuemech.curves.GRID_SPECS`); fits are shown on both
+linear and log axes.
+"""
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import matplotlib
+import numpy as np
+import pandas as pd
+import xarray as xr
+from matplotlib.colors import TwoSlopeNorm
+from matplotlib.figure import Figure
+
+from .canonical import CANONICAL_VARIABLES, atomic_write
+
+#: axis labels (symbol [unit]) of canonical variables
+AXIS_LABELS: dict[str, str] = {
+    "time": "time t [s]",
+    "shear_strain": "shear strain γ [–]",
+    "shear_stress": "shear stress σ [Pa]",
+    "shear_rate": "shear rate γ̇ [1/s]",
+    "viscosity": "viscosity η [Pa s]",
+    "frequency": "frequency f [Hz]",
+    "angular_frequency": "angular frequency ω [rad/s]",
+    "storage_modulus": "storage modulus G' [Pa]",
+    "loss_modulus": "loss modulus G'' [Pa]",
+    "complex_modulus": "|G*| [Pa]",
+    "relaxation_modulus": "relaxation modulus G(t) [Pa]",
+    "creep_compliance": "creep compliance J(t) [1/Pa]",
+    "normal_force": "normal force F_N [N]",
+    "torque": "torque M [N m]",
+    "stretch": "stretch λ [–]",
+    "nominal_stress": "nominal stress P [Pa]",
+    "force": "force F [N]",
+    "displacement": "displacement [m]",
+}
+
+_FORMATS = ("png", "svg")
+
+
+def axis_label(name: str) -> str:
+    """Axis label of a canonical variable (falls back to its long name and units)."""
+    if name in AXIS_LABELS:
+        return AXIS_LABELS[name]
+    if name in CANONICAL_VARIABLES:
+        units, long_name = CANONICAL_VARIABLES[name]
+        return f"{long_name} [{units}]"
+    return name
+
+
+def save_figure(fig: Figure, path: str | Path, dpi: int = 150) -> list[Path]:
+    """Write ``fig`` as ``<path>.png`` and ``<path>.svg`` atomically; returns the written paths."""
+    base = Path(path)
+    base = base.with_suffix("") if base.suffix.lower() in (".png", ".svg", ".pdf") else base
+    written = []
+    with matplotlib.rc_context({"svg.hashsalt": "tissuemech", "svg.fonttype": "none"}):
+        for fmt in _FORMATS:
+            target = base.parent / f"{base.name}.{fmt}"
+            metadata = {"Date": None} if fmt == "svg" else {"Software": None}
+            written.append(atomic_write(
+                target, lambda tmp, fmt=fmt, metadata=metadata: fig.savefig(tmp, format=fmt, dpi=dpi,
+                                                                            metadata=metadata)))
+            # the layout (in inches) is settled by the first save; freezing it halves the cost of the second
+            fig.set_layout_engine("none")
+    return written
+
+
+def _new_figure(ncols: int = 1, nrows: int = 1, width: float = 5.0, height: float = 3.8) -> tuple[Figure, np.ndarray]:
+    fig = Figure(figsize=(width * ncols, height * nrows), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False)).ravel()
+    return fig, axes
+
+
+def _positive(values: np.ndarray) -> bool:
+    finite = np.asarray(values, dtype=float)
+    finite = finite[np.isfinite(finite)]
+    return finite.size > 0 and bool(np.all(finite > 0))
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# raw runs vs sample average
+
+
+def figure_average(curve: xr.Dataset, variable: str, runs: Sequence[xr.Dataset] = (), title: str | None = None) -> Figure:
+    """Raw runs (thin lines) and the sample mean with a ±1 SD band.
+
+    Parameters
+    ----------
+    curve : one averaged curve (:func:`tissuemech.curves.select_average`): grid coordinate, ``<variable>_mean``,
+        ``<variable>_sd``, attrs ``grid_scale``, ``n_samples``, ``test``, ``condition``.
+    variable : canonical variable on the y axis.
+    runs : the member runs, drawn raw (their own points, not resampled).
+    """
+    grid_name = next(iter(curve.coords))
+    x = np.asarray(curve[grid_name].values, dtype=float)
+    mean = np.asarray(curve[f"{variable}_mean"].values, dtype=float)
+    sd = np.asarray(curve[f"{variable}_sd"].values, dtype=float) if f"{variable}_sd" in curve else np.full_like(mean, np.nan)
+    fig, (ax,) = _new_figure()
+    for run in runs:
+        if variable not in run:
+            continue
+        if grid_name in run:
+            rx = np.asarray(run[grid_name].values, dtype=float)
+        elif grid_name == "frequency" and "angular_frequency" in run:
+            rx = np.asarray(run["angular_frequency"].values, dtype=float) / (2 * np.pi)
+        else:
+            continue
+        ax.plot(rx, run[variable].values, color="0.6", lw=0.7, alpha=0.7, zorder=1)
+    band = np.isfinite(sd)
+    ax.fill_between(x, np.where(band, mean - sd, np.nan), np.where(band, mean + sd, np.nan), color="C0",
+                    alpha=0.3, lw=0, label="±1 SD", zorder=2)
+    n = int(curve.attrs.get("n_samples", 0))
+    ax.plot(x, mean, color="C0", lw=2, label=f"mean (n = {n})", zorder=3)
+    if runs:
+        ax.plot([], [], color="0.6", lw=0.7, label="runs")
+    log = curve.attrs.get("grid_scale") == "log"
+    if log:
+        ax.set_xscale("log")
+        if _positive(mean) and variable != "temperature":
+            ax.set_yscale("log")
+    ax.set_xlabel(axis_label(grid_name))
+    ax.set_ylabel(axis_label(variable))
+    ax.set_title(title or f"{curve.attrs.get('test', '')} [{curve.attrs.get('condition', '')}]", fontsize=10)
+    ax.legend(fontsize=8)
+    return fig
+
+
+def plot_average(curve: xr.Dataset, variable: str, path: str | Path, runs: Sequence[xr.Dataset] = (),
+                 title: str | None = None) -> list[Path]:
+    """Write :func:`figure_average` as PNG + SVG."""
+    return save_figure(figure_average(curve, variable, runs, title), path)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# LVE limit on an amplitude sweep
+
+
+def figure_lve(strain: np.ndarray, storage: np.ndarray, loss: np.ndarray, result: Mapping[str, float],
+               storage_sd: np.ndarray | None = None, loss_sd: np.ndarray | None = None,
+               title: str | None = None) -> Figure:
+    """Amplitude sweep G', G'' (log-log) with the G' tolerance band, LVE limit and flow point.
+
+    Parameters
+    ----------
+    strain, storage, loss : strain amplitude [1], G', G'' [Pa].
+    result : output of :func:`tissuemech.lve.analyse_amplitude_sweep` (``lve_strain``, ``plateau_storage_pa``,
+        ``tolerance`` optional, ``flow_point_strain``, ``yield_stress_pa``).
+    storage_sd, loss_sd : optional SD bands (averaged sweeps).
+    """
+    strain = np.asarray(strain, dtype=float)
+    fig, (ax,) = _new_figure()
+    for values, sd, colour, label in ((storage, storage_sd, "C0", "G'"), (loss, loss_sd, "C1", "G''")):
+        values = np.asarray(values, dtype=float)
+        ax.plot(strain, values, "o-", ms=3, color=colour, label=label)
+        if sd is not None:
+            sd = np.asarray(sd, dtype=float)
+            ax.fill_between(strain, values - sd, values + sd, color=colour, alpha=0.25, lw=0)
+    tolerance = float(result.get("tolerance", 0.05))
+    plateau = float(result.get("plateau_storage_pa", math.nan))
+    if math.isfinite(plateau):
+        for factor in (1 - tolerance, 1 + tolerance):
+            ax.axhline(plateau * factor, color="C0", ls=":", lw=0.8)
+    limit = float(result.get("lve_strain", math.nan))
+    if math.isfinite(limit):
+        ax.axvline(limit, color="k", ls="--", lw=1,
+                   label=f"LVE limit γ_L = {100 * limit:.3g} % (τ_y = {result.get('yield_stress_pa', math.nan):.3g} Pa)")
+    flow = float(result.get("flow_point_strain", math.nan))
+    if math.isfinite(flow):
+        ax.axvline(flow, color="C3", ls="-.", lw=1, label=f"flow point γ_f = {100 * flow:.3g} %")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel(axis_label("shear_strain"))
+    ax.set_ylabel("G', G'' [Pa]")
+    ax.set_title(title or f"amplitude sweep, ±{100 * tolerance:g} % band on G'", fontsize=10)
+    ax.legend(fontsize=8)
+    return fig
+
+
+def plot_lve(strain, storage, loss, result: Mapping[str, float], path: str | Path, storage_sd=None, loss_sd=None,
+             title: str | None = None) -> list[Path]:
+    """Write :func:`figure_lve` as PNG + SVG."""
+    return save_figure(figure_lve(strain, storage, loss, result, storage_sd, loss_sd, title), path)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# a fit over its data
+
+
+def figure_fit(x: np.ndarray, observed: np.ndarray, predicted: np.ndarray, *, xlabel: str, ylabel: str,
+               observed_sd: np.ndarray | None = None, label: str = "model", title: str | None = None,
+               x_model: np.ndarray | None = None) -> Figure:
+    """Data (with SD error bars) and a model prediction on linear axes (left) and log axes (right).
+
+    Parameters
+    ----------
+    x, observed : data points.
+    predicted : model values at ``x_model`` (default: at ``x``).
+    xlabel, ylabel : axis labels with units.
+    observed_sd : optional SD of the data.
+
+    Notes
+    -----
+    Log axes drop non-positive values (matplotlib masks them); a log axis is only used when the data along it
+    are positive, otherwise the right panel keeps that axis linear (e.g. signed stress).
+    """
+    x = np.asarray(x, dtype=float)
+    observed = np.asarray(observed, dtype=float)
+    predicted = np.asarray(predicted, dtype=float)
+    xm = x if x_model is None else np.asarray(x_model, dtype=float)
+    fig, axes = _new_figure(ncols=2)
+    for ax, log in zip(axes, (False, True)):
+        if observed_sd is not None:
+            ax.errorbar(x, observed, yerr=np.asarray(observed_sd, dtype=float), fmt="o", ms=3, color="0.3",
+                        ecolor="0.7", elinewidth=0.8, label="data ± SD")
+        else:
+            ax.plot(x, observed, "o", ms=3, color="0.3", label="data")
+        ax.plot(xm, predicted, "-", color="C3", lw=1.8, label=label)
+        if log:
+            if _positive(x):
+                ax.set_xscale("log")
+            if _positive(observed) and _positive(predicted):
+                ax.set_yscale("log")
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
+        ax.set_title("log axes" if log else "linear axes", fontsize=9)
+    axes[0].legend(fontsize=8)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def plot_fit(x, observed, predicted, path: str | Path, *, xlabel: str, ylabel: str, observed_sd=None,
+             label: str = "model", title: str | None = None, x_model=None) -> list[Path]:
+    """Write :func:`figure_fit` as PNG + SVG."""
+    return save_figure(figure_fit(x, observed, predicted, xlabel=xlabel, ylabel=ylabel, observed_sd=observed_sd,
+                                  label=label, title=title, x_model=x_model), path)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# ranking table
+
+
+def figure_table(table: pd.DataFrame, *, highlight_column: str | None = None, lowest_is_best: bool = True,
+                 title: str | None = None, float_format: str = "{:.4g}") -> Figure:
+    """A table figure (e.g. model ranking); the best row by ``highlight_column`` is shaded.
+
+    Parameters
+    ----------
+    table : rows to show, in display order.
+    highlight_column : numeric column that decides the best row (lowest, or highest when
+        ``lowest_is_best`` is False); None for no highlight.
+    """
+    cells = [[float_format.format(v) if isinstance(v, (float, np.floating)) and math.isfinite(v) else
+              ("–" if isinstance(v, (float, np.floating)) else str(v)) for v in row]
+             for row in table.itertuples(index=False)]
+    fig = Figure(figsize=(max(4.0, 1.2 * table.shape[1]), 0.6 + 0.3 * (len(table) + 1)), layout="constrained")
+    ax = fig.add_subplot()
+    ax.axis("off")
+    shown = ax.table(cellText=cells or [[""] * table.shape[1]], colLabels=[str(c) for c in table.columns],
+                     loc="center", cellLoc="center")
+    shown.auto_set_font_size(False)
+    shown.set_fontsize(8)
+    for col in range(table.shape[1]):
+        shown[0, col].set_facecolor("0.85")
+    if highlight_column is not None and len(table):
+        values = pd.to_numeric(table[highlight_column], errors="coerce").to_numpy(dtype=float)
+        if np.isfinite(values).any():
+            best = int(np.nanargmin(values) if lowest_is_best else np.nanargmax(values))
+            for col in range(table.shape[1]):
+                shown[best + 1, col].set_facecolor("#cfe8cf")
+    if title:
+        ax.set_title(title, fontsize=10)
+    return fig
+
+
+def plot_table(table: pd.DataFrame, path: str | Path, *, highlight_column: str | None = None,
+               lowest_is_best: bool = True, title: str | None = None) -> list[Path]:
+    """Write :func:`figure_table` as PNG + SVG (the ranking table of the report)."""
+    return save_figure(figure_table(table, highlight_column=highlight_column, lowest_is_best=lowest_is_best,
+                                    title=title), path)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# residual map
+
+
+def figure_residual_map(residuals: np.ndarray, x: np.ndarray, row_labels: Sequence[str], *, xlabel: str,
+                        colorbar_label: str = "normalised residual", log_x: bool = False,
+                        title: str | None = None) -> Figure:
+    """Residuals as a diverging colour map: one row per curve/condition, columns along ``x``.
+
+    Parameters
+    ----------
+    residuals : array (rows, len(x)); NaN where a curve has no point.
+    x : column positions (e.g. common strain or time grid), increasing.
+    row_labels : one label per row.
+    log_x : log-spaced column edges (for log grids).
+    """
+    residuals = np.asarray(residuals, dtype=float)
+    x = np.asarray(x, dtype=float)
+    if residuals.shape != (len(row_labels), x.size):
+        raise ValueError(f"residuals shape {residuals.shape} does not match ({len(row_labels)} rows, {x.size} x values)")
+    # cell edges halfway between columns (in log space for log grids)
+    u = np.log(x) if log_x else x
+    mid = (u[1:] + u[:-1]) / 2 if u.size > 1 else np.array([])
+    first = u[0] - (mid[0] - u[0] if mid.size else 0.5)
+    last = u[-1] + (u[-1] - mid[-1] if mid.size else 0.5)
+    edges = np.concatenate([[first], mid, [last]])
+    edges = np.exp(edges) if log_x else edges
+    limit = float(np.nanmax(np.abs(residuals))) if np.isfinite(residuals).any() else 1.0
+    limit = limit if limit > 0 else 1.0
+    fig, (ax,) = _new_figure(width=6.0, height=1.2 + 0.35 * len(row_labels))
+    mesh = ax.pcolormesh(edges, np.arange(len(row_labels) + 1), np.ma.masked_invalid(residuals), cmap="RdBu_r",
+                         norm=TwoSlopeNorm(vcenter=0.0, vmin=-limit, vmax=limit))
+    ax.set_yticks(np.arange(len(row_labels)) + 0.5, labels=list(row_labels), fontsize=8)
+    if log_x:
+        ax.set_xscale("log")
+    ax.set_xlabel(xlabel)
+    fig.colorbar(mesh, ax=ax, label=colorbar_label)
+    if title:
+        ax.set_title(title, fontsize=10)
+    return fig
+
+
+def plot_residual_map(residuals, x, row_labels, path: str | Path, *, xlabel: str,
+                      colorbar_label: str = "normalised residual", log_x: bool = False,
+                      title: str | None = None) -> list[Path]:
+    """Write :func:`figure_residual_map` as PNG + SVG."""
+    return save_figure(figure_residual_map(residuals, x, row_labels, xlabel=xlabel, colorbar_label=colorbar_label,
+                                           log_x=log_x, title=title), path)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# curves (FEM force-depth, torque-time, before/after comparisons)
+
+
+def figure_curves(series: Mapping[str, tuple[np.ndarray, np.ndarray]], *, xlabel: str, ylabel: str,
+                  reference: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None, log_x: bool = False,
+                  log_y: bool = False, title: str | None = None) -> Figure:
+    """Named (x, y) curves as lines, optional reference curves (e.g. closed form, measurement) as markers."""
+    fig, (ax,) = _new_figure()
+    for i, (name, (x, y)) in enumerate(series.items()):
+        ax.plot(np.asarray(x, dtype=float), np.asarray(y, dtype=float), "-", color=f"C{i % 10}", lw=1.6, label=name)
+    for i, (name, (x, y)) in enumerate((reference or {}).items()):
+        ax.plot(np.asarray(x, dtype=float), np.asarray(y, dtype=float), "o", ms=3.5, mfc="none",
+                color=f"C{(i + len(series)) % 10}", label=name)
+    if log_x:
+        ax.set_xscale("log")
+    if log_y:
+        ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if title:
+        ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=8)
+    return fig
+
+
+def plot_force_depth(series: Mapping[str, tuple[np.ndarray, np.ndarray]], path: str | Path, *,
+                     reference: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None,
+                     title: str | None = None) -> list[Path]:
+    """FEM indentation force [N] vs depth [m], plotted in mm and mN; reference curves as markers."""
+    scale = {k: (1e3 * np.asarray(d, dtype=float), 1e3 * np.asarray(f, dtype=float)) for k, (d, f) in series.items()}
+    ref = {k: (1e3 * np.asarray(d, dtype=float), 1e3 * np.asarray(f, dtype=float))
+           for k, (d, f) in (reference or {}).items()}
+    return save_figure(figure_curves(scale, xlabel="indentation depth [mm]", ylabel="force [mN]", reference=ref,
+                                     title=title), path)
+
+
+def plot_torque(series: Mapping[str, tuple[np.ndarray, np.ndarray]], path: str | Path, *, xlabel: str = "time t [s]",
+                reference: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None,
+                title: str | None = None) -> list[Path]:
+    """Torque [N m] curves (FEM plate simulation vs measurement), plotted in µN m."""
+    scale = {k: (np.asarray(x, dtype=float), 1e6 * np.asarray(m, dtype=float)) for k, (x, m) in series.items()}
+    ref = {k: (np.asarray(x, dtype=float), 1e6 * np.asarray(m, dtype=float)) for k, (x, m) in (reference or {}).items()}
+    return save_figure(figure_curves(scale, xlabel=xlabel, ylabel="torque M [µN m]", reference=ref, title=title), path)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# timings
+
+
+def figure_timings(names: Sequence[str], seconds: Sequence[float], *, budget_s: float | None = None,
+                   budget_label: str = "budget", xlabel: str = "wall time [s]", title: str | None = None) -> Figure:
+    """Horizontal bars of wall times (log axis), with an optional budget line (e.g. real-time step budget)."""
+    seconds = np.asarray(seconds, dtype=float)
+    if len(names) != seconds.size:
+        raise ValueError(f"{len(names)} names for {seconds.size} timings")
+    fig, (ax,) = _new_figure(width=6.0, height=1.0 + 0.3 * max(len(names), 1))
+    positions = np.arange(len(names))
+    colours = ["C3" if budget_s is not None and s > budget_s else "C0" for s in seconds]
+    ax.barh(positions, seconds, color=colours)
+    ax.set_yticks(positions, labels=list(names), fontsize=8)
+    ax.invert_yaxis()
+    if _positive(seconds):
+        ax.set_xscale("log")
+    if budget_s is not None:
+        ax.axvline(budget_s, color="k", ls="--", lw=1, label=f"{budget_label} ({budget_s:.3g} s)")
+        ax.legend(fontsize=8)
+    ax.set_xlabel(xlabel)
+    if title:
+        ax.set_title(title, fontsize=10)
+    return fig
+
+
+def plot_timings(names: Sequence[str], seconds: Sequence[float], path: str | Path, *, budget_s: float | None = None,
+                 budget_label: str = "budget", xlabel: str = "wall time [s]", title: str | None = None) -> list[Path]:
+    """Write :func:`figure_timings` as PNG + SVG."""
+    return save_figure(figure_timings(names, seconds, budget_s=budget_s, budget_label=budget_label, xlabel=xlabel,
+                                      title=title), path)
+
+
+def figure_scaling(x: np.ndarray, series: Mapping[str, np.ndarray], *, xlabel: str, ylabel: str = "wall time [s]",
+                   title: str | None = None) -> Figure:
+    """Timing scaling curves (e.g. time per step vs number of elements, CPU vs GPU) on log-log axes."""
+    x = np.asarray(x, dtype=float)
+    return figure_curves({k: (x, np.asarray(v, dtype=float)) for k, v in series.items()}, xlabel=xlabel,
+                         ylabel=ylabel, log_x=_positive(x),
+                         log_y=all(_positive(v) for v in series.values()), title=title)
+
+
+def plot_scaling(x, series: Mapping[str, np.ndarray], path: str | Path, *, xlabel: str,
+                 ylabel: str = "wall time [s]", title: str | None = None) -> list[Path]:
+    """Write :func:`figure_scaling` as PNG + SVG."""
+    return save_figure(figure_scaling(x, series, xlabel=xlabel, ylabel=ylabel, title=title), path)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# stage-level figure sets (keep workflow scripts thin)
+
+#: variables drawn per test in the averages figures (those present in a curve)
+PRIMARY_VARIABLES: dict[str, tuple[str, ...]] = {
+    "stress_relaxation": ("relaxation_modulus", "shear_stress"),
+    "creep_recovery": ("shear_strain", "creep_compliance"),
+    "amplitude_sweep": ("storage_modulus", "loss_modulus"),
+    "frequency_sweep": ("storage_modulus", "loss_modulus"),
+    "flow_curve": ("shear_stress", "viscosity"),
+    "constant_shear_rate": ("shear_stress", "normal_force"),
+    "simple_shear": ("shear_stress", "nominal_stress", "normal_force"),
+    "uniaxial": ("nominal_stress",),
+    "indentation": ("force",),
+}
+
+
+def safe_name(text: str) -> str:
+    """File-name-safe form of a label (``"strain_pct=10"`` -> ``"strain_pct-10"``)."""
+    return re.sub(r"[^A-Za-z0-9.+-]+", "_", text.replace("=", "-")).strip("_") or "default"
+
+
+def plot_all_averages(averages: xr.Dataset, runs: Sequence[xr.Dataset], folder: str | Path) -> list[Path]:
+    """One raw-vs-average figure per curve and primary variable: ``<folder>/<test>__<condition>__<variable>``.
+
+    Parameters
+    ----------
+    averages : output of :func:`tissuemech.curves.average_runs`.
+    runs : the canonical runs it was built from (matched to curves through the member table).
+    """
+    from .curves import select_average  # noqa: PLC0415
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    by_name = {str(r.attrs.get("run", "")): r for r in runs}
+    written = []
+    for test, label in zip(averages["test"].values, averages["condition"].values):
+        curve = select_average(averages, str(test), str(label))
+        members = [by_name[name] for name in curve.attrs["runs"].split(",") if name in by_name]
+        for variable in PRIMARY_VARIABLES.get(str(test), ()):
+            if f"{variable}_mean" not in curve:
+                continue
+            stem = f"{test}__{safe_name(str(label))}__{variable}"
+            written += plot_average(curve, variable, folder / stem, members)
+    return written
+
+
+def plot_all_lve(summary: xr.Dataset, runs: Sequence[xr.Dataset], averages: xr.Dataset | None,
+                 folder: str | Path) -> list[Path]:
+    """One LVE figure per analysed amplitude sweep (runs and averages) of an :func:`tissuemech.lve.lve_summary`."""
+    from .curves import select_average  # noqa: PLC0415
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    by_name = {str(r.attrs.get("run", "")): r for r in runs}
+    written = []
+    for i in range(summary.sizes.get("sweep", 0)):
+        row = {name: summary[name].values[i].item() for name in summary.data_vars if summary[name].dims == ("sweep",)}
+        source, name = str(row["source"]), str(row["name"])
+        if source == "run" and name in by_name:
+            run = by_name[name]
+            strain, storage, loss = (run[v].values for v in ("shear_strain", "storage_modulus", "loss_modulus"))
+            sds = (None, None)
+        elif source == "average" and averages is not None:
+            curve = select_average(averages, "amplitude_sweep", name)
+            strain = curve["shear_strain"].values
+            storage, loss = curve["storage_modulus_mean"].values, curve["loss_modulus_mean"].values
+            sds = (curve["storage_modulus_sd"].values, curve["loss_modulus_sd"].values)
+        else:
+            continue
+        title = f"amplitude sweep {source} {name}" + (f" (n = {row['n_samples']})" if source == "average" else "")
+        written += plot_lve(strain, storage, loss, row, folder / f"lve__{source}__{safe_name(name)}",
+                            storage_sd=sds[0], loss_sd=sds[1], title=title)
+    return written

@@ -1,0 +1,684 @@
+"""Honest model ranking: information criteria, cross-validation, identifiability and a recommendation.
+
+Per data scope (a set of curves fitted jointly, with one plate target) every candidate model is fitted
+(:func:`tissuemech.fitting.fit`) and judged on
+
+* AICc and BIC (with n and with the effective n from lag-1 residual autocorrelation; dense curves overstate
+  n, ``science.md`` §4.2), Akaike weights, in-sample RMSE/NRMSE;
+* held-out error from cross-validation folds (:func:`leave_one_condition_out` -- fit three CSR rates,
+  predict the fourth; :func:`train_on_tests` -- fit relaxation, predict the frequency sweep and the CSR
+  ramps; :func:`leave_one_specimen_out`); condition-level CV is the primary criterion because it does not
+  depend on the assumed independence of points;
+* a paired comparison with the best model across folds (Wilcoxon signed-rank on per-fold errors);
+* identifiability and convergence flags, and the valid strain/rate range of the data.
+
+:func:`recommend` applies the thesis selection criteria (strain <= 10 % and rate-independent -> linear
+elastic; larger strain -> hyperelastic; rate matters -> QLV; both plus strain-dependent relaxation ->
+beyond-QLV) and states when the ranking of the data says otherwise.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+from scipy import stats as sps
+
+from .fitting import Curve, FitProblem, FitResult, NoiseModel, evaluate, fit, prony_start
+from .models.base import ConstitutiveModel
+
+#: strain up to which the thesis treats brain tissue as linear elastic (10 %)
+LINEAR_STRAIN_LIMIT = 0.10
+#: information-criterion difference regarded as strong support (Burnham & Anderson)
+STRONG_EVIDENCE = 10.0
+
+
+@dataclass(frozen=True)
+class Fold:
+    """One cross-validation fold: fit on ``train`` curve labels, predict ``test`` curve labels."""
+
+    name: str
+    design: str
+    train: tuple[str, ...]
+    test: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class RegistryFactory:
+    """Picklable zero-argument factory of a registry model (lets candidate fits run in worker processes)."""
+
+    key: str
+
+    def __call__(self) -> ConstitutiveModel:
+        from .models.registry import get_model
+
+        return get_model(self.key)
+
+
+def leave_one_condition_out(curves: Sequence[Curve], test: str = "constant_shear_rate") -> list[Fold]:
+    """Hold out each condition of ``test`` in turn (e.g. fit three CSR rates + everything else, predict the
+    fourth rate). Needs at least two conditions of that test."""
+    of_test = [c for c in curves if c.test == test]
+    conditions = sorted({c.condition for c in of_test})
+    if len(conditions) < 2:
+        return []
+    folds = []
+    for cond in conditions:
+        held = tuple(c.label for c in of_test if c.condition == cond)
+        folds.append(Fold(name=f"hold {test} {cond}", design="leave_one_condition_out",
+                          train=tuple(c.label for c in curves if c.label not in held), test=held))
+    return folds
+
+
+def train_on_tests(curves: Sequence[Curve], train_tests: Sequence[str] = ("stress_relaxation",),
+                   predict_tests: Sequence[str] = ("frequency_sweep", "constant_shear_rate")) -> list[Fold]:
+    """Fit on the curves of ``train_tests`` only and predict the curves of ``predict_tests`` (one fold)."""
+    train = tuple(c.label for c in curves if c.test in train_tests)
+    test = tuple(c.label for c in curves if c.test in predict_tests)
+    if not train or not test:
+        return []
+    return [Fold(name=f"fit {'+'.join(train_tests)} -> predict {'+'.join(predict_tests)}",
+                 design="leave_one_test_type_out", train=train, test=test)]
+
+
+def leave_one_specimen_out(curves: Sequence[Curve]) -> list[Fold]:
+    """Hold out every curve of one specimen in turn (population models; needs >= 2 specimens)."""
+    specimens = sorted({c.specimen for c in curves})
+    if len(specimens) < 2:
+        return []
+    return [Fold(name=f"hold specimen {s}", design="leave_one_specimen_out",
+                 train=tuple(c.label for c in curves if c.specimen != s),
+                 test=tuple(c.label for c in curves if c.specimen == s)) for s in specimens]
+
+
+@dataclass
+class Candidate:
+    """A model to rank: registry key, factory and optional fit settings."""
+
+    key: str
+    factory: Callable[[], ConstitutiveModel]
+    starts: Callable[[Sequence[Curve]], list[dict]] | None = None
+    fixed: Mapping[str, float] = field(default_factory=dict)
+    bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+
+    def describes(self, curves: Sequence[Curve]) -> bool:
+        model = self.factory()
+        for c in curves:
+            need = c.response
+            if need == "shear_history":
+                if not (model.supports("shear_history") or model.supports("elastic_shear")):
+                    return False
+            elif not model.supports(need):
+                return False
+        return True
+
+
+def fit_candidate(cand: Candidate, curves: Sequence[Curve], target: str, scope: str = "",
+                  noise: NoiseModel | None = None, n_random: int = 4, seed: int = 0,
+                  relaxation: str = "measured") -> FitResult:
+    """Fit one candidate to ``curves`` (joint fit, one plate target; ``relaxation`` is recorded)."""
+    problem = FitProblem(model=cand.factory(), curves=list(curves), target=target, model_key=cand.key,
+                         noise=noise or NoiseModel(), fixed=cand.fixed, bounds=cand.bounds, scope=scope,
+                         relaxation=relaxation)
+    if cand.starts:
+        starts = cand.starts(curves)
+    else:  # NNLS Prony start for QLV models (robust; the model default is tried as well)
+        nn = prony_start(problem.model, curves, problem.noise)
+        starts = [nn] if nn else []
+    return fit(problem, starts=starts, n_random=n_random, seed=seed)
+
+
+def cross_validate(cand: Candidate, curves: Sequence[Curve], folds: Sequence[Fold], target: str,
+                   noise: NoiseModel | None = None, n_random: int = 2, seed: int = 0,
+                   start: Mapping[str, float] | None = None) -> list[dict]:
+    """Held-out errors of a candidate on each fold.
+
+    Returns one record per fold: ``fold``, ``design``, ``model``, held-out ``rmse``/``nrmse``/``chisqr_per_point``,
+    ``n_test``, ``train_flags`` and ``status`` (``"ok"``, or why the fold was skipped: a model that cannot
+    describe the held-out test kind is *not* scored on it).
+    """
+    by_label = {c.label: c for c in curves}
+    model = cand.factory()
+    out = []
+    for fold in folds:
+        rec = {"fold": fold.name, "design": fold.design, "model": cand.key, "rmse": np.nan, "nrmse": np.nan,
+               "chisqr_per_point": np.nan, "n_test": 0, "train_flags": "", "status": "ok"}
+        train = [by_label[k] for k in fold.train]
+        test = [by_label[k] for k in fold.test]
+        if not cand.describes(test):
+            rec["status"] = "model cannot describe the held-out test kind"
+            out.append(rec)
+            continue
+        if not cand.describes(train):
+            train = [c for c in train if cand.describes([c])]
+            if not train:
+                rec["status"] = "model cannot describe any training curve"
+                out.append(rec)
+                continue
+        try:
+            problem = FitProblem(model=cand.factory(), curves=train, target=target, model_key=cand.key,
+                                 noise=noise or NoiseModel(), fixed=cand.fixed, bounds=cand.bounds)
+            starts = ([dict(start)] if start else []) + (cand.starts(train) if cand.starts else [])
+            # the full-data optimum is a close start for every fold: random restarts only without it
+            res = fit(problem, starts=starts, n_random=0 if start else n_random, seed=seed)
+            ev = evaluate(model, res.params, test, target, noise)
+        except (ValueError, RuntimeError) as exc:
+            rec["status"] = f"failed: {exc}"
+            out.append(rec)
+            continue
+        rec.update(rmse=ev["rmse"], nrmse=ev["nrmse"], chisqr_per_point=ev["chisqr"] / max(ev["n"], 1),
+                   n_test=ev["n"], train_flags="; ".join(res.flags))
+        out.append(rec)
+    return out
+
+
+def _identifiable(flags: Sequence[str]) -> bool:
+    return not any(f.startswith(("correlated", "no_covariance", "poorly_determined")) for f in flags)
+
+
+def paired_comparison(cv: pd.DataFrame, metric: str = "nrmse") -> pd.DataFrame:
+    """Per model: mean held-out error, and a paired Wilcoxon signed-rank test against the model with the
+    lowest mean error over the folds both were scored on (two-sided; NaN with fewer than 2 shared folds)."""
+    ok = cv[cv["status"] == "ok"]
+    if ok.empty:
+        return pd.DataFrame(columns=["model", f"cv_{metric}", "cv_folds", "cv_best", "cv_p_vs_best"])
+    wide = ok.pivot_table(index="fold", columns="model", values=metric)
+    means = wide.mean(axis=0)
+    best = str(means.idxmin())
+    rows = []
+    for model in wide.columns:
+        both = wide[[best, model]].dropna()
+        p = np.nan
+        if model != best and len(both) >= 2 and np.any(both[model] != both[best]):
+            p = float(sps.wilcoxon(both[model], both[best]).pvalue)
+        rows.append({"model": model, f"cv_{metric}": float(means[model]), "cv_folds": int(wide[model].notna().sum()),
+                     "cv_best": best, "cv_p_vs_best": p})
+    return pd.DataFrame(rows)
+
+
+def ranking_table(fits: Mapping[str, FitResult], cv: pd.DataFrame | None = None, scope: str = "",
+                  dataset: str = "") -> pd.DataFrame:
+    """``ranking.csv`` rows of one scope: criteria, deltas, Akaike weights, CV error, flags, ranges, rank.
+
+    Rank order: mean held-out NRMSE when every model was scored by cross-validation, otherwise AICc.
+    Models whose fit did not converge are ranked last.
+    """
+    rows = []
+    for key, r in fits.items():
+        rows.append({"dataset": dataset, "scope": scope or r.scope, "target": r.target, "model": key,
+                     "family": r.family, "k": r.k, "n": r.n, "n_eff": r.n_eff, "chisqr": r.chisqr, "rmse": r.rmse,
+                     "nrmse": r.nrmse, "aic": r.aic, "aicc": r.aicc, "bic": r.bic, "aicc_eff": r.aicc_eff,
+                     "bic_eff": r.bic_eff, "converged": r.success, "identifiable": _identifiable(r.flags),
+                     "n_flags": len(r.flags), "flags": "; ".join(r.flags), **r.ranges})
+    table = pd.DataFrame(rows)
+    if table.empty:
+        return table
+    for crit in ("aicc", "bic", "aicc_eff"):
+        table[f"delta_{crit}"] = table[crit] - table[crit].min()
+    rel = np.exp(-0.5 * table["delta_aicc"].to_numpy(float))
+    table["akaike_weight"] = rel / rel.sum()
+    if cv is not None and not cv.empty:
+        table = table.merge(paired_comparison(cv), on="model", how="left")
+    else:
+        for col in ("cv_nrmse", "cv_folds", "cv_best", "cv_p_vs_best"):
+            table[col] = np.nan
+    # models scored by cross-validation rank first by held-out error; the others (not cross-validated, e.g.
+    # outside the AICc short list) follow by AICc
+    table["_bad"] = ~table["converged"]
+    table["_no_cv"] = table["cv_nrmse"].isna()
+    table = table.sort_values(["_bad", "_no_cv", "cv_nrmse", "aicc"]).reset_index(drop=True)
+    table["rank_criterion"] = np.where(table["_no_cv"], "aicc", "cv_nrmse")
+    table = table.drop(columns=["_bad", "_no_cv"])
+    table["rank"] = np.arange(1, len(table) + 1)
+    return table
+
+
+# ------------------------------------------------------------------------------------------------
+# evidence from the data and the thesis selection criteria
+# ------------------------------------------------------------------------------------------------
+def rate_dependence(curves: Sequence[Curve], noise: NoiseModel | None = None) -> dict:
+    """Does the stress at a given strain depend on the shear rate? (CSR curves at >= 2 rates)
+
+    At strains covered by every CSR curve the log-stress is regressed on log-rate; returns the median
+    slope ``d ln sigma / d ln rate``, the relative stress change across the rate range, the relative
+    uncertainty (mean of SD/mean of the curves and the noise floor), and ``rate_dependent``: the change
+    exceeds three times the uncertainty.
+    """
+    noise = noise or NoiseModel()
+    csr = [c for c in curves if c.test == "constant_shear_rate" and "shear_rate_1_per_s" in c.nominal]
+    rates = sorted({c.nominal["shear_rate_1_per_s"] for c in csr})
+    if len(rates) < 2:
+        return {"rate_dependent": None, "reason": "fewer than two CSR rates"}
+    lo = max(np.min(c.obs_inputs("shear_strain")) for c in csr)
+    hi = min(np.max(c.obs_inputs("shear_strain")) for c in csr)
+    lo = max(lo, 0.1 * hi)
+    if not hi > lo:
+        return {"rate_dependent": None, "reason": "CSR strain ranges do not overlap"}
+    grid = np.linspace(lo, hi, 20)
+    logs, lr, rel_sd = [], [], []
+    for c in csr:
+        x = c.obs_inputs("shear_strain")
+        y = np.asarray(c.observed["shear_stress"], float)
+        order = np.argsort(x)
+        yi = np.interp(grid, x[order], y[order])
+        logs.append(np.log(np.maximum(yi, 1e-300)))
+        lr.append(math.log(c.nominal["shear_rate_1_per_s"]))
+        sig = noise.sigma("shear_stress", y, c.sd.get("shear_stress"))
+        rel_sd.append(float(np.median(sig / np.maximum(np.abs(y), 1e-300))))
+    logs = np.array(logs)
+    lr = np.array(lr)
+    slopes = np.polyfit(lr, logs, 1)[0]
+    change = float(np.median(np.abs(slopes)) * (lr.max() - lr.min()))
+    uncertainty = float(np.median(rel_sd))
+    return {"rate_dependent": bool(change > 3.0 * uncertainty), "slope_median": float(np.median(slopes)),
+            "relative_change": float(math.expm1(change)), "relative_uncertainty": uncertainty,
+            "strain_window": (float(lo), float(hi)), "rates_1_per_s": rates}
+
+
+def time_dependence(curves: Sequence[Curve], noise: NoiseModel | None = None) -> dict:
+    """Evidence that the response depends on time or rate, from whatever tests a scope has.
+
+    Constant-shear-rate curves at several rates decide (:func:`rate_dependence`); otherwise relaxation
+    (stress decay during the hold larger than 3x the relative uncertainty) or a frequency sweep (loss factor
+    G''/G' larger than 3x the relative uncertainty). ``rate_dependent`` is ``None`` when no test can tell.
+    """
+    noise = noise or NoiseModel()
+    rd = rate_dependence(curves, noise)
+    if rd.get("rate_dependent") is not None:
+        return rd | {"evidence": "csr_rates"}
+    decays, uncert = [], []
+    for c in curves:
+        if c.test == "stress_relaxation":
+            y = np.abs(np.asarray(c.observed["shear_stress"], float))
+            k = int(np.argmax(y))
+            if y.size - k >= 3:
+                decays.append(1.0 - y[-1] / y[k])
+                sig = noise.sigma("shear_stress", y, c.sd.get("shear_stress"))
+                uncert.append(float(np.median(sig / np.maximum(y, 1e-300))))
+    if decays:
+        d, u = float(np.median(decays)), float(np.median(uncert))
+        return {"rate_dependent": bool(d > 3 * u), "evidence": "relaxation_decay", "relative_decay": d,
+                "relative_uncertainty": u}
+    tans, uncert = [], []
+    for c in curves:
+        if c.test == "frequency_sweep":
+            g1, g2 = np.asarray(c.observed["storage_modulus"], float), np.asarray(c.observed["loss_modulus"], float)
+            tans.append(float(np.median(g2 / np.maximum(g1, 1e-300))))
+            sig = noise.sigma("storage_modulus", g1, c.sd.get("storage_modulus"))
+            uncert.append(float(np.median(sig / np.maximum(np.abs(g1), 1e-300))))
+    if tans:
+        t, u = float(np.median(tans)), float(np.median(uncert))
+        return {"rate_dependent": bool(t > 3 * u), "evidence": "loss_factor", "loss_factor": t,
+                "relative_uncertainty": u}
+    return rd | {"evidence": "none"}
+
+
+def thesis_rule(strain_max: float, rate_dependent: bool, nonseparable: bool = False) -> str:
+    """The thesis selection criteria as a family: ``linear_elastic``, ``hyperelastic``, ``qlv`` or ``beyond_qlv``."""
+    if rate_dependent and strain_max > LINEAR_STRAIN_LIMIT and nonseparable:
+        return "beyond_qlv"
+    if rate_dependent:
+        return "qlv"
+    if strain_max > LINEAR_STRAIN_LIMIT:
+        return "hyperelastic"
+    return "linear_elastic"
+
+
+def _family_class(row: pd.Series) -> str:
+    fam = str(row["family"])
+    if fam == "hyperelastic" and str(row["model"]).startswith(("linear", "hooke")):
+        return "linear_elastic"
+    if fam in ("linear_viscoelastic", "fractional"):
+        return "qlv"  # linear viscoelastic = QLV with a linear instantaneous law
+    return fam
+
+
+def recommend(table: pd.DataFrame, curves: Sequence[Curve], noise: NoiseModel | None = None,
+              decisive_cv_ratio: float = 0.8) -> dict:
+    """Recommendation for one scope: the thesis rule, the data's ranking, and whether they agree.
+
+    Evidence: maximum strain of the data; time/rate dependence (:func:`time_dependence`; when no test can
+    tell, a time-dependent model beating every elastic one by ΔAICc > 10); strain-dependent relaxation (a
+    beyond-QLV model beating the best QLV by ΔAICc > 10 and not worse in CV).
+
+    The rule's family is recommended (best model of that family) unless the top-ranked model of another
+    family is *decisively* better: held-out NRMSE below ``decisive_cv_ratio`` times the rule model's, or,
+    without cross-validation, ΔAICc > 10. The statement then says that the data say otherwise.
+    """
+    if table.empty:
+        return {"recommended": None, "statement": "no model was fitted"}
+    strain_max = float(np.nanmax(table["strain_max"])) if "strain_max" in table else float("nan")
+    rd = time_dependence(curves, noise)
+    classes = table.apply(_family_class, axis=1)
+    # best of each family in the table's own rank order
+    best_of = {cls: table[classes == cls].iloc[0] for cls in classes.unique()}
+    rate_dep = rd.get("rate_dependent")
+    if rate_dep is None:
+        elastic = [best_of[c]["aicc"] for c in ("linear_elastic", "hyperelastic") if c in best_of]
+        timed = [best_of[c]["aicc"] for c in ("qlv", "beyond_qlv") if c in best_of]
+        rate_dep = bool(elastic and timed and min(timed) < min(elastic) - STRONG_EVIDENCE)
+    nonsep = False
+    if "beyond_qlv" in best_of and "qlv" in best_of:
+        b, q = best_of["beyond_qlv"], best_of["qlv"]
+        cv_ok = not (np.isfinite(b.get("cv_nrmse", np.nan)) and np.isfinite(q.get("cv_nrmse", np.nan))
+                     and b["cv_nrmse"] > q["cv_nrmse"])
+        nonsep = bool(b["aicc"] < q["aicc"] - STRONG_EVIDENCE and cv_ok)
+    rule = thesis_rule(strain_max if np.isfinite(strain_max) else 0.0, rate_dep, nonsep)
+    top = table.iloc[0]
+    top_class = _family_class(top)
+    rule_best = best_of.get(rule)
+    statement = (f"Thesis criteria: max strain {100 * strain_max:.3g} %, "
+                 f"{'rate/time-dependent' if rate_dep else 'rate-independent'} ({rd.get('evidence', 'models')})"
+                 f"{', strain-dependent relaxation' if nonsep else ''} -> {rule.replace('_', ' ')}"
+                 + (f" (best fitted: {rule_best['model']})" if rule_best is not None else " (no such model fitted)")
+                 + f". Data ranking ({top['rank_criterion']}): {top['model']} ({top_class.replace('_', ' ')}) first.")
+    agree = top_class == rule
+    recommended = str(top["model"])
+    if not agree and rule_best is not None:
+        cv_top, cv_rule = float(top.get("cv_nrmse", np.nan)), float(rule_best.get("cv_nrmse", np.nan))
+        d_aicc = float(rule_best["aicc"] - top["aicc"])
+        if np.isfinite(cv_top) and np.isfinite(cv_rule):
+            decisive = cv_top < decisive_cv_ratio * cv_rule
+            margin = f"held-out NRMSE {cv_top:.3g} vs {cv_rule:.3g}, ΔAICc = {d_aicc:.1f}"
+        else:
+            decisive = d_aicc > STRONG_EVIDENCE
+            margin = f"ΔAICc = {d_aicc:.1f}"
+        if decisive:
+            statement += f" The data say otherwise: {top['model']} is decisively better than {rule_best['model']} ({margin})."
+        else:
+            recommended = str(rule_best["model"])
+            statement += (f" {top['model']} is not decisively better than {rule_best['model']} ({margin}): "
+                          f"the rule's choice stands.")
+    elif not agree:
+        statement += f" No {rule.replace('_', ' ')} model was fitted in this scope: the data's choice is used."
+    return {"rule_family": rule, "rule_model": None if rule_best is None else str(rule_best["model"]),
+            "data_model": str(top["model"]), "data_family": top_class, "agree": agree, "recommended": recommended,
+            "strain_max": strain_max, "rate_dependent": rate_dep, "nonseparable": nonsep, "rate_evidence": rd,
+            "statement": statement}
+
+
+def rank_scope(candidates: Sequence[Candidate], curves: Sequence[Curve], target: str, scope: str,
+               folds: Sequence[Fold] = (), dataset: str = "", noise: NoiseModel | None = None,
+               n_random: int = 4, cv_random: int = 1, seed: int = 0, cv_top: int = 6,
+               failures: dict | None = None, workers: int = 1, relaxation: str = "measured") -> tuple[pd.DataFrame, dict[str, FitResult], pd.DataFrame, dict]:
+    """Fit, cross-validate and rank every candidate that can describe ``curves``.
+
+    Cross-validation refits every fold, so it runs for the ``cv_top`` best models by AICc; the others are
+    ranked after them by AICc (``rank_criterion`` says which). Candidates whose fit raised are recorded in
+    ``failures`` (key -> message) when a dict is given. ``workers > 1`` runs the candidate fits and the
+    cross-validations in that many processes (candidates must then be picklable, e.g. registry keys through
+    :class:`RegistryFactory`).
+
+    Returns ``(ranking table, fits by key, per-fold CV records, recommendation)``; the recommendation
+    statement is also stored in the table's ``recommendation`` column.
+    """
+    failures = {} if failures is None else failures
+    usable = [c for c in candidates if c.describes(curves)]
+    fit_jobs = [(_fit_job, (cand, curves, target, scope, noise, n_random, seed, relaxation)) for cand in usable]
+    fits, by_key = {}, {c.key: c for c in usable}
+    for cand, outcome in zip(usable, _run_jobs(fit_jobs, workers)):
+        if isinstance(outcome, str):  # recorded, never silently dropped
+            failures[cand.key] = outcome
+        else:
+            fits[cand.key] = outcome
+    cv_rows = []
+    if folds and fits:
+        # cross-validation (refits per fold) for the AICc short list only: it is the expensive part
+        short = sorted(fits, key=lambda k: (not fits[k].success, fits[k].aicc))[:cv_top]
+        cv_jobs = [(cross_validate, (by_key[k], curves, folds, target, noise, cv_random, seed, fits[k].params))
+                   for k in short]
+        for rows in _run_jobs(cv_jobs, workers):
+            cv_rows += rows
+    cv = pd.DataFrame(cv_rows)
+    table = ranking_table(fits, cv, scope=scope, dataset=dataset)
+    rec = recommend(table, curves, noise)
+    if not table.empty:
+        table["recommendation"] = rec["statement"]
+        table["recommended"] = table["model"] == rec["recommended"]
+    return table, fits, cv, rec
+
+
+def _fit_job(cand, curves, target, scope, noise, n_random, seed, relaxation="measured"):
+    try:
+        return fit_candidate(cand, curves, target, scope, noise, n_random=n_random, seed=seed, relaxation=relaxation)
+    except (ValueError, RuntimeError) as exc:
+        return f"{type(exc).__name__}: {exc}"
+
+
+def _run_jobs(jobs, workers: int) -> list:
+    """Run ``(function, args)`` jobs serially or in a process pool (results in job order)."""
+    if workers <= 1 or len(jobs) <= 1:
+        return [fn(*args) for fn, args in jobs]
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    # fork keeps the compiled numba kernels of the parent; jobs are independent pure computations
+    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork")) as pool:
+        futures = [pool.submit(fn, *args) for fn, args in jobs]
+        return [f.result() for f in futures]
+
+
+def plot_ranking(table: pd.DataFrame, path=None):
+    """Two-panel figure: ΔAICc (log scale, +1) and held-out NRMSE per model, best first. Returns the figure;
+    writes it (PNG/PDF by extension) when ``path`` is given."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 0.35 * max(len(table), 4) + 1.2), sharey=True)
+    labels = table["model"].tolist()[::-1]
+    y = np.arange(len(labels))
+    colors = ["tab:red" if f else "tab:blue" for f in (table["n_flags"] > 0).tolist()[::-1]]
+    axes[0].barh(y, table["delta_aicc"].to_numpy(float)[::-1] + 1.0, color=colors)
+    axes[0].set_xscale("log")
+    axes[0].set_xlabel("ΔAICc + 1")
+    axes[0].axvline(STRONG_EVIDENCE + 1, color="k", ls=":", lw=1)
+    axes[0].set_yticks(y, labels)
+    cvn = table["cv_nrmse"].to_numpy(float)[::-1] if "cv_nrmse" in table else np.full(len(y), np.nan)
+    axes[1].barh(y, np.nan_to_num(cvn), color=colors)
+    axes[1].set_xlabel("held-out NRMSE (CV)")
+    scope = str(table["scope"].iloc[0]) if len(table) else ""
+    fig.suptitle(f"model ranking {scope} (red: flagged fit)")
+    fig.tight_layout()
+    if path is not None:
+        from .canonical import atomic_write
+
+        atomic_write(path, lambda tmp: fig.savefig(tmp, format=str(path).rsplit(".", 1)[-1], dpi=120))
+    return fig
+
+
+__all__ = ["Fold", "Candidate", "leave_one_condition_out", "train_on_tests", "leave_one_specimen_out",
+           "fit_candidate", "cross_validate", "paired_comparison", "ranking_table", "rate_dependence",
+           "time_dependence", "RegistryFactory",
+           "thesis_rule", "recommend", "rank_scope", "plot_ranking", "LINEAR_STRAIN_LIMIT", "Scope",
+           "DEFAULT_SCOPES", "THESIS_SCOPES", "scope_folds", "scope_curves", "scope_candidates", "run_fit_stage",
+           "run_fit_stage_files"]
+
+
+# ------------------------------------------------------------------------------------------------
+# the whole fit + rank + cards stage of a dataset
+# ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Scope:
+    """A data scope: which tests are fitted jointly, by which model families, how, and how they are validated.
+
+    Attributes
+    ----------
+    name : label (file names, ``scope`` columns)
+    tests : canonical test kinds fitted jointly
+    families : model families considered (registry models that can describe every curve)
+    models : explicit registry keys (overrides ``families``)
+    target : plate target (``fitting.PLATE_TARGETS``)
+    max_strain : keep observations up to this rim strain (e.g. 0.10 for the linear-elastic criterion)
+    relaxation : relaxation strain-history treatment (``fitting.relaxation_history``)
+    thin_points : log-spaced points kept per curve
+    folds : cross-validation designs: ``"loco"`` (leave one condition out, per test kind with >= 2
+        conditions), ``"relaxation_to_others"`` (fit relaxation, predict frequency sweep and CSR),
+        ``"loso"`` (leave one specimen out)
+    nominal : keep only curves whose nominal condition matches, e.g. ``{"shear_rate_1_per_s": 0.001}``
+        (relative tolerance 1e-6)
+    """
+
+    name: str
+    tests: tuple[str, ...]
+    families: tuple[str, ...] = ()
+    models: tuple[str, ...] | None = None
+    target: str = "apparent_stress"
+    max_strain: float | None = None
+    relaxation: str = "measured"
+    thin_points: int = 30
+    folds: tuple[str, ...] = ("loco",)
+    nominal: tuple[tuple[str, float], ...] = ()
+
+
+_LVE = ("linear_viscoelastic", "fractional")
+DEFAULT_SCOPES: tuple[Scope, ...] = (
+    Scope("flow", ("flow_curve",), ("viscous",), folds=()),
+    Scope("frequency_sweep", ("frequency_sweep",), _LVE, folds=()),
+    Scope("creep", ("creep_recovery",), _LVE),
+    Scope("relaxation", ("stress_relaxation",), _LVE + ("qlv", "beyond_qlv")),
+    Scope("csr", ("constant_shear_rate",), ("hyperelastic", "qlv", "beyond_qlv")),
+    Scope("csr+relaxation", ("constant_shear_rate", "stress_relaxation"), ("qlv", "beyond_qlv"),
+          folds=("loco", "relaxation_to_others")),
+    # interconversion check (science.md §0): fit relaxation, predict the frequency sweep
+    Scope("relaxation+sweep", ("stress_relaxation", "frequency_sweep"), _LVE + ("qlv",),
+          folds=("relaxation_to_others",)),
+    Scope("simple_shear", ("simple_shear",), ("hyperelastic",), target="none"),
+    Scope("uniaxial", ("uniaxial",), ("hyperelastic",), target="none"),
+)
+
+#: the thesis's own method, for reproducing its tables: apparent rim stress taken as the rim stress,
+#: relaxation treated as a step, the linear modulus from CSR up to 10 % and hyperelastic laws fitted directly
+#: to the slowest CSR ramp (no convolution)
+THESIS_SCOPES: tuple[Scope, ...] = (
+    Scope("thesis_linear_csr", ("constant_shear_rate",), ("hyperelastic",), target="thesis", max_strain=0.10),
+    Scope("thesis_hyperelastic_csr0.001", ("constant_shear_rate",), ("hyperelastic",), target="thesis",
+          folds=(), nominal=(("shear_rate_1_per_s", 0.001),)),
+    Scope("thesis_relaxation_step", ("stress_relaxation",), _LVE + ("qlv",), target="thesis", relaxation="step"),
+)
+
+
+def scope_folds(scope: Scope, curves: Sequence[Curve]) -> list[Fold]:
+    folds: list[Fold] = []
+    if "loco" in scope.folds:
+        for test in scope.tests:
+            folds += leave_one_condition_out(curves, test)
+    if "relaxation_to_others" in scope.folds:
+        folds += train_on_tests(curves, ("stress_relaxation",), ("frequency_sweep", "constant_shear_rate"))
+    if "loso" in scope.folds:
+        folds += leave_one_specimen_out(curves)
+    return folds
+
+
+def scope_curves(scope: Scope, curves: Sequence[Curve]) -> list[Curve]:
+    from .fitting import select_strain, thin, with_relaxation_history
+
+    out = []
+    for c in curves:
+        if c.test not in scope.tests:
+            continue
+        if any(not np.isclose(c.nominal.get(k, np.nan), v, rtol=1e-6) for k, v in scope.nominal):
+            continue
+        if scope.max_strain is not None:
+            try:
+                c = select_strain(c, max_strain=scope.max_strain)
+            except ValueError:
+                continue
+        c = with_relaxation_history(c, scope.relaxation)
+        out.append(thin(c, scope.thin_points) if scope.thin_points else c)
+    return out
+
+
+def scope_candidates(scope: Scope, models: Sequence[str] | None = None) -> list[Candidate]:
+    """Registry models of the scope (explicit keys, else the scope's families), optionally restricted."""
+    from .models.registry import available_models, get_model
+
+    keys = list(scope.models) if scope.models is not None else [
+        k for k in available_models() if get_model(k).family in scope.families]
+    if models is not None:
+        keys = [k for k in keys if k in models]
+    return [Candidate(k, RegistryFactory(k)) for k in keys]
+
+
+def run_fit_stage(curves: Sequence[Curve], out_dir, dataset: str = "", scopes: Sequence[Scope] = DEFAULT_SCOPES,
+                  models: Sequence[str] | None = None, poisson_ratio: float = 0.49, n_random: int = 1,
+                  cv_top: int = 4, seed: int = 0, noise: NoiseModel | None = None, workers: int = 1,
+                  log=None) -> dict:
+    """Fit, rank and export cards for every scope that has data.
+
+    Writes under ``out_dir``: ``fits/<scope>/<model>.nc``, ``fits.csv``, ``ranking.csv``,
+    ``ranking_<scope>.png``, ``cv.csv``, ``recommendations.json`` and ``cards/<scope>/<model>.{json,inp,feb.xml}``
+    (cards for every converged fit). Returns a summary dict (scopes run, recommendations, failures).
+    """
+    import json
+    from pathlib import Path
+
+    from .canonical import write_text
+    from .cards import make_card, write_card_files
+    from .fitting import fits_csv_row, write_fit_netcdf
+
+    out = Path(out_dir)
+    fit_rows, rank_tables, cv_tables, recs, failures = [], [], [], {}, {}
+    for scope in scopes:
+        sc = scope_curves(scope, curves)
+        if not sc or {c.test for c in sc} != set(scope.tests):  # a joint scope needs every one of its tests
+            continue
+        cands = scope_candidates(scope, models)
+        fails: dict[str, str] = {}
+        table, fits, cv, rec = rank_scope(cands, sc, scope.target, scope.name, scope_folds(scope, sc), dataset,
+                                          noise, n_random=n_random, seed=seed, cv_top=cv_top, failures=fails,
+                                          workers=workers, relaxation=scope.relaxation)
+        if fails:
+            failures[scope.name] = fails
+        if table.empty:
+            continue
+        if log:
+            log(f"{scope.name}: {len(fits)} models, best {table.iloc[0]['model']}")
+        factories = {c.key: c.factory for c in cands}
+        for key, res in fits.items():
+            fit_file = out / "fits" / scope.name / f"{key}.nc"
+            write_fit_netcdf(res, fit_file)
+            fit_rows.append(fits_csv_row(res, dataset))
+            if res.success:
+                card = make_card(res, factories[key](), poisson_ratio=poisson_ratio, dataset=dataset,
+                                 fit_file=str(fit_file.relative_to(out)))
+                write_card_files(card, out / "cards" / scope.name, key)
+        rank_tables.append(table)
+        if not cv.empty:
+            cv_tables.append(cv.assign(scope=scope.name))
+        recs[scope.name] = {k: v for k, v in rec.items() if k != "rate_evidence"} | {
+            "rate_evidence": {k: v for k, v in rec.get("rate_evidence", {}).items()}}
+        plot_ranking(table, out / f"ranking_{scope.name.replace('+', '_')}.png")
+    write_text(pd.DataFrame(fit_rows).to_csv(index=False), out / "fits.csv")
+    ranking = pd.concat(rank_tables, ignore_index=True) if rank_tables else pd.DataFrame()
+    write_text(ranking.to_csv(index=False), out / "ranking.csv")
+    write_text((pd.concat(cv_tables, ignore_index=True) if cv_tables else pd.DataFrame()).to_csv(index=False),
+               out / "cv.csv")
+    write_text(json.dumps(recs, indent=2, default=str) + "\n", out / "recommendations.json")
+    return {"scopes": [t["scope"].iloc[0] for t in rank_tables], "recommendations": recs, "failures": failures,
+            "n_fits": len(fit_rows)}
+
+
+def run_fit_stage_files(averages_path, out_dir, runs_dir=None, dataset: str = "", thesis: bool = False,
+                        **kwargs) -> dict:
+    """:func:`run_fit_stage` on ``results/<dataset>/averages.nc`` (the adapter of the workflow's fit rule).
+
+    Plate geometry per test kind comes from the canonical runs in ``runs_dir`` (``*.nc``; averages do not
+    carry it). ``thesis=True`` adds the thesis-method scopes (:data:`THESIS_SCOPES`) to the default ones.
+    """
+    from pathlib import Path
+
+    from .canonical import read_netcdf
+    from .fitting import curves_from_averages, geometry_from_runs
+
+    geometry = {}
+    if runs_dir is not None:
+        geometry = geometry_from_runs(read_netcdf(p) for p in sorted(Path(runs_dir).glob("*.nc")))
+    curves = curves_from_averages(read_netcdf(averages_path), radius_m={k: v[0] for k, v in geometry.items()},
+                                  gap_m={k: v[1] for k, v in geometry.items()})
+    if thesis:
+        kwargs.setdefault("scopes", DEFAULT_SCOPES + THESIS_SCOPES)
+    return run_fit_stage(curves, out_dir, dataset=dataset, **kwargs)

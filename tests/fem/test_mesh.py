@@ -1,0 +1,95 @@
+import numpy as np
+import pytest
+
+from tissuemech.fem.mesh import (block_mesh, boundary_faces, cylinder_mesh, graded_layers, graded_ring_radii,
+                                 mesh_quality, read_mesh, reorder_for_locality, write_mesh)
+
+
+def _face_area(nodes, faces):
+    x = nodes[faces]
+    return 0.5 * np.linalg.norm(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), axis=1).sum()
+
+
+def test_block_is_conforming_and_exact():
+    mesh = block_mesh((2e-3, 3e-3, 4e-3), (2, 3, 4))
+    q = mesh_quality(mesh)
+    assert q["n_elements"] == 6 * 24
+    assert q["volume_m3"] == pytest.approx(24e-9, rel=1e-12)
+    assert q["min_volume_m3"] > 0
+    # conforming: the boundary faces are exactly the box surface
+    assert _face_area(mesh.nodes, boundary_faces(mesh.elements)) == pytest.approx(2 * (6 + 8 + 12) * 1e-6, rel=1e-12)
+
+
+def test_rheometer_cylinder_quality_and_conformity():
+    mesh = cylinder_mesh(12.5e-3, 2e-3, n_rings=6, n_layers=3)
+    q = mesh_quality(mesh)
+    faces = boundary_faces(mesh.elements)
+    x = mesh.nodes
+    # polygonal cross-section: area from the bottom faces, perimeter from the side
+    bottom = faces[np.all(np.isclose(x[faces, 2], 0.0), axis=1)]
+    area = _face_area(x, bottom)
+    assert q["volume_m3"] == pytest.approx(area * 2e-3, rel=1e-10)
+    assert area == pytest.approx(np.pi * 12.5e-3**2, rel=0.01)
+    assert q["min_volume_m3"] > 0
+    # no slivers: smallest altitude of the same order as the mean (structured extrusion)
+    assert q["min_altitude_m"] > 0.5 * q["mean_altitude_m"]
+    # a conforming mesh has no boundary faces inside the sample
+    r = np.hypot(x[faces, 0], x[faces, 1]).max(axis=1)
+    z = x[faces, 2]
+    on_surface = np.isclose(r, 12.5e-3) | np.all(np.isclose(z, 0), axis=1) | np.all(np.isclose(z, 2e-3), axis=1)
+    assert on_surface.all()
+
+
+def test_graded_rings_hit_punch_edge_and_rim():
+    rings = graded_ring_radii(10e-3, 2e-3, 4, 1.3)
+    assert np.isclose(rings, 2e-3).any() and rings[-1] == pytest.approx(10e-3)
+    assert np.all(np.diff(rings) > 0)
+    z = graded_layers(5e-3, 0.25e-3, 1.3)
+    assert z[0] == 0 and z[-1] == pytest.approx(5e-3) and np.diff(z)[-1] == pytest.approx(0.25e-3, rel=0.2)
+    with pytest.raises(ValueError, match="inner_radius_m"):
+        graded_ring_radii(1e-3, 2e-3, 4)
+
+
+@pytest.mark.parametrize("suffix", [".vtu", ".xdmf"])
+def test_roundtrip_with_displacement(tmp_path, suffix):
+    mesh = reorder_for_locality(cylinder_mesh(5e-3, 1e-3, n_rings=3, n_layers=2))
+    u = np.random.default_rng(1).normal(size=(mesh.n_nodes, 3)) * 1e-6
+    path = write_mesh(tmp_path / f"m{suffix}", mesh, {"displacement": u})
+    back, data = read_mesh(path)
+    assert np.array_equal(back.elements, mesh.elements)
+    np.testing.assert_allclose(back.nodes, mesh.nodes)
+    np.testing.assert_allclose(data["displacement"], u)
+
+
+def test_reordering_keeps_geometry():
+    mesh = cylinder_mesh(5e-3, 1e-3, n_rings=4, n_layers=2, reorder=False)
+    re = reorder_for_locality(mesh)
+    assert mesh_quality(re)["volume_m3"] == pytest.approx(mesh_quality(mesh)["volume_m3"], rel=1e-12)
+    bw = lambda m: np.max(m.elements.max(1) - m.elements.min(1))  # noqa: E731
+    assert bw(re) < bw(mesh)
+
+
+def test_brain_mesh_from_cached_wheel_data(tmp_path):
+    """MNI brain mesh (optional: nilearn wheel + pyvista + pytetwild; ~1-2 min, so only from a cache).
+
+    The cache is produced by ``brain_mesh(cache_dir=...)``; here we only check a cached mesh if the
+    developer cache exists, otherwise the meshing inputs are located without meshing.
+    """
+    from tissuemech.fem import mesh as fm
+
+    pytest.importorskip("nibabel")
+    try:
+        path = fm._wheel_file(fm.MNI_GM)
+    except ModuleNotFoundError:
+        pytest.skip("nilearn wheel not installed")
+    import nibabel as nib
+
+    img = nib.load(path)
+    assert img.shape == (197, 233, 189)
+    cache = fm.Path(__file__).resolve().parents[2] / "results" / "fem_cache"
+    if not any(cache.glob("brain_mni_*.vtu")):
+        pytest.skip("no cached brain mesh (run tissuemech.fem.mesh.brain_mesh(cache_dir='results/fem_cache'))")
+    mesh = fm.brain_mesh(cache_dir=cache)
+    q = mesh_quality(mesh)
+    assert 1.2e-3 < q["volume_m3"] < 2.2e-3  # MNI-space brain incl. cerebellum, ~1.8 l
+    assert q["min_volume_m3"] > 0 and q["min_altitude_m"] > 1e-4  # fTetWild: no slivers

@@ -1,0 +1,218 @@
+"""Material cards: JSON shape, Abaqus/FEBio syntax and conventions, and the round trip card -> material law
+(single material point in simple shear) -> the fitted curve within 1 %."""
+from __future__ import annotations
+
+import json
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+from doubles import ProxyLopezPamies, ProxyMooneyRivlin, ProxyOgden, ProxyProny, ProxyReducedPolynomial
+
+from tissuemech import cards as C
+from tissuemech import fitting as F
+from tissuemech.models.qlv import QLVModel, qlv_params
+from tissuemech.models.registry import get_model
+
+GAMMA = np.linspace(0.01, 0.5, 25)
+G_PRONY = [0.10, 0.23, 0.21, 0.14]
+
+
+def fitted(model, truth, key, gmax=0.5):
+    """A FitResult of ``model`` on its own noise-free simple-shear curve (the card's 'fitted curve')."""
+    g = np.linspace(gmax / 30, gmax, 30)
+    curve = F.Curve(test="simple_shear", condition="shear", response="elastic_shear", inputs={"shear_strain": g},
+                    observed={"shear_stress": model.elastic_shear_stress(truth, g)})
+    return F.fit(F.FitProblem(model, [curve], target="none", model_key=key), starts=[truth], n_random=0)
+
+
+def fitted_qlv(model, truth, key, gmax=0.5):
+    t = np.linspace(0, gmax / 0.01, 41)
+    g = 0.01 * t
+    curve = F.Curve(test="constant_shear_rate", condition="rate=0.01/s", response="shear_history",
+                    inputs={"time": t, "shear_strain": g}, observed={"shear_stress": model.shear_stress_history(truth, t, g)[1:]},
+                    obs_index=np.arange(1, 41), nominal={"shear_rate_1_per_s": 0.01})
+    return F.fit(F.FitProblem(model, [curve], target="none", model_key=key), starts=[truth], n_random=0)
+
+
+def fem_simple_shear(card, gamma):
+    """Cauchy shear stress of the card's law in the project's FEM material routine (one material point,
+    homogeneous simple shear, nearly incompressible)."""
+    mats = pytest.importorskip("tissuemech.fem.materials")
+    if card["elastic_law"] not in mats.available_laws():
+        pytest.skip(f"FEM has no law {card['elastic_law']!r} yet")
+    mat = mats.make_material(card["elastic_law"], card["elastic_parameters"], bulk_modulus_pa=card["bulk_modulus"])
+    out = []
+    for g in gamma:
+        F_ = np.eye(3)
+        F_[0, 1] = g
+        out.append(mats.cauchy_stress(mat, F_)[0, 1])
+    return np.array(out)
+
+
+# ------------------------------------------------------------------------------------------------
+def test_qlv_card_shape_prony_normalisation_and_abaqus_syntax():
+    qlv = get_model("qlv_linear_prony4")
+    truth = qlv_params(qlv, {"G0": 200.0}, G_PRONY)
+    res = fitted_qlv(qlv, truth, "qlv_linear_prony4")
+    card = C.make_card(res, qlv, dataset="demo")
+    data = json.loads(C.card_json(card))
+    for key in ("model", "family", "parameters", "units", "prony", "poisson_ratio", "validity", "provenance",
+                "fit_quality", "elastic_law", "bulk_modulus"):
+        assert key in data
+    assert data["model"] == "qlv_linear_prony4" and data["poisson_ratio"] == 0.49
+    np.testing.assert_allclose(data["prony"]["g"], G_PRONY, rtol=1e-6)
+    assert data["prony"]["g_inf"] == pytest.approx(1 - sum(G_PRONY))
+    mu0 = 200.0
+    assert data["initial_shear_modulus"] == pytest.approx(mu0, rel=1e-6)
+    assert data["bulk_modulus"] == pytest.approx(2 * mu0 * 1.49 / (3 * 0.02), rel=1e-6)
+
+    block = C.abaqus_block(card)
+    parsed = C.parse_abaqus_block(block)
+    keys = list(parsed)
+    assert keys[0].startswith("*MATERIAL, NAME=QLV_LINEAR_PRONY4")
+    assert keys[1] == "*HYPERELASTIC, NEO HOOKE, MODULI=INSTANTANEOUS"
+    c10, d1 = parsed[keys[1]][0]
+    assert c10 == pytest.approx(mu0 / 2) and d1 == pytest.approx(2 / data["bulk_modulus"])
+    assert keys[2] == "*VISCOELASTIC, TIME=PRONY"
+    rows = np.array(parsed[keys[2]])
+    np.testing.assert_allclose(rows[:, 0], G_PRONY, rtol=1e-6)  # g_i relative to the instantaneous modulus
+    assert np.all(rows[:, 1] == 0.0)  # shear-only relaxation: k_i = 0
+    np.testing.assert_allclose(rows[:, 2], qlv.taus(truth))
+
+    # FEBio: S = g0 S_e + sum g_i H_i with the instantaneous law as base
+    root = ET.fromstring(C.febio_block(card))
+    assert root.get("type") == "uncoupled viscoelastic"
+    assert float(root.findtext("g0")) == pytest.approx(1 - sum(G_PRONY))
+    assert float(root.findtext("g2")) == pytest.approx(0.23) and float(root.findtext("t4")) == pytest.approx(100.0)
+    el = root.find("elastic")
+    assert el.get("type") == "Mooney-Rivlin" and float(el.findtext("c1")) == pytest.approx(100.0)
+    assert float(el.findtext("c2")) == 0.0
+    # the project's FEM routine evaluates the same instantaneous law
+    assert data["elastic_law"] == "neo_hookean"
+    np.testing.assert_allclose(fem_simple_shear(card, GAMMA), mu0 * GAMMA, rtol=0.01)
+
+
+@pytest.mark.parametrize("make,truth,form", [
+    (lambda: ProxyReducedPolynomial(order=3), {"C10": 40.0, "C20": 100.0, "C30": 400.0}, "REDUCED POLYNOMIAL, N=3"),
+    (ProxyMooneyRivlin, {"C10": 60.0, "C01": 20.0}, "MOONEY-RIVLIN"),
+    (ProxyOgden, {"mu1": 600.0, "alpha1": -12.0}, "OGDEN, N=1"),
+    (ProxyLopezPamies, {"mu1": 500.0, "alpha1": 3.0}, "MARLOW"),
+])
+def test_round_trip_card_law_matches_fitted_curve(make, truth, form):
+    model = make()
+    res = fitted(model, truth, model.name)
+    card = C.make_card(res, model)
+    assert card["abaqus_form"] == form
+    fitted_curve = model.elastic_shear_stress(res.params, GAMMA)
+    block = C.abaqus_block(card)
+    # the Abaqus energy form with the card's constants (independent implementation of Abaqus's conventions)
+    np.testing.assert_allclose(C.abaqus_simple_shear_stress(block, GAMMA), fitted_curve, rtol=0.01)
+    fb = C.febio_block(card)
+    if fb is not None:
+        ET.fromstring(fb)
+        np.testing.assert_allclose(C.febio_simple_shear_stress(fb, GAMMA), fitted_curve, rtol=0.01)
+    # the project's FEM material routine (single material point, simple shear)
+    np.testing.assert_allclose(fem_simple_shear(card, GAMMA), fitted_curve, rtol=0.01)
+
+
+def test_ogden_conventions_in_abaqus_and_febio():
+    model = ProxyOgden()
+    truth = {"mu1": 600.0, "alpha1": -12.0}
+    card = C.make_card(fitted(model, truth, "ogden1"), model)
+    parsed = C.parse_abaqus_block(C.abaqus_block(card))
+    mu, alpha, d1 = parsed["*HYPERELASTIC, OGDEN, N=1"][0]
+    assert mu == pytest.approx(600.0, rel=1e-4) and alpha == pytest.approx(-12.0, rel=1e-4)
+    root = ET.fromstring(C.febio_block(card))
+    assert root.get("type") == "Ogden"
+    assert float(root.findtext("c1")) == pytest.approx(1200.0, rel=1e-4)  # c = 2 mu (FEBio W = c/m^2 (...))
+    assert card["initial_shear_modulus"] == pytest.approx(600.0, rel=1e-4)
+
+
+def test_marlow_table_is_uniaxial_and_covers_the_validity_range():
+    model = ProxyLopezPamies()
+    card = C.make_card(fitted(model, {"mu1": 500.0, "alpha1": 3.0}, "lopez_pamies1"), model)
+    parsed = C.parse_abaqus_block(C.abaqus_block(card))
+    assert "*HYPERELASTIC, MARLOW, POISSON=0.49" in parsed and parsed["*HYPERELASTIC, MARLOW, POISSON=0.49"] == []
+    stress, strain = np.array(parsed["*UNIAXIAL TEST DATA"]).T
+    assert stress[0] == 0 and strain[0] == 0 and np.all(np.diff(strain) > 0) and np.all(np.diff(stress) > 0)
+    lam = 1 + strain[-1]
+    assert lam ** 2 + 2 / lam - 3 >= (0.5 * 1.2) ** 2 - 1e-9  # I1 range of simple shear up to 1.2 x gamma_max
+    assert C.febio_block(card) is None and any("MARLOW" in n for n in card["notes"])
+
+
+def test_linear_viscoelastic_card_prony_from_step_response():
+    model = ProxyProny()
+    truth = {"G_inf": 81.4, "G_1": 30.0, "G_2": 46.9, "G_3": 42.7, "G_4": 28.9}
+    t = np.r_[0.0, np.geomspace(0.01, 300, 60)]
+    g = np.full(t.size, 0.01)
+    curve = F.Curve(test="stress_relaxation", condition="strain=1%", response="shear_history",
+                    inputs={"time": t, "shear_strain": g}, observed={"shear_stress": model.shear_stress_history(truth, t, g)[1:]},
+                    obs_index=np.arange(1, t.size))
+    res = F.fit(F.FitProblem(model, [curve], target="none", model_key="prony4"), starts=[truth], n_random=0)
+    card = C.make_card(res, model)
+    g0 = sum(truth.values())
+    assert card["initial_shear_modulus"] == pytest.approx(g0, rel=1e-3)
+    np.testing.assert_allclose(card["prony"]["g"], np.array(list(truth.values())[1:]) / g0, atol=1e-3)
+    assert card["prony"]["fit_rel_error"] < 1e-3
+    parsed = C.parse_abaqus_block(C.abaqus_block(card))
+    assert "*HYPERELASTIC, NEO HOOKE, MODULI=INSTANTANEOUS" in parsed
+
+
+def test_write_card_files(tmp_path):
+    qlv = get_model("qlv_linear_prony4")
+    truth = qlv_params(qlv, {"G0": 200.0}, G_PRONY)
+    card = C.make_card(fitted_qlv(qlv, truth, "qlv_linear_prony4"), qlv)
+    paths = C.write_card_files(card, tmp_path / "cards")
+    assert set(paths) == {"json", "abaqus", "febio"}
+    assert json.loads(paths["json"].read_text())["model"] == "qlv_linear_prony4"
+    assert paths["abaqus"].read_text().count("*") >= 3
+
+
+def test_beyond_qlv_card_has_no_fe_block_and_says_why():
+    key = "pr_linear_prony4"
+    model = get_model(key)
+    p = model.default_params()
+    res = fitted_qlv(model, p, key)
+    card = C.make_card(res, model)
+    assert C.abaqus_block(card) is None and C.febio_block(card) is None
+    assert any("user material" in n for n in card["notes"])
+
+
+def test_qlv_with_nonlinear_law_round_trip():
+    model = QLVModel(ProxyReducedPolynomial(order=3), 4, name="qlv_rp3_prony4")
+    truth = qlv_params(model, {"C10": 40.0, "C20": 100.0, "C30": 400.0}, G_PRONY)
+    card = C.make_card(fitted_qlv(model, truth, "qlv_rp3_prony4"), model)
+    block = C.abaqus_block(card)
+    assert "*HYPERELASTIC, REDUCED POLYNOMIAL, N=3, MODULI=INSTANTANEOUS" in block
+    np.testing.assert_allclose(C.abaqus_simple_shear_stress(block, GAMMA), model.elastic_shear_stress(truth, GAMMA),
+                               rtol=0.01)
+
+
+def test_prony_from_complex_modulus_recovers_a_prony_spectrum():
+    model = ProxyProny()
+    truth = {"G_inf": 81.4, "G_1": 30.0, "G_2": 46.9, "G_3": 42.7, "G_4": 28.9}
+    pr = C.prony_from_complex_modulus(model, truth, np.array(model.taus), 1e-3, 1e2)
+    g0 = sum(truth.values())
+    assert pr["G0"] == pytest.approx(g0, rel=1e-3) and pr["fit_rel_error"] < 1e-3
+    np.testing.assert_allclose(pr["g"], np.array(list(truth.values())[1:]) / g0, atol=1e-3)
+
+
+def test_classical_ogden_convention_is_converted_and_checked():
+    """A law written as W = mu/alpha (sum l^alpha - 3) (classical form) must reach Abaqus as mu alpha/2."""
+
+    class ClassicalOgden(ProxyOgden):
+        def elastic_shear_stress(self, p, strain):
+            g = np.asarray(strain, float)
+            lam = g / 2 + np.sqrt(1 + g ** 2 / 4)
+            a = p["alpha1"]
+            return p["mu1"] * (lam ** a - lam ** -a) / (lam + 1 / lam)
+
+    model = ClassicalOgden()
+    truth = {"mu1": 100.0, "alpha1": -12.0}
+    card = C.make_card(fitted(model, truth, "ogden1"), model)
+    mu, alpha = card["abaqus_constants"]
+    assert card["abaqus_form"] == "OGDEN, N=1" and mu == pytest.approx(100.0 * -12.0 / 2, rel=1e-4)
+    assert any("do not reproduce" in n for n in card["notes"])
+    np.testing.assert_allclose(C.abaqus_simple_shear_stress(C.abaqus_block(card), GAMMA),
+                               model.elastic_shear_stress(truth, GAMMA), rtol=0.01)

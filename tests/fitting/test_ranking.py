@@ -1,0 +1,199 @@
+"""Ranking: cross-validation selects the generating model, the thesis rule is applied and disagreements are stated."""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+from doubles import ProxyReducedPolynomial
+
+from tissuemech import fitting as F
+from tissuemech import ranking as R
+from tissuemech.models.qlv import LinearElasticShear, QLVModel, qlv_params
+from tissuemech.models.registry import get_model
+
+RATES = (0.001, 0.01, 0.1, 1.0)
+G_PRONY = [0.10, 0.23, 0.21, 0.14]
+
+
+def csr_curves(model, p, gmax, noise=0.01, seed=0, n=25, specimen="mean"):
+    rng = np.random.default_rng(seed)
+    out = []
+    for rate in RATES:
+        t = np.linspace(0.0, gmax / rate, n + 1)
+        y = model.shear_stress_history(p, t, rate * t) if model.supports("shear_history") else \
+            model.elastic_shear_stress(p, rate * t)
+        y = y[1:] * (1 + noise * rng.standard_normal(n))
+        out.append(F.Curve(test="constant_shear_rate", condition=f"rate={rate:g}/s", response="shear_history",
+                           inputs={"time": t, "shear_strain": rate * t}, observed={"shear_stress": y},
+                           obs_index=np.arange(1, n + 1), nominal={"shear_rate_1_per_s": rate}, specimen=specimen))
+    return out
+
+
+def candidates(*extra):
+    base = [R.Candidate("linear_elastic_shear", LinearElasticShear),
+            R.Candidate("qlv_linear_prony4", lambda: get_model("qlv_linear_prony4"))]
+    return base + list(extra)
+
+
+def test_folds():
+    curves = csr_curves(LinearElasticShear(), {"G0": 100.0}, 0.05)
+    folds = R.leave_one_condition_out(curves)
+    assert len(folds) == 4 and all(len(f.test) == 1 and len(f.train) == 3 for f in folds)
+    assert R.train_on_tests(curves) == []  # no relaxation curve to train on
+    assert R.leave_one_specimen_out(curves) == []
+    two = curves + csr_curves(LinearElasticShear(), {"G0": 100.0}, 0.05, specimen="b2")
+    assert len(R.leave_one_specimen_out(two)) == 2
+
+
+def test_rate_dependent_small_strain_selects_qlv_by_cv_and_rule():
+    qlv = get_model("qlv_linear_prony4")
+    truth = qlv_params(qlv, {"G0": 200.0}, G_PRONY)
+    curves = csr_curves(qlv, truth, gmax=0.05, seed=1)
+    rd = R.rate_dependence(curves)
+    assert rd["rate_dependent"] and rd["slope_median"] > 0
+    table, fits, cv, rec = R.rank_scope(candidates(), curves, target="none", scope="csr",
+                                        folds=R.leave_one_condition_out(curves), n_random=1)
+    assert table.iloc[0]["model"] == "qlv_linear_prony4"
+    assert table.iloc[0]["rank_criterion"] == "cv_nrmse"
+    best = table.set_index("model")
+    assert best.loc["qlv_linear_prony4", "cv_nrmse"] < 0.5 * best.loc["linear_elastic_shear", "cv_nrmse"]
+    assert best.loc["linear_elastic_shear", "delta_aicc"] > 10
+    assert rec["rule_family"] == "qlv" and rec["agree"] and rec["recommended"] == "qlv_linear_prony4"
+    assert "rate/time-dependent (csr_rates)" in rec["statement"]
+    assert set(cv["design"]) == {"leave_one_condition_out"} and (cv["status"] == "ok").all()
+    assert np.isclose(table["akaike_weight"].sum(), 1.0)
+
+
+def test_rate_independent_large_strain_selects_hyperelastic():
+    rp3 = ProxyReducedPolynomial(order=3)
+    truth = {"C10": 40.0, "C20": 100.0, "C30": 400.0}
+    curves = csr_curves(rp3, truth, gmax=0.5, seed=2)
+    assert R.rate_dependence(curves)["rate_dependent"] is False
+    table, fits, cv, rec = R.rank_scope(candidates(R.Candidate("reduced_polynomial3", lambda: ProxyReducedPolynomial(order=3))),
+                                        curves, target="none", scope="csr", folds=R.leave_one_condition_out(curves),
+                                        n_random=1)
+    assert table.iloc[0]["model"] == "reduced_polynomial3"
+    assert rec["rule_family"] == "hyperelastic" and rec["agree"]
+    # the recommendation is stored with every row of the scope
+    assert (table["recommendation"] == rec["statement"]).all() and table["recommended"].sum() == 1
+
+
+def test_data_that_contradict_the_rule_are_reported():
+    """Strain <= 10 % and rate-independent -> the thesis rule says linear elastic, but a strongly stiffening
+    law is measurably better: the recommendation follows the data and says so."""
+    rp3 = ProxyReducedPolynomial(order=3)
+    truth = {"C10": 40.0, "C20": 4000.0, "C30": 4.0e5}
+    curves = csr_curves(rp3, truth, gmax=0.1, seed=3, noise=0.003)
+    table, _, _, rec = R.rank_scope([R.Candidate("linear_elastic_shear", LinearElasticShear),
+                                     R.Candidate("reduced_polynomial3", lambda: ProxyReducedPolynomial(order=3))],
+                                    curves, target="none", scope="csr", folds=R.leave_one_condition_out(curves),
+                                    n_random=1)
+    assert rec["rule_family"] == "linear_elastic"
+    assert not rec["agree"] and rec["recommended"] == "reduced_polynomial3"
+    assert "The data say otherwise" in rec["statement"]
+
+
+def test_qlv_with_nonlinear_law_wins_at_large_strain_and_rate_dependence():
+    law = ProxyReducedPolynomial(order=3)
+    model = QLVModel(law, n_prony=4, name="qlv_rp3_prony4")
+    truth = qlv_params(model, {"C10": 40.0, "C20": 100.0, "C30": 400.0}, G_PRONY)
+    curves = [F.thin(c, 15) for c in csr_curves(model, truth, gmax=0.4, seed=4)]
+    cands = [R.Candidate("reduced_polynomial3", lambda: ProxyReducedPolynomial(order=3)),
+             R.Candidate("qlv_linear_prony4", lambda: get_model("qlv_linear_prony4")),
+             R.Candidate("qlv_rp3_prony4", lambda: QLVModel(ProxyReducedPolynomial(order=3), 4, name="qlv_rp3_prony4"))]
+    table, fits, cv, rec = R.rank_scope(cands, curves, target="none", scope="csr", n_random=1)
+    assert table.iloc[0]["model"] == "qlv_rp3_prony4" and table.iloc[0]["rank_criterion"] == "aicc"
+    assert rec["rule_family"] == "qlv" and rec["agree"]
+
+
+def test_paired_comparison_and_plot(tmp_path):
+    cv = pd.DataFrame({"fold": ["a", "b", "c", "a", "b", "c"], "model": ["m1"] * 3 + ["m2"] * 3,
+                       "nrmse": [0.1, 0.12, 0.11, 0.3, 0.25, 0.4], "status": ["ok"] * 6})
+    pc = R.paired_comparison(cv).set_index("model")
+    assert pc.loc["m1", "cv_best"] == "m1" and np.isnan(pc.loc["m1", "cv_p_vs_best"])
+    assert 0 < pc.loc["m2", "cv_p_vs_best"] <= 0.5
+    model = LinearElasticShear()
+    curves = csr_curves(model, {"G0": 100.0}, 0.05)
+    table, *_ = R.rank_scope([R.Candidate("linear_elastic_shear", LinearElasticShear)], curves, target="none",
+                             scope="csr", n_random=0)
+    path = tmp_path / "ranking.png"
+    R.plot_ranking(table, path)
+    assert path.stat().st_size > 1000
+
+
+@pytest.mark.parametrize("strain,rate,nonsep,expected", [
+    (0.05, False, False, "linear_elastic"), (0.5, False, False, "hyperelastic"),
+    (0.05, True, False, "qlv"), (0.5, True, False, "qlv"), (0.5, True, True, "beyond_qlv")])
+def test_thesis_rule(strain, rate, nonsep, expected):
+    assert R.thesis_rule(strain, rate, nonsep) == expected
+
+
+def test_rule_choice_stands_when_the_top_model_is_not_decisively_better():
+    table = pd.DataFrame({"model": ["beyond", "qlv_a"], "family": ["beyond_qlv", "qlv"], "aicc": [10.0, 11.0],
+                          "cv_nrmse": [0.050, 0.052], "strain_max": [0.5, 0.5], "rank_criterion": ["cv_nrmse"] * 2})
+    qlv = get_model("qlv_linear_prony4")
+    curves = csr_curves(qlv, qlv_params(qlv, {"G0": 200.0}, G_PRONY), gmax=0.5, seed=5)
+    rec = R.recommend(table, curves)
+    assert rec["rule_family"] == "qlv" and not rec["agree"] and rec["recommended"] == "qlv_a"
+    assert "not decisively better" in rec["statement"]
+    table.loc[0, "cv_nrmse"] = 0.02
+    rec = R.recommend(table, curves)
+    assert rec["recommended"] == "beyond" and "The data say otherwise" in rec["statement"]
+
+
+def test_time_dependence_from_relaxation_and_sweep():
+    t = np.geomspace(0.1, 100, 30)
+    relax = F.Curve(test="stress_relaxation", condition="s", response="shear_history", inputs={"time": t, "shear_strain": 0.01 + 0 * t},
+                    observed={"shear_stress": 2.0 * (0.4 + 0.6 * np.exp(-t / 5))})
+    assert R.time_dependence([relax])["evidence"] == "relaxation_decay"
+    assert R.time_dependence([relax])["rate_dependent"]
+    w = np.geomspace(0.6, 120, 10)
+    fs = F.Curve(test="frequency_sweep", condition="f", response="oscillation", inputs={"angular_frequency": w},
+                 observed={"storage_modulus": 200 + 0 * w, "loss_modulus": 0.5 + 0 * w})
+    assert R.time_dependence([fs])["rate_dependent"] is False
+
+
+def test_run_fit_stage_writes_fits_ranking_cards(tmp_path):
+    qlv = get_model("qlv_linear_prony4")
+    truth = qlv_params(qlv, {"G0": 200.0}, G_PRONY)
+    curves = csr_curves(qlv, truth, gmax=0.05, seed=6)
+    scopes = (R.Scope("csr", ("constant_shear_rate",), models=("qlv_linear_prony4",), target="none"),
+              R.Scope("flow", ("flow_curve",), ("viscous",)))  # no data: skipped
+    summary = R.run_fit_stage(curves, tmp_path, dataset="demo", scopes=scopes)
+    assert summary["scopes"] == ["csr"] and summary["n_fits"] == 1
+    fits = pd.read_csv(tmp_path / "fits.csv")
+    assert list(fits["model"]) == ["qlv_linear_prony4"] and (fits["dataset"] == "demo").all()
+    ranking = pd.read_csv(tmp_path / "ranking.csv")
+    assert list(ranking["rank"]) == [1] and ranking["recommendation"].notna().all()
+    assert (tmp_path / "fits" / "csr" / "qlv_linear_prony4.nc").exists()
+    assert (tmp_path / "cards" / "csr" / "qlv_linear_prony4.inp").exists()
+    assert (tmp_path / "ranking_csr.png").exists() and (tmp_path / "recommendations.json").exists()
+    assert len(pd.read_csv(tmp_path / "cv.csv")) == len(RATES)
+    with pytest.raises(KeyError, match="unknown model 'no_such_model'"):  # a config typo is an error
+        R.run_fit_stage(curves, tmp_path / "x", scopes=(R.Scope("csr", ("constant_shear_rate",), models=("no_such_model",)),))
+
+
+def test_run_fit_stage_files_reads_averages_and_geometry(tmp_path):
+    from tissuemech.canonical import make_run_dataset, write_netcdf
+    from tissuemech.curves import average_runs, write_averages
+    from tissuemech.models import plate
+
+    qlv = get_model("qlv_linear_prony4")
+    truth = qlv_params(qlv, {"G0": 200.0}, G_PRONY)
+    runs = []
+    for i, rate in enumerate((0.01, 0.1)):
+        for s in range(2):
+            t = np.linspace(0, 0.05 / rate, 31)
+            y = plate.forward_plate(qlv, truth, t, rate * t, 0.0125) * (1 + 0.002 * s)
+            ds = make_run_dataset({"time": t[1:], "shear_strain": rate * t[1:], "shear_stress": y[1:]},
+                                  {"test": "constant_shear_rate", "shear_rate_1_per_s": rate, "radius_m": 0.0125,
+                                   "gap_m": 0.003, "specimen": "b1", "sample": f"s{s}", "run": f"r{i}{s}"})
+            write_netcdf(ds, tmp_path / "runs" / f"r{i}{s}.nc")
+            runs.append(ds)
+    write_averages(average_runs(runs), tmp_path / "averages.nc")
+    summary = R.run_fit_stage_files(tmp_path / "averages.nc", tmp_path / "out", runs_dir=tmp_path / "runs",
+                                    dataset="demo", scopes=(R.Scope("csr", ("constant_shear_rate",),
+                                                                    models=("qlv_linear_prony4",)),))
+    assert summary["scopes"] == ["csr"]
+    fits = pd.read_csv(tmp_path / "out" / "fits.csv")
+    assert fits.loc[0, "target"] == "apparent_stress" and fits.loc[0, "param_G0"] == pytest.approx(200.0, rel=0.02)

@@ -1,0 +1,18 @@
+# Instrument exports -> canonical netCDF runs (one job per dataset; bad runs are reported, not fatal).
+
+
+rule ingest:
+    input:
+        dataset_files,
+    output:
+        runs=directory("results/{dataset}/runs"),
+        report="results/{dataset}/ingest_report.csv",
+    log:
+        "logs/{dataset}/ingest.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/ingest.tsv"
+    params:
+        folder=dataset_dir,
+        pkg=package_hash("io", "units.py", "canonical.py", "schemas"),
+    script:
+        "../scripts/ingest.py"
