@@ -766,7 +766,7 @@ def _signature_regression(c: pd.DataFrame, sigma_c: float | None, slip_control: 
 
 def _best_slip(c: pd.DataFrame):
     best = None
-    grid = np.quantile(c["observed"], [0.15, 0.3, 0.5, 0.7, 0.85])
+    grid = np.quantile(c["observed"], [0.3, 0.5, 0.7, 0.85])
     for sc in grid:
         if np.count_nonzero(c["observed"] > sc) < 10:
             continue
