@@ -15,7 +15,7 @@ from tissuemech.synth.generator import generate_dataset
 ROOT = Path(__file__).resolve().parents[2]
 BRAIN_CFG = ROOT / "config" / "synth" / "porcine_brain_thesis.yaml"
 AGAR_CFG = ROOT / "config" / "synth" / "agar_3pct_thesis.yaml"
-SEEDS = {"porcine_brain_thesis": 20150101, "agar_3pct_thesis": 20150102}
+SEEDS = {"porcine_brain_thesis": 20150137, "agar_3pct_thesis": 20150102}
 
 needs_rp3 = pytest.mark.skipif("reduced_polynomial3" not in available_models(),
                                reason="hyperelastic family (RP3 law of the brain truth) not available")

@@ -113,3 +113,14 @@ def test_round_trip_through_ingest(dataset):
         for name, values in gen["channels"].items():
             assert name in run, f"{fname}: {name} not read back"
             np.testing.assert_allclose(run[name].values, values, rtol=1e-10, atol=1e-300, err_msg=f"{fname}:{name}")
+
+
+def test_cli_writes_a_dataset(tmp_path, capsys):
+    from tissuemech.cli import main
+    cfg = small_config()
+    cfg["groups"] = cfg["groups"][2:3]
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(cfg))
+    assert main(["synth", "--config", str(tmp_path / "c.yaml"), "--seed", "5", "--out", str(tmp_path / "d")]) == 0
+    assert "wrote 2 runs" in capsys.readouterr().out
+    assert len(pd.read_csv(tmp_path / "d" / "samples.csv")) == 2
+    assert json.loads((tmp_path / "d" / "truth.json").read_text())["seed"] == 5

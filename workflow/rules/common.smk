@@ -13,11 +13,30 @@ def package_hash(*parts):
     paths = []
     for part in parts or ("",):
         target = PACKAGE_DIR / part
-        paths += sorted(target.rglob("*.py")) if target.is_dir() else [target]
+        if target.is_dir():
+            paths += sorted(
+                p for p in target.rglob("*") if p.suffix in (".py", ".json")
+            )
+        elif target.is_file():
+            paths.append(target)
     for path in sorted(set(paths)):
         h.update(str(path.relative_to(PACKAGE_DIR)).encode())
         h.update(path.read_bytes())
     return h.hexdigest()[:16]
+
+
+def external_source_available(folder):
+    """An external dataset runs only when its sample sheet and its read-only source folder exist."""
+    import yaml
+
+    folder = Path(folder)
+    if (
+        not (folder / "samples.csv").is_file()
+        or not (folder / "dataset.yaml").is_file()
+    ):
+        return False
+    source = yaml.safe_load((folder / "dataset.yaml").read_text()).get("source_dir")
+    return source is None or (folder / source).is_dir()
 
 
 def discover_datasets():
@@ -27,10 +46,12 @@ def discover_datasets():
     for sheet in sorted(raw.glob("*/samples.csv")):
         found[sheet.parent.name] = str(sheet.parent)
     for name, folder in config.get("external_datasets", {}).items():
-        if (Path(folder) / "samples.csv").is_file():
+        if external_source_available(folder):
             found[name] = folder
         else:
-            logger.warning(f"external dataset {name!r}: {folder}/samples.csv not found, skipped")
+            logger.warning(
+                f"external dataset {name!r}: {folder} or its source_dir not found, skipped"
+            )
     wanted = config.get("datasets") or list(found)
     missing = sorted(set(wanted) - set(found))
     if missing:
@@ -51,10 +72,97 @@ def dataset_dir(wildcards):
 
 def dataset_files(wildcards):
     """Every input file of a dataset (sample sheet, description, instrument files) so edits rerun ingest."""
+    import yaml
+
     folder = Path(DATASETS[wildcards.dataset])
-    return sorted(str(p) for p in folder.rglob("*") if p.is_file())
+    files = sorted(str(p) for p in folder.rglob("*") if p.is_file())
+    source = yaml.safe_load((folder / "dataset.yaml").read_text()).get("source_dir")
+    if source:
+        sheet = pd.read_csv(folder / "samples.csv", dtype=str)
+        files += sorted(str(folder / source / f) for f in sheet["file"])
+    return files
 
 
 def dataset_tests(name):
     sheet = pd.read_csv(Path(DATASETS[name]) / "samples.csv", dtype=str)
     return sorted(set(sheet["test"].dropna())) if "test" in sheet else []
+
+
+def dataset_scopes_of(name):
+    from tissuemech.stages import dataset_scopes
+
+    return dataset_scopes(dataset_tests(name), config["fit"])
+
+
+def scope_spec(wildcards):
+    return dataset_scopes_of(wildcards.dataset)[wildcards.scope]
+
+
+def scope_rankings(wildcards):
+    return [
+        f"results/{wildcards.dataset}/ranking/{scope}.csv"
+        for scope in dataset_scopes_of(wildcards.dataset)
+    ]
+
+
+def scope_fit_dirs(wildcards):
+    return [
+        f"results/{wildcards.dataset}/fits/{scope}"
+        for scope in dataset_scopes_of(wildcards.dataset)
+    ]
+
+
+#: scope whose fits the diagnosis examines, best first (the joint viscoelastic fit carries most evidence)
+DIAGNOSIS_SCOPES = (
+    "viscoelastic_joint",
+    "all_modes",
+    "constant_shear_rate",
+    "stress_relaxation",
+    "creep_recovery",
+    "frequency_sweep",
+    "amplitude_sweep",
+    "simple_shear",
+    "flow_curve",
+)
+
+
+def diagnosis_scope(name):
+    scopes = dataset_scopes_of(name)
+    return next((s for s in DIAGNOSIS_SCOPES if s in scopes), None)
+
+
+def diagnosis_fits(wildcards):
+    return f"results/{wildcards.dataset}/fits/{diagnosis_scope(wildcards.dataset)}"
+
+
+HOMOGENEOUS_TESTS = {"simple_shear", "uniaxial", "indentation"}
+
+
+def is_rheometer_dataset(name):
+    """Parallel-plate data (the plate-level diagnosis applies) as opposed to homogeneous specimens."""
+    return bool(set(dataset_tests(name)) - HOMOGENEOUS_TESTS)
+
+
+def has_shear_ramps(name):
+    return "constant_shear_rate" in dataset_tests(name)
+
+
+def all_targets():
+    targets = []
+    for name in DATASETS:
+        targets += [
+            f"results/{name}/ingest_report.csv",
+            f"results/{name}/averages.nc",
+            f"results/{name}/lve.csv",
+        ]
+        if dataset_scopes_of(name):
+            targets += [f"results/{name}/ranking.csv", f"results/{name}/fits.csv"]
+        if diagnosis_scope(name) and is_rheometer_dataset(name):
+            targets.append(f"results/{name}/diagnosis.json")
+        if has_shear_ramps(name):
+            targets.append(f"results/{name}/fem/torsion.csv")
+        if name in config["fem"].get("indentation_datasets", []):
+            targets.append(f"results/{name}/fem/indentation.nc")
+    targets.append("results/fem/timing.csv")
+    targets.append("results/summary.html")
+    return targets

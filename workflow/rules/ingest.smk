@@ -13,6 +13,6 @@ rule ingest:
         "benchmarks/runs/{dataset}/ingest.tsv"
     params:
         folder=dataset_dir,
-        pkg=package_hash("io", "units.py", "canonical.py", "schemas"),
+        pkg=package_hash("io", "units.py", "canonical.py"),
     script:
         "../scripts/ingest.py"

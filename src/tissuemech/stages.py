@@ -1,0 +1,328 @@
+"""Pipeline stages above the science modules: what to fit on a dataset, and how fits become rankings and cards.
+
+A *scope* is a set of test kinds fitted jointly with a list of candidate models:
+
+* one scope per test kind present in the dataset that has models in ``config.fit.models`` (e.g. ``flow_curve``,
+  ``stress_relaxation``, ``constant_shear_rate``);
+* ``viscoelastic_joint`` when the dataset has constant-shear-rate ramps *and* relaxations: QLV and beyond-QLV
+  models (``config.fit.joint_models``) fitted to all CSR rates plus all relaxations, cross-validated by
+  leave-one-rate-out and by "fit relaxation, predict the ramps";
+* ``all_modes`` when the dataset has simple shear *and* uniaxial curves (e.g. Budday et al.): hyperelastic laws
+  fitted to every mode jointly, cross-validated by leaving one mode out.
+
+Outputs of one scope (``run_fit_scope``): ``<fits_dir>/<model>.nc`` per fitted model, a ranking table, the
+cross-validation records, the recommendation, and material cards of every converged model.
+"""
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import xarray as xr
+
+from . import cards as cards_mod
+from . import fitting as F
+from . import ranking as R
+from .canonical import read_netcdf, write_text
+from .models.registry import available_models, get_model
+
+JOINT_SCOPE = "viscoelastic_joint"
+ALL_MODES_SCOPE = "all_modes"
+#: points per curve kept for fitting (dense rheometer curves have autocorrelated residuals, science.md 4.2)
+POINTS_PER_CURVE = 40
+
+
+def dataset_scopes(tests: Sequence[str], fit_config: Mapping) -> dict[str, dict]:
+    """Scopes of a dataset from its test kinds (see module docstring). Unknown model keys raise ``KeyError``."""
+    known = set(available_models())
+    tests = set(tests)
+    scopes: dict[str, dict] = {}
+
+    def check(keys):
+        missing = sorted(set(keys) - known)
+        if missing:
+            raise KeyError(f"config names unknown models {missing}")
+        return list(keys)
+
+    for test, models in fit_config.get("models", {}).items():
+        if test in tests and models:
+            scopes[test] = {"tests": [test], "models": check(models)}
+    joint = fit_config.get("joint_models", [])
+    if joint and {"constant_shear_rate", "stress_relaxation"} <= tests:
+        scopes[JOINT_SCOPE] = {"tests": ["constant_shear_rate", "stress_relaxation"], "models": check(joint)}
+    if {"simple_shear", "uniaxial"} <= tests:
+        models = [m for m in fit_config.get("models", {}).get("uniaxial", []) if m != "linear_elastic"]
+        if models:
+            scopes[ALL_MODES_SCOPE] = {"tests": ["simple_shear", "uniaxial"], "models": check(models)}
+    return scopes
+
+
+def _geometry_by_test(avg: xr.Dataset, name: str) -> dict[str, float]:
+    out: dict[str, float] = {}
+    if name not in avg:
+        return out
+    tests = [str(t) for t in avg["test"].values]
+    values = np.asarray(avg[name].values, float)
+    for test in set(tests):
+        v = values[[t == test for t in tests]]
+        v = v[np.isfinite(v)]
+        if v.size:
+            out[test] = float(np.median(v))
+    return out
+
+
+def scope_curves(averages: xr.Dataset, tests: Sequence[str], relaxation: str = "measured") -> list[F.Curve]:
+    """Averaged curves of ``tests`` with their plate geometry, thinned to :data:`POINTS_PER_CURVE` points."""
+    curves = F.curves_from_averages(averages, radius_m=_geometry_by_test(averages, "radius_m"),
+                                    gap_m=_geometry_by_test(averages, "gap_m"), relaxation=relaxation, tests=tests)
+    return [F.thin(c, POINTS_PER_CURVE) for c in curves]
+
+
+def scope_folds(scope: str, curves: Sequence[F.Curve]) -> list[R.Fold]:
+    """Cross-validation designs of a scope (science.md section 4.3)."""
+    folds: list[R.Fold] = []
+    if scope in ("constant_shear_rate", JOINT_SCOPE):
+        folds += R.leave_one_condition_out(curves, "constant_shear_rate")
+    if scope == JOINT_SCOPE:
+        folds += R.train_on_tests(curves, ("stress_relaxation",), ("constant_shear_rate",))
+    if scope == "stress_relaxation":
+        folds += R.leave_one_condition_out(curves, "stress_relaxation")
+    if scope == ALL_MODES_SCOPE:
+        folds += R.train_on_tests(curves, ("simple_shear",), ("uniaxial",))
+        folds += R.train_on_tests(curves, ("uniaxial",), ("simple_shear",))
+    return folds
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, (np.floating, float)):
+        return None if not math.isfinite(float(obj)) else float(obj)
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    return obj
+
+
+def run_fit_scope(averages_path, scope: str, spec: Mapping, target: str, seed: int, multistart: int,
+                  fits_dir, cards_dir, ranking_path, dataset: str = "", poisson_ratio: float = 0.49) -> pd.DataFrame:
+    """Fit, cross-validate and rank every candidate of one scope; write fits, cards and the ranking table.
+
+    Parameters
+    ----------
+    averages_path : ``results/<dataset>/averages.nc``
+    scope, spec : scope name and ``{"tests": [...], "models": [...]}`` from :func:`dataset_scopes`
+    target : parallel-plate target (``apparent_stress``, ``corrected_stress`` or ``torque``), recorded per fit
+    seed, multistart : seeded random starts per model
+    fits_dir, cards_dir : output folders (``<model>.nc``; ``<model>.json/.inp/.feb``)
+    ranking_path : CSV of the ranking table (also holds the recommendation statement)
+
+    Returns
+    -------
+    The ranking table.
+    """
+    avg = read_netcdf(averages_path)
+    curves = scope_curves(avg, spec["tests"])
+    fits_dir, cards_dir = Path(fits_dir), Path(cards_dir)
+    fits_dir.mkdir(parents=True, exist_ok=True)
+    cards_dir.mkdir(parents=True, exist_ok=True)
+    candidates = [R.Candidate(key, R.RegistryFactory(key)) for key in spec["models"]]
+    failures: dict[str, str] = {}
+    if curves:
+        table, fits, cv, rec = R.rank_scope(candidates, curves, target, scope, folds=scope_folds(scope, curves),
+                                            dataset=dataset, n_random=multistart, seed=seed, failures=failures)
+    else:
+        table, fits, cv, rec = pd.DataFrame(), {}, pd.DataFrame(), {"statement": "no curves in this scope"}
+    for key, result in fits.items():
+        F.write_fit_netcdf(result, fits_dir / f"{key}.nc")
+        if not result.success:
+            continue
+        try:
+            card = cards_mod.make_card(result, get_model(key), poisson_ratio=poisson_ratio, dataset=dataset,
+                                       fit_file=str(fits_dir / f"{key}.nc"))
+        except (ValueError, KeyError, RuntimeError) as exc:
+            failures[f"card:{key}"] = str(exc)
+            continue
+        cards_mod.write_card_files(card, cards_dir, stem=key)
+    if not table.empty:
+        table["failures"] = json.dumps(failures) if failures else ""
+    else:
+        table = pd.DataFrame([{"dataset": dataset, "scope": scope, "model": None,
+                               "recommendation": rec.get("statement", ""), "failures": json.dumps(failures)}])
+    write_text(table.to_csv(index=False), ranking_path)
+    write_text(cv.to_csv(index=False) if not cv.empty else "fold,design,model,status\n",
+               Path(ranking_path).with_suffix(".cv.csv"))
+    write_text(json.dumps(_jsonable(rec), indent=2, default=str), Path(ranking_path).with_suffix(".recommendation.json"))
+    return table
+
+
+def collect_scopes(ranking_paths: Sequence, fits_dirs: Sequence, dataset: str, ranking_out, fits_out,
+                   figure_out=None) -> pd.DataFrame:
+    """Merge the per-scope rankings into ``ranking.csv`` and every fit record into the tidy ``fits.csv``."""
+    tables = [pd.read_csv(p) for p in ranking_paths if Path(p).stat().st_size > 0]
+    ranking = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
+    write_text(ranking.to_csv(index=False), ranking_out)
+    rows = []
+    for folder in fits_dirs:
+        for path in sorted(Path(folder).glob("*.nc")):
+            ds = read_netcdf(path)
+            row = {"dataset": dataset, "file": str(path)}
+            row.update({k: v for k, v in ds.attrs.items() if isinstance(v, (int, float, str))})
+            for name, value, se in zip(ds["param"].values, ds["value"].values, ds["stderr"].values):
+                row[f"param_{name}"] = float(value)
+                row[f"se_{name}"] = float(se)
+            rows.append(row)
+    write_text(pd.DataFrame(rows).to_csv(index=False), fits_out)
+    if figure_out is not None and not ranking.empty and "model" in ranking:
+        shown = ranking.dropna(subset=["model"]).copy()
+        shown["model"] = shown["scope"].astype(str) + ": " + shown["model"].astype(str)
+        R.plot_ranking(shown, figure_out)
+    return ranking
+
+
+# ------------------------------------------------------------------------------------------------------
+# FEM experiments driven by the material cards
+# ------------------------------------------------------------------------------------------------------
+#: scopes whose cards describe the shear response of a parallel-plate sample, best first
+TORSION_SCOPES = (JOINT_SCOPE, "constant_shear_rate", "stress_relaxation", "amplitude_sweep", ALL_MODES_SCOPE,
+                  "simple_shear")
+
+
+def select_cards(ranking_csv, cards_root, scopes: Sequence[str] = TORSION_SCOPES, per_scope: int = 2) -> list[Path]:
+    """Card JSON files of the best-ranked converged models of the given scopes that the FEM can run.
+
+    A card is runnable when it names an elastic law the TLED materials know (``fem.materials.available_laws``).
+    """
+    from .fem.materials import available_laws
+
+    ranking = pd.read_csv(ranking_csv)
+    laws = available_laws()
+    chosen: list[Path] = []
+    for scope in scopes:
+        rows = ranking[(ranking.get("scope") == scope) & ranking["model"].notna()] if "scope" in ranking else []
+        taken = 0
+        for _, row in (rows.iterrows() if len(rows) else []):
+            path = Path(cards_root) / scope / f"{row['model']}.json"
+            if not path.is_file():
+                continue
+            card = json.loads(path.read_text())
+            law = card.get("elastic_law") or card.get("model")
+            if law == "linear_elastic_shear" or law == "linear_elastic":
+                law = "neo_hookean"
+            if law not in laws:
+                continue
+            chosen.append(path)
+            taken += 1
+            if taken >= per_scope:
+                break
+    return chosen
+
+
+def _card_for_fem(path: Path) -> dict:
+    card = json.loads(Path(path).read_text())
+    if card.get("elastic_law") in ("linear_elastic_shear", "linear_elastic"):
+        # small-strain linear shear law: its finite-strain extension in the FEM is neo-Hookean with mu = G
+        g0 = card.get("initial_shear_modulus") or card["elastic_parameters"].get("G0", card["elastic_parameters"].get("G"))
+        card["elastic_law"], card["elastic_parameters"] = "neo_hookean", {"mu": float(g0)}
+    return card
+
+
+def run_fem_torsion(card_paths: Sequence, averages_path, out_nc, out_csv, figure_path, element_size_m: float = 2.5e-3,
+                    n_points: int = 12, rates: Sequence[float] | None = None, vtu_dir=None) -> pd.DataFrame:
+    """Twist the rheometer sample as in the dataset's constant-shear-rate tests, for every card.
+
+    The simulated torque of each card is compared with the measured mean torque of the same rate
+    (``shear_stress * pi R^3 / 2`` of the averaged apparent rim stress); the error table reports the
+    normalised RMS error and the error at the largest strain, per card and rate.
+    """
+    from .fem.experiments import rheometer_torsion
+    from .plots import plot_torque
+
+    avg = read_netcdf(averages_path)
+    tests = [str(t) for t in avg["test"].values]
+    idx = [i for i, t in enumerate(tests) if t == "constant_shear_rate"]
+    all_rates = sorted({float(avg["shear_rate_1_per_s"].values[i]) for i in idx})
+    if rates is None:
+        rates = [all_rates[0], all_rates[-1]] if len(all_rates) > 1 else all_rates
+    radius = _geometry_by_test(avg, "radius_m").get("constant_shear_rate", 12.5e-3)
+    gap = _geometry_by_test(avg, "gap_m").get("constant_shear_rate", 2e-3)
+    series, reference, rows, measured = {}, {}, [], {}
+    from .curves import select_average
+
+    for rate in rates:
+        i = next(i for i in idx if math.isclose(float(avg["shear_rate_1_per_s"].values[i]), rate))
+        one = select_average(avg, "constant_shear_rate", str(avg["condition"].values[i]))
+        strain = np.asarray(one[next(iter(one.coords))].values, float)
+        stress = np.asarray(one["shear_stress_mean"].values, float)
+        ok = np.isfinite(strain) & np.isfinite(stress) & (strain > 0)
+        strain, stress = strain[ok], stress[ok]
+        torque_measured = stress * math.pi * radius**3 / 2.0
+        gamma_sim = np.linspace(strain.max() / n_points, strain.max(), n_points)
+        reference[f"measured {rate:g} 1/s"] = (gamma_sim, np.interp(gamma_sim, strain, torque_measured))
+        for path in card_paths:
+            card = _card_for_fem(Path(path))
+            label = f"{Path(path).parent.name}/{Path(path).stem} {rate:g} 1/s"
+            vtu = None if vtu_dir is None else Path(vtu_dir) / f"{Path(path).parent.name}__{Path(path).stem}__{rate:g}.vtu"
+            if vtu is not None:
+                vtu.parent.mkdir(parents=True, exist_ok=True)
+            ds = rheometer_torsion(card, gamma_sim / rate, gamma_sim, radius_m=radius, gap_m=gap,
+                                   element_size_m=element_size_m, n_threads=1, vtu_path=vtu)
+            sim = np.asarray(ds["torque"].values, float)
+            meas = np.interp(gamma_sim, strain, torque_measured)
+            series[label] = (gamma_sim, sim)
+            measured[label] = meas
+            rows.append({"card": f"{Path(path).parent.name}/{Path(path).stem}", "rate_1_s": rate,
+                         "nrmse": float(np.sqrt(np.mean((sim - meas) ** 2)) / np.mean(np.abs(meas))),
+                         "rel_error_at_max_strain": float((sim[-1] - meas[-1]) / meas[-1]),
+                         "max_strain": float(gamma_sim[-1]),
+                         "normal_force_at_max_strain_n": float(ds["normal_force"].values[-1])})
+    table = pd.DataFrame(rows)
+    write_text(table.to_csv(index=False), out_csv)
+    combined = xr.Dataset(
+        {"rim_strain": (("case", "point"), np.array([series[k][0] for k in series])),
+         "torque_fem": (("case", "point"), np.array([series[k][1] for k in series]), {"units": "N m"}),
+         "torque_measured": (("case", "point"), np.array([measured[k] for k in series]), {"units": "N m"})},
+        coords={"case": list(series)}) if series else xr.Dataset()
+    from .canonical import write_netcdf
+
+    write_netcdf(combined, out_nc)
+    plot_torque(series, figure_path, xlabel="rim strain [-]", reference=reference,
+                title="TLED rheometer torsion vs measured torque")
+    return table
+
+
+def run_fem_indentation(card_paths: Sequence, out_nc, figure_path, punch_diameters_m=(8e-3, 15e-3),
+                        max_depth_m: float = 1.5e-3, speed_m_s: float = 1e-4, element_size_m: float = 1e-3,
+                        vtu_dir=None) -> xr.Dataset:
+    """Flat-punch indentation (8 and 15 mm punches, constant slow speed) of a tissue sample per card."""
+    from .fem.experiments import flat_punch_indentation
+    from .plots import plot_force_depth
+
+    series, parts = {}, []
+    for path in card_paths:
+        card = _card_for_fem(Path(path))
+        for d in punch_diameters_m:
+            label = f"{Path(path).parent.name}/{Path(path).stem} {d * 1e3:g} mm"
+            vtu = None if vtu_dir is None else Path(vtu_dir) / f"{Path(path).parent.name}__{Path(path).stem}__{d * 1e3:g}mm.vtu"
+            if vtu is not None:
+                vtu.parent.mkdir(parents=True, exist_ok=True)
+            ds = flat_punch_indentation(card, d, max_depth_m, speed_m_s, element_size_m=min(element_size_m, d / 4),
+                                        n_increments=10, n_threads=1, vtu_path=vtu)
+            series[label] = (np.asarray(ds["displacement"].values), np.asarray(ds["force"].values))
+            parts.append((label, ds))
+    out = xr.Dataset(
+        {"depth": (("case", "point"), np.array([s[0] for s in series.values()]), {"units": "m"}),
+         "force": (("case", "point"), np.array([s[1] for s in series.values()]), {"units": "N"})},
+        coords={"case": list(series)}) if series else xr.Dataset()
+    from .canonical import write_netcdf
+
+    write_netcdf(out, out_nc)
+    plot_force_depth(series, figure_path, title="TLED flat-punch indentation per material card")
+    return out

@@ -1,0 +1,20 @@
+# What the model gets wrong, why, the extension that fixes it and the held-out gain.
+
+
+rule diagnose:
+    input:
+        runs="results/{dataset}/runs",
+        fits=diagnosis_fits,
+        ranking="results/{dataset}/ranking.csv",
+    output:
+        json="results/{dataset}/diagnosis.json",
+        residuals="results/{dataset}/residuals.nc",
+        figures=directory("results/{dataset}/figures/diagnosis"),
+    log:
+        "logs/{dataset}/diagnose.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/diagnose.tsv"
+    params:
+        pkg=package_hash("diagnosis", "models", "fitting.py", "canonical.py"),
+    script:
+        "../scripts/diagnose.py"

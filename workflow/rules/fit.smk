@@ -1,0 +1,50 @@
+# Model fits per dataset and scope (joint test kinds), cross-validated ranking, material cards.
+
+
+rule fit_scope:
+    input:
+        averages="results/{dataset}/averages.nc",
+    output:
+        fits=directory("results/{dataset}/fits/{scope}"),
+        cards=directory("results/{dataset}/cards/{scope}"),
+        ranking="results/{dataset}/ranking/{scope}.csv",
+    log:
+        "logs/{dataset}/fit_{scope}.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/fit_{scope}.tsv"
+    group:
+        "fits"
+    params:
+        spec=scope_spec,
+        target=config["fit"]["plate_target"],
+        seed=config["fit"]["seed"],
+        multistart=config["fit"]["multistart"],
+        poisson_ratio=config["fem"]["poisson_ratio"],
+        pkg=package_hash(
+            "models",
+            "fitting.py",
+            "ranking.py",
+            "cards.py",
+            "stages.py",
+            "canonical.py",
+        ),
+    script:
+        "../scripts/fit_scope.py"
+
+
+rule rank:
+    input:
+        rankings=scope_rankings,
+        fits=scope_fit_dirs,
+    output:
+        ranking="results/{dataset}/ranking.csv",
+        fits="results/{dataset}/fits.csv",
+        figure="results/{dataset}/figures/ranking.png",
+    log:
+        "logs/{dataset}/rank.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/rank.tsv"
+    params:
+        pkg=package_hash("stages.py", "ranking.py", "plots.py"),
+    script:
+        "../scripts/rank.py"

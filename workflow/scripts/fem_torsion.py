@@ -1,0 +1,11 @@
+"""Snakemake adapter: best cards -> TLED torsion of the rheometer sample vs measured torque."""
+from tissuemech.pipeline import job_log
+from tissuemech.stages import run_fem_torsion, select_cards
+
+with job_log(snakemake.log[0]) as log:
+    cards = select_cards(snakemake.input.ranking, snakemake.params.cards_root)
+    log.info("torsion with cards: %s", [str(c) for c in cards])
+    table = run_fem_torsion(cards, snakemake.input.averages, snakemake.output.data, snakemake.output.table,
+                            snakemake.output.figure, element_size_m=snakemake.params.element_size_m,
+                            vtu_dir=snakemake.output.vtu)
+    log.info("\n%s", table.to_string())

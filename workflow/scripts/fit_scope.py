@@ -1,0 +1,12 @@
+"""Snakemake adapter: averaged curves -> fits, cards and ranking of one scope."""
+from tissuemech.pipeline import job_log
+from tissuemech.stages import run_fit_scope
+
+with job_log(snakemake.log[0]) as log:
+    table = run_fit_scope(
+        snakemake.input.averages, snakemake.wildcards.scope, snakemake.params.spec,
+        target=snakemake.params.target, seed=snakemake.params.seed, multistart=snakemake.params.multistart,
+        fits_dir=snakemake.output.fits, cards_dir=snakemake.output.cards, ranking_path=snakemake.output.ranking,
+        dataset=snakemake.wildcards.dataset, poisson_ratio=snakemake.params.poisson_ratio,
+    )
+    log.info("scope %s: ranked %d models", snakemake.wildcards.scope, len(table))
