@@ -110,6 +110,7 @@ def test_round_trip_through_ingest(dataset):
     for fname, gen in result["runs"].items():
         runs = read_export(out / fname)
         run = runs[0] if isinstance(runs, (list, tuple)) else runs
+        run = getattr(run, "data", run)  # io Block -> its canonical DataFrame
         for name, values in gen["channels"].items():
             assert name in run, f"{fname}: {name} not read back"
             np.testing.assert_allclose(run[name].values, values, rtol=1e-10, atol=1e-300, err_msg=f"{fname}:{name}")

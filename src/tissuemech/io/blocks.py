@@ -1,0 +1,122 @@
+"""Shared pieces of the readers: the :class:`Block` record, text decoding and canonical column building."""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..canonical import CANONICAL_VARIABLES
+from ..units import UnknownUnitError, to_si
+from .errors import IngestError
+
+
+@dataclass
+class Block:
+    """One test block of an export (a RheoCompass result interval, a TRIOS step, a Kinexus action ...).
+
+    Attributes
+    ----------
+    name : block name as written (e.g. ``"Step strain / 1"``, ``"Frequency sweep - 2"``)
+    index : 1-based position of the block in the file (what a sample sheet's ``block`` column selects)
+    data : canonical columns in SI units (see :data:`tissuemech.canonical.CANONICAL_VARIABLES`)
+    meta : geometry (``radius_m``, ``gap_m``), ``temperature_c``, ``instrument``, ``format``, ``labels``
+        (canonical -> original label and unit) and ``first_data_line`` (1-based)
+    """
+
+    name: str
+    index: int
+    data: pd.DataFrame
+    meta: dict = field(default_factory=dict)
+
+
+def decode_text(path: Path) -> str:
+    """File text: UTF-16 (BOM) or UTF-8 (optional BOM); other encodings are rejected with the reason."""
+    raw = Path(path).read_bytes()
+    if raw[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        try:
+            return raw.decode("utf-16")
+        except UnicodeDecodeError as exc:
+            raise IngestError(path, f"not valid UTF-16 text ({exc.reason} at byte {exc.start})") from exc
+    if raw[:4] == b"PK\x03\x04":
+        raise IngestError(path, "is a zip container (xlsx, or an Anton Paar .RhPts object export), not text")
+    if b"\x00" in raw[:200]:
+        raise IngestError(path, "binary content or UTF-16 without a byte-order mark; export as UTF-8 or UTF-16 text")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        raise IngestError(path, f"wrong encoding: not UTF-8/UTF-16 (invalid byte 0x{raw[exc.start]:02x}); "
+                                "re-export as UTF-8 or UTF-16", line=line) from exc
+
+
+_NUMBER = re.compile(r"^[+-]?(\d+([.,]\d*)?|[.,]\d+)([eE][+-]?\d+)?$")
+
+
+def parse_number(cell: str, decimal_comma: bool) -> float:
+    """A numeric cell (decimal comma or point); empty -> NaN; raises ``ValueError`` for text."""
+    s = cell.strip()
+    if s == "":
+        return np.nan
+    if s.lower() in ("nan", "-nan", "inf", "-inf", "+inf"):
+        return float(s)
+    if not _NUMBER.match(s):
+        raise ValueError(f"not a number: {s!r}")
+    if decimal_comma:
+        s = s.replace(",", ".")
+    elif "," in s:
+        raise ValueError(f"not a number: {s!r}")
+    return float(s)
+
+
+def detect_decimal_comma(lines: list[str], sep: str) -> bool:
+    """True when numeric cells use a decimal comma (``0,019``); separators other than the comma only."""
+    if sep == ",":
+        return False
+    comma = point = 0
+    for line in lines[:400]:
+        for cell in line.split(sep):
+            c = cell.strip()
+            if re.fullmatch(r"[+-]?\d+,\d+([eE][+-]?\d+)?", c):
+                comma += 1
+            elif re.fullmatch(r"[+-]?\d+\.\d+([eE][+-]?\d+)?", c):
+                point += 1
+    return comma > point
+
+
+def canonical_frame(path: Path, columns: list[tuple[str, str, np.ndarray, int]]) -> tuple[pd.DataFrame, dict]:
+    """Convert ``(canonical name, unit, raw values, column index)`` columns to SI, first occurrence wins.
+
+    Raises :class:`IngestError` naming the column for an unknown unit.
+    """
+    data, labels = {}, {}
+    for name, unit, values, col in columns:
+        if name in data or name not in CANONICAL_VARIABLES:
+            continue
+        try:
+            data[name] = to_si(values, unit)
+        except UnknownUnitError as exc:
+            raise IngestError(path, f"{exc} in column {name!r}", column=col) from exc
+        labels[name] = unit
+    return pd.DataFrame(data), labels
+
+
+def check_time(path: Path, frame: pd.DataFrame, first_line: int, line_numbers: np.ndarray | None = None) -> None:
+    """Time must be finite, unique and increasing within a block (the line of the first bad point is named)."""
+    if "time" not in frame:
+        return
+    t = frame["time"].to_numpy(float)
+    rows = line_numbers if line_numbers is not None else first_line + np.arange(t.size)
+    bad = np.flatnonzero(~np.isfinite(t))
+    if bad.size:
+        raise IngestError(path, "missing (NaN) time value", line=int(rows[bad[0]]), column="time")
+    d = np.diff(t)
+    dup = np.flatnonzero(d == 0)
+    if dup.size:
+        raise IngestError(path, f"duplicate time {t[dup[0] + 1]:g} s", line=int(rows[dup[0] + 1]), column="time")
+    back = np.flatnonzero(d < 0)
+    if back.size:
+        raise IngestError(path, f"non-monotonic time: {t[back[0] + 1]:g} s after {t[back[0]]:g} s",
+                          line=int(rows[back[0] + 1]), column="time")

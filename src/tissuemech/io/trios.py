@@ -1,0 +1,141 @@
+"""TA Instruments TRIOS exports: text (tab), CSV (comma) and Excel .xls (``instrument_formats.md`` 2.1-2.3).
+
+Text/CSV: a key/value header, ``[Section]`` blocks of key/value lines (``[Geometry Parameters]`` holds
+``Diameter 40.0 mm`` and ``Gap 1000 µm``: value and unit in one cell), then per step ``[step]``, the step name
+(``Peak hold - 1``), the column row, the units row (empty cell = dimensionless) and data rows. Units are
+converted per column (step time may be in minutes). Excel: a ``Details`` sheet and one sheet per step
+(row 0 step name, row 1 columns, row 2 units, data from row 3); empty sheets are skipped.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from .blocks import Block, canonical_frame, check_time, decode_text, parse_number
+from .errors import IngestError
+
+#: lower-cased TRIOS column -> canonical variable
+LABELS: dict[str, str] = {
+    "step time": "time", "time": "total_time", "run time": "total_time",
+    "stress": "shear_stress", "oscillation stress": "shear_stress",
+    "strain": "shear_strain", "oscillation strain": "shear_strain",
+    "shear rate": "shear_rate", "viscosity": "viscosity", "complex viscosity": "complex_viscosity",
+    "storage modulus": "storage_modulus", "loss modulus": "loss_modulus", "complex modulus": "complex_modulus",
+    "tan(delta)": "loss_factor", "phase angle": "phase_angle", "raw phase": "raw_phase",
+    "frequency": "frequency", "angular frequency": "angular_frequency",
+    "torque": "torque", "oscillation torque": "torque",
+    "displacement": "deflection_angle", "oscillation displacement": "deflection_angle",
+    "normal force": "normal_force", "axial force": "normal_force",
+    "gap": "gap", "temperature": "temperature", "modulus": "relaxation_modulus",
+}
+
+
+def looks_like_trios(text: str) -> bool:
+    low = text[:20000].lower()
+    return "[step]" in low and ("procedure name" in low or "instrument name" in low or "filename" in low)
+
+
+def _geometry(text_lines: list[str], sep: str) -> dict:
+    meta = {}
+    for line in text_lines:
+        cells = [c.strip() for c in line.split(sep)]
+        if len(cells) < 2:
+            continue
+        key = cells[0].lower()
+        m = re.match(r"^([-+\d.eE]+)\s*(\S+)$", cells[1])
+        if not m:
+            continue
+        from ..units import to_si
+
+        try:
+            value = float(to_si(float(m.group(1)), m.group(2)))
+        except ValueError:
+            continue
+        if key == "diameter":
+            meta["radius_m"] = value / 2.0
+        elif key == "gap":
+            meta["gap_m"] = value
+    return meta
+
+
+def read_trios_text(path, text: str | None = None) -> list[Block]:
+    """Every ``[step]`` of a TRIOS text or CSV export as canonical blocks."""
+    path = Path(path)
+    text = decode_text(path) if text is None else text
+    lines = text.splitlines()
+    sep = "\t" if sum(line.count("\t") for line in lines[:50]) >= sum(line.count(",") for line in lines[:50]) else ","
+    starts = [i for i, line in enumerate(lines) if line.strip().lower() == "[step]"]
+    if not starts:
+        raise IngestError(path, "no [step] block in a TRIOS export")
+    meta_common = {"format": "ta_trios_text" if sep == "\t" else "ta_trios_csv", **_geometry(lines[: starts[0]], sep)}
+    blocks = []
+    for b, s in enumerate(starts):
+        end = starts[b + 1] if b + 1 < len(starts) else len(lines)
+        if s + 3 >= end:
+            raise IngestError(path, "truncated [step] block (needs name, columns and units rows)", line=s + 1)
+        name = lines[s + 1].strip()
+        cols = [c.strip() for c in lines[s + 2].split(sep)]
+        units = [c.strip() for c in lines[s + 3].split(sep)]
+        rows, line_no = [], []
+        for j in range(s + 4, end):
+            if not lines[j].strip():
+                continue
+            rows.append(lines[j].split(sep))
+            line_no.append(j + 1)
+        blocks.append(_step_block(path, name, b + 1, cols, units, rows, line_no, meta_common))
+    return blocks
+
+
+def _step_block(path, name, index, cols, units, rows, line_no, meta_common) -> Block:
+    if not rows:
+        raise IngestError(path, f"step {name!r} has no data rows", line=line_no[0] if line_no else None)
+    columns, seen = [], set()
+    for k, label in enumerate(cols):
+        canon = LABELS.get(label.lower())
+        if canon is None or canon in seen:
+            continue
+        values = np.empty(len(rows))
+        for r, row in enumerate(rows):
+            raw = row[k] if k < len(row) else ""
+            cell = str(raw)
+            try:
+                values[r] = float(raw) if isinstance(raw, float) else parse_number(cell, decimal_comma=False)
+            except ValueError:
+                raise IngestError(path, f"text in a numeric column: {cell.strip()!r}", line=line_no[r],
+                                  column=label) from None
+        unit = units[k] if k < len(units) else ""
+        seen.add(canon)
+        columns.append((canon, unit, values, label))
+    frame, labels = canonical_frame(path, columns)
+    check_time(path, frame, line_no[0], np.asarray(line_no))
+    return Block(name=name, index=index, data=frame,
+                 meta=dict(meta_common, labels=labels, first_data_line=line_no[0]))
+
+
+def read_trios_xls(path) -> list[Block]:
+    """Every step sheet of a TRIOS Excel (.xls, BIFF8) export."""
+    import xlrd
+
+    path = Path(path)
+    try:
+        book = xlrd.open_workbook(str(path))
+    except xlrd.XLRDError as exc:
+        raise IngestError(path, f"not a readable TRIOS .xls workbook: {exc}") from exc
+    blocks = []
+    for sheet in book.sheets():
+        if sheet.name.lower() == "details" or sheet.nrows < 4:
+            continue
+        name = str(sheet.cell_value(0, 0)).strip() or sheet.name
+        cols = [str(v).strip() for v in sheet.row_values(1)]
+        units = [str(v).strip() for v in sheet.row_values(2)]
+        rows = []
+        for r in range(3, sheet.nrows):
+            vals = sheet.row_values(r)
+            rows.append([v if isinstance(v, float) else str(v) for v in vals])
+        blocks.append(_step_block(path, name, len(blocks) + 1, cols, units, rows, list(range(4, sheet.nrows + 1)),
+                                  {"format": "ta_trios_xls", "sheet": sheet.name}))
+    if not blocks:
+        raise IngestError(path, "no step sheet with data in the workbook")
+    return blocks
