@@ -1,6 +1,7 @@
 """Readers of the two real exports these tests use.
 
-They go through the package readers (``tissuemech.io``) when those exist; until then a minimal reading done
+They go through the package reader (``tissuemech.io.dispatch.read_export``) when it gives the needed variables;
+otherwise (and while it did not exist) a minimal reading done
 here from the documented layout (RheoCompass UTF-16 tab CSV with decimal comma; TRIOS .xls step sheets with
 name/column/unit rows). Units are converted to the canonical SI units explicitly.
 """
@@ -21,10 +22,18 @@ def _io_read(path: Path):
     except ImportError:
         return None
     try:
-        runs = read_export(path)
+        blocks = read_export(path)
     except Exception:  # reader still in progress elsewhere: fall back to the local reading
         return None
-    return list(runs) if not isinstance(runs, xr.Dataset) else [runs]
+    runs = []
+    for block in blocks:
+        columns = {name: block.data[name].to_numpy(dtype=float) for name in block.data.columns}
+        geometry = {k: block.meta.get(k) for k in ("radius_m", "gap_m") if isinstance(block.meta.get(k), float)}
+        try:
+            runs.append(make_run_dataset(columns, {"block": block.name, **geometry}))
+        except (KeyError, ValueError, TypeError):
+            continue
+    return runs
 
 
 def _io_pick(path: Path, wanted) -> xr.Dataset | None:

@@ -3,7 +3,6 @@ configuration injects nothing."""
 import numpy as np
 import pytest
 
-from tissuemech.models.beyond_qlv import PipkinRogersModel
 from tissuemech.models.qlv import LinearElasticShear, QLVModel, qlv_params
 from tissuemech.synth import effects as fx
 from tissuemech.synth.generator import generate_dataset

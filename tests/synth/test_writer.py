@@ -104,16 +104,21 @@ def test_determinism_from_seed(tmp_path):
 @pytest.mark.skipif(importlib.util.find_spec("tissuemech.io") is None
                     or importlib.util.find_spec("tissuemech.io.rheocompass") is None,
                     reason="RheoCompass reader (tissuemech.io) not available yet")
-def test_round_trip_through_ingest(dataset):
+@pytest.mark.parametrize("header", ["simple", "project"])
+def test_round_trip_through_ingest(dataset, header, tmp_path):
     from tissuemech.io.dispatch import read_export
     out, result = dataset
+    if header == "project":
+        out = tmp_path
+        result = generate_dataset(small_config({"nonseparable_relaxation": {"kappa": 0.5}}), 7, out, header="project")
     for fname, gen in result["runs"].items():
-        runs = read_export(out / fname)
-        run = runs[0] if isinstance(runs, (list, tuple)) else runs
-        run = getattr(run, "data", run)  # io Block -> its canonical DataFrame
+        blocks = read_export(out / fname)
+        assert len(blocks) == 1
+        data = blocks[0].data
+        assert set(gen["channels"]) <= set(data.columns), f"{fname}: not read back {set(gen['channels']) - set(data.columns)}"
         for name, values in gen["channels"].items():
-            assert name in run, f"{fname}: {name} not read back"
-            np.testing.assert_allclose(run[name].values, values, rtol=1e-10, atol=1e-300, err_msg=f"{fname}:{name}")
+            np.testing.assert_allclose(data[name].to_numpy(float), values, rtol=1e-11, atol=1e-300,
+                                       err_msg=f"{fname}:{name}")
 
 
 def test_cli_writes_a_dataset(tmp_path, capsys):

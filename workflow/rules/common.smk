@@ -1,5 +1,6 @@
 # Shared helpers: dataset discovery, package source hashes (rerun triggers), target lists.
 import hashlib
+import sys
 from pathlib import Path
 
 import pandas as pd

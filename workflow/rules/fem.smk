@@ -49,6 +49,7 @@ rule fem_timing:
     benchmark:
         "benchmarks/runs/fem_timing.tsv"
     params:
+        python=sys.executable,
         pkg=package_hash("fem"),
     shell:
-        "python benchmarks/fem_timing.py --threads 1 --max-elements 20000 --out {output.table} > {log} 2>&1"
+        "{params.python} benchmarks/fem_timing.py --threads 1 --max-elements 20000 --out {output.table} > {log} 2>&1"

@@ -36,7 +36,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..models.base import ConstitutiveModel, ParamSpec, Params
+from ..models.base import ConstitutiveModel, Params
 from ..models.qlv import QLVModel, initial_shear_modulus, sub_params
 from .instrument import Artefacts
 
@@ -228,7 +228,3 @@ def protocol_overrides(kind: str, effects: Mapping[str, Mapping[str, float]]) ->
         return {"rise_time_s": effects["finite_rise_time"]["rise_time_s"]}
     return {}
 
-
-def param_specs_with_units(model: ConstitutiveModel) -> dict[str, ParamSpec]:
-    """Parameter specs by name (for truth.json units)."""
-    return {s.name: s for s in model.param_specs}

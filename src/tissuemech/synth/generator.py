@@ -202,6 +202,8 @@ def generate_dataset(config: Mapping, seed: int, out_dir: str | Path, header: st
         run_rng = np.random.default_rng([seed, idx])
         channels = run_protocol(protocol, m, p_run, Geometry(radius_m, run.gap_m), instrument, artefacts,
                                 temperature_c, run_rng)
+        # elapsed session time of every point: the specimen's session clock at the test start + test time
+        channels = {"total_time": run.start_s + channels["time"], **channels}
         clock[run.specimen_index] += protocol.duration_s + pause
         cond = protocol.condition
         tag = {"constant_shear_rate": f"csr{cond.get('shear_rate_1_per_s', 0):g}",

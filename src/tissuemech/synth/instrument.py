@@ -18,13 +18,14 @@ effects of :mod:`tissuemech.synth.effects` reach the simulation through :class:`
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..models.base import ConstitutiveModel
-from ..models.plate import (apparent_rim_stress, creep_rim_strain, first_harmonic_moduli, gauss_radii,
-                            stress_histories, thrust_normal_force, torque_from_history)
+from ..models.plate import (apparent_complex_modulus, apparent_rim_stress, creep_rim_strain,
+                            first_harmonic_moduli, gauss_radii, stress_histories, thrust_normal_force,
+                            torque_from_history)
 from .protocols import Protocol
 
 
@@ -237,7 +238,6 @@ def simulate_oscillation(protocol: Protocol, model: ConstitutiveModel, p: Mappin
             g1, g2 = first_harmonic_moduli(t[keep], rim[k, keep], s_app, f)
             g_star = complex(g1, g2)
             if artefacts.sample_density_kg_m3 > 0:
-                from ..models.plate import apparent_complex_modulus
                 g_star = complex(apparent_complex_modulus(np.array([g_star]), np.array([f]), geometry.radius_m,
                                                           geometry.gap_m, artefacts.sample_density_kg_m3)[0])
             if artefacts.amplitude_factors is not None:

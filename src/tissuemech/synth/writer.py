@@ -23,7 +23,8 @@ from ..canonical import atomic_write
 
 #: canonical variable -> (RheoCompass English column label, unit label, factor from SI to that unit)
 RHEOCOMPASS_COLUMNS: dict[str, tuple[str, str, float]] = {
-    "time": ("Time", "s", 1.0),
+    "total_time": ("Time", "s", 1.0),
+    "time": ("Interval Time", "s", 1.0),
     "frequency": ("Frequency", "Hz", 1.0),
     "angular_frequency": ("Angular Frequency", "rad/s", 1.0),
     "shear_strain": ("Shear Strain", "%", 100.0),
@@ -66,14 +67,22 @@ def format_number(value: float, digits: int = 12) -> str:
 
 def rheocompass_text(columns: Mapping[str, np.ndarray], test_name: str, result_name: str,
                      header: str = "simple", project: str = "tissuemech virtual rheometer") -> str:
-    """Text of a RheoCompass export (one result, one interval) from canonical SI columns."""
+    """Text of a RheoCompass export (one result, one interval) from canonical SI columns.
+
+    With ``total_time`` (time since the start of the measurement session) the export has RheoCompass's two
+    time columns, ``Time`` (session) and ``Interval Time`` (``time``, since the start of the test); without
+    it the single ``Time`` column is the test time, as in a one-interval export.
+    """
     names = [c for c in COLUMN_ORDER if c in columns]
+    labels_of = dict(RHEOCOMPASS_COLUMNS)
+    if "total_time" not in columns:
+        labels_of["time"] = ("Time", "s", 1.0)
     unknown = set(columns) - set(RHEOCOMPASS_COLUMNS)
     if unknown:
         raise KeyError(f"no RheoCompass column for {sorted(unknown)}")
     n = len(np.asarray(columns[names[0]]))
-    labels = ["Point No."] + [RHEOCOMPASS_COLUMNS[c][0] for c in names] + ["Status"]
-    units = [""] + [f"[{RHEOCOMPASS_COLUMNS[c][1]}]" for c in names] + [""]
+    labels = ["Point No."] + [labels_of[c][0] for c in names] + ["Status"]
+    units = [""] + [f"[{labels_of[c][1]}]" for c in names] + [""]
     lines: list[str] = []
     if header == "simple":
         lines += [f"Test:\t{test_name}", f"Result:\t{result_name}", "Interval:\t1", "\t".join(labels),
@@ -84,7 +93,7 @@ def rheocompass_text(columns: Mapping[str, np.ndarray], test_name: str, result_n
                   "\t" * len(labels), "\t" + "\t".join(units)]
     else:
         raise ValueError("header must be 'simple' or 'project'")
-    scaled = [np.asarray(columns[c], float) * RHEOCOMPASS_COLUMNS[c][2] for c in names]
+    scaled = [np.asarray(columns[c], float) * labels_of[c][2] for c in names]
     lead = "" if header == "simple" else "\t"
     for i in range(n):
         cells = [str(i + 1)] + [format_number(col[i]) for col in scaled] + ["Dy_auto"]
