@@ -48,8 +48,10 @@ def decode_text(path: Path) -> str:
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         line = raw[: exc.start].count(b"\n") + 1
-        raise IngestError(path, f"wrong encoding: not UTF-8/UTF-16 (invalid byte 0x{raw[exc.start]:02x}); "
-                                "re-export as UTF-8 or UTF-16", line=line) from exc
+        column = exc.start - (raw.rfind(b"\n", 0, exc.start) + 1) + 1  # 1-based byte position in the line
+        raise IngestError(path, f"wrong encoding: not UTF-8/UTF-16 (invalid byte 0x{raw[exc.start]:02x}, e.g. "
+                                "Latin-1/Windows-1252 text); re-export as UTF-8 or UTF-16", line=line,
+                          column=column) from exc
 
 
 _NUMBER = re.compile(r"^[+-]?(\d+([.,]\d*)?|[.,]\d+)([eE][+-]?\d+)?$")
@@ -89,14 +91,15 @@ def detect_decimal_comma(lines: list[str], sep: str) -> bool:
 def canonical_frame(path: Path, columns: list[tuple[str, str, np.ndarray, int]]) -> tuple[pd.DataFrame, dict]:
     """Convert ``(canonical name, unit, raw values, column index)`` columns to SI, first occurrence wins.
 
-    Raises :class:`IngestError` naming the column for an unknown unit.
+    Raises :class:`IngestError` naming the column for an unknown unit, or for a unit of another quantity than
+    the canonical one (a modulus without a unit is not taken to be in Pa).
     """
     data, labels = {}, {}
     for name, unit, values, col in columns:
         if name in data or name not in CANONICAL_VARIABLES:
             continue
         try:
-            data[name] = to_si(values, unit)
+            data[name] = to_si(values, unit, expected=CANONICAL_VARIABLES[name][0])
         except UnknownUnitError as exc:
             raise IngestError(path, f"{exc} in column {name!r}", column=col) from exc
         labels[name] = unit
@@ -120,3 +123,76 @@ def check_time(path: Path, frame: pd.DataFrame, first_line: int, line_numbers: n
     if back.size:
         raise IngestError(path, f"non-monotonic time: {t[back[0] + 1]:g} s after {t[back[0]]:g} s",
                           line=int(rows[back[0] + 1]), column="time")
+
+
+def parse_column(path: Path, label: str | int, cells, line_numbers, decimal_comma: bool) -> np.ndarray:
+    """Numbers of one column (cells as text, or floats from a spreadsheet); empty cells are NaN.
+
+    Raises :class:`IngestError` naming the line and column of the first cell holding text.
+    """
+    values = np.empty(len(cells))
+    for r, cell in enumerate(cells):
+        if isinstance(cell, (int, float)) and not isinstance(cell, bool):
+            values[r] = float(cell)
+            continue
+        text = "" if cell is None else str(cell)
+        try:
+            values[r] = parse_number(text, decimal_comma)
+        except ValueError:
+            raise IngestError(path, f"text in a numeric column: {text.strip()!r}", line=int(line_numbers[r]),
+                              column=label) from None
+    return values
+
+
+def pick_columns(path: Path, candidates: dict[str, tuple[str, ...]], table: dict[str, tuple[str, str, int]],
+                 cells_of, line_numbers, decimal_comma: bool) -> list[tuple[str, str, np.ndarray, str]]:
+    """Choose, per canonical variable, the first candidate label whose column holds data in this block.
+
+    Instruments export steady and oscillatory twins side by side (``Stress`` / ``Oscillation stress``,
+    ``Shear strain`` / ``Complex shear strain``) and leave the one that does not apply to the step empty, so
+    the label that carries numbers wins; a variable whose candidates are all empty is left out.
+
+    Parameters
+    ----------
+    candidates : canonical name -> lower-cased labels in order of preference
+    table : lower-cased label -> (label as written, unit, column position)
+    cells_of : column position -> the column's cells
+    """
+    chosen = []
+    for name, labels in candidates.items():
+        for low in labels:
+            if low not in table:
+                continue
+            label, unit, position = table[low]
+            values = parse_column(path, label, cells_of(position), line_numbers, decimal_comma)
+            if np.isfinite(values).any():
+                chosen.append((name, unit, values, label))
+                break
+    return chosen
+
+
+def auxiliary_frame(columns: list[tuple[str, str, list]], decimal_comma: bool) -> pd.DataFrame:
+    """Numeric columns outside the canonical set, converted to SI where the unit is known.
+
+    ``columns`` holds ``(label, unit, cells)``. Columns holding text, or in a unit without a known SI
+    conversion, are left out: they are kept for cross-checks (e.g. a compliance in 1/MPa against
+    G'/|G*|^2), never used as canonical data.
+    """
+    data = {}
+    for label, unit, cells in columns:
+        try:
+            values = np.array([parse_number("" if c is None else str(c), decimal_comma) for c in cells], float)
+            data[label] = to_si(values, unit)
+        except (ValueError, UnknownUnitError):
+            continue
+    return pd.DataFrame(data)
+
+
+def canonical_frame_at(path: Path, columns, units_line: int | None):
+    """:func:`canonical_frame`, with an unknown unit reported at the line of the units row."""
+    try:
+        return canonical_frame(path, columns)
+    except IngestError as exc:
+        if exc.line is not None or units_line is None:
+            raise
+        raise IngestError(path, exc.problem, line=units_line, column=exc.column) from exc

@@ -32,6 +32,31 @@ def run_id(row: dict) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "-", "_".join(map(str, parts)))
 
 
+#: canonical variables a run of each test kind must hold (each entry: alternatives, at least one present)
+REQUIRED_VARIABLES: dict[str, tuple[tuple[str, ...], ...]] = {
+    "amplitude_sweep": (("shear_strain",), ("storage_modulus",), ("loss_modulus",)),
+    "frequency_sweep": (("frequency", "angular_frequency"), ("storage_modulus",), ("loss_modulus",)),
+    "constant_shear_rate": (("time",), ("shear_stress",)),
+    "stress_relaxation": (("time",), ("shear_stress", "relaxation_modulus")),
+    "creep_recovery": (("time",), ("shear_strain", "creep_compliance")),
+    "flow_curve": (("shear_rate",), ("shear_stress", "viscosity")),
+    "simple_shear": (("shear_strain",), ("shear_stress", "nominal_stress")),
+    "uniaxial": (("stretch",), ("nominal_stress",)),
+    "indentation": (("displacement",), ("force",)),
+}
+
+
+def check_required(block: Block, test: str, path) -> None:
+    """The block holds the variables its test kind needs (missing column -> IngestError naming it)."""
+    for alternatives in REQUIRED_VARIABLES.get(test, ()):
+        present = [v for v in alternatives if v in block.data and block.data[v].notna().any()]
+        if not present:
+            wanted = " or ".join(repr(v) for v in alternatives)
+            raise IngestError(path, f"missing column: block {block.name!r} has no {wanted} data, needed for a "
+                                    f"{test} run; it has {list(block.data.columns)}",
+                              line=block.meta.get("first_data_line"), column=alternatives[0])
+
+
 def select_block(blocks: list[Block], block, path) -> Block:
     """The block a sample-sheet row asks for (index from 1, or a name); the only block when none is given."""
     if block in (None, ""):
@@ -109,7 +134,9 @@ def ingest_dataset(dataset_dir, runs_dir, report_path) -> pd.DataFrame:
                     clean[key] = _number(clean[key])
             problems = row_problems(clean)
             if problems:
-                raise IngestError(dataset_dir / "samples.csv", "; ".join(problems), line=line)
+                field = problems[0].split(":", 1)[0]
+                raise IngestError(dataset_dir / "samples.csv", "; ".join(problems), line=line,
+                                  column=field if field in row else None)
             path = source / str(row["file"])
             if not path.is_file():
                 raise IngestError(dataset_dir / "samples.csv", f"file {row['file']!r} not found", line=line,
@@ -117,7 +144,13 @@ def ingest_dataset(dataset_dir, runs_dir, report_path) -> pd.DataFrame:
             options = {k: row[k] for k in READER_OPTIONS if row.get(k)}
             if path not in cache:
                 cache[path] = read_export(path, **options)
-            block = select_block(cache[path], row.get("block"), path)
+            try:
+                block = select_block(cache[path], row.get("block"), path)
+            except IngestError as exc:
+                # the sample sheet is what is wrong: name its line and column, and the export in the text
+                raise IngestError(dataset_dir / "samples.csv", f"{exc.problem} in {path.name}", line=line,
+                                  column="block") from exc
+            check_required(block, str(row["test"]), path)
             ds = build_run(clean, block, dataset, path)
             write_netcdf(ds, runs_dir / f"{rid}.nc")
         except (IngestError, OSError, ValueError, KeyError) as exc:

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .blocks import Block, canonical_frame, check_time, decode_text, detect_decimal_comma, parse_number
+from .blocks import Block, canonical_frame_at, check_time, decode_text, detect_decimal_comma, parse_number
 from .errors import IngestError
 
 #: lower-cased RheoCompass label -> canonical variable (English, French, German)
@@ -91,49 +91,73 @@ def read_rheocompass(path, text: str | None = None) -> list[Block]:
     lines = text.splitlines()
     sep = _sep(lines)
     comma = detect_decimal_comma(lines, sep)
-    meta_common = {"format": "anton_paar_rheocompass", "decimal_comma": comma}
+    blocks = _read_rows(path, [line.split(sep) for line in lines], comma)
+    if not blocks:
+        raise IngestError(path, "no data block found (expected a 'Point No.' or 'Interval data:' column header row)")
+    return blocks
+
+
+def _read_rows(path: Path, table: list[list[str]], comma: bool, result: str = "result", first_index: int = 1,
+               meta_extra: dict | None = None) -> list[Block]:
+    """Blocks of a grid of cells (text lines split at the separator, or a spreadsheet's rows).
+
+    ``table[i]`` is line/row ``i + 1`` of the file (what errors name). ``result`` names blocks before any
+    ``Result:`` row (an Excel sheet without one uses its sheet name).
+    """
+    meta_common = {"format": "anton_paar_rheocompass", "decimal_comma": comma, **(meta_extra or {})}
     blocks: list[Block] = []
-    index = 0
-    result = "result"
+    index = first_index - 1
     interval = "1"
+    declared = None
     i = 0
-    while i < len(lines):
-        cells = lines[i].split(sep)
-        head = cells[0].strip().lower()
+    while i < len(table):
+        cells = table[i]
+        head = cells[0].strip().lower() if cells else ""
         if head.startswith(("test:",)):
             meta_common["test_name"] = cells[1].strip() if len(cells) > 1 else ""
         if head.startswith(_RESULT):
             result = cells[1].strip() if len(cells) > 1 else "result"
         elif head.startswith(_INTERVAL):
             interval = cells[1].strip() if len(cells) > 1 else str(len(blocks) + 1)
+            # "Interval and data points:  1  60": the point count lets a cut-short file be told from a short test
+            try:
+                declared = int(cells[2].strip()) if len(cells) > 2 and cells[2].strip() else None
+            except ValueError:
+                declared = None
         elif head.startswith(_INTERVAL_DATA) or head in _POINT_NO:
             offset = 1 if head.startswith(_INTERVAL_DATA) else 0
             names = [c.strip() for c in cells]
-            if i + 2 >= len(lines):
+            if i + 2 >= len(table):
                 raise IngestError(path, "truncated file: column header without sub-label and unit rows", line=i + 1)
-            sub = lines[i + 1].split(sep)
-            units = lines[i + 2].split(sep)
+            sub = table[i + 1]
+            units = table[i + 2]
             j = i + 3
             rows, line_no, invalid = [], [], 0
-            while j < len(lines):
-                raw = lines[j]
-                row = raw.split(sep)
-                first = row[0].strip().lower()
+            while j < len(table):
+                row = table[j]
+                first = row[0].strip().lower() if row else ""
                 if first.endswith(":") and any(first.startswith(k) for k in _RESULT + _INTERVAL + _INTERVAL_DATA
                                                + ("test:", "project:", "projet:")):
                     break
-                if not raw.strip():
+                if not any(c.strip() for c in row):
                     j += 1
-                    # an empty line ends the block when the next non-empty line starts a new section
                     continue
                 pn = row[offset].strip() if len(row) > offset else ""
                 if _INVALID.search(pn):
                     invalid += 1
                 elif pn:
+                    # every real export writes all cells of a point row (empty ones included): fewer means cut off
+                    if len(row) < len(names):
+                        raise IngestError(path, f"truncated row: {len(row)} cells, the column row has {len(names)}",
+                                          line=j + 1)
                     rows.append(row)
                     line_no.append(j + 1)
                 j += 1
             index += 1
+            if declared is not None and len(rows) + invalid < declared:
+                raise IngestError(path, f"truncated file: interval '{result} / {interval}' declares {declared} "
+                                        f"points, found {len(rows) + invalid}", line=j)
+            declared = None
             if rows or not invalid:
                 block = _block(path, names, sub, units, rows, line_no, offset, comma, result, interval,
                                index, i + 1, meta_common)
@@ -143,8 +167,6 @@ def read_rheocompass(path, text: str | None = None) -> list[Block]:
             i = j
             continue
         i += 1
-    if not blocks:
-        raise IngestError(path, "no data block found (expected a 'Point No.' or 'Interval data:' column header row)")
     return blocks
 
 
@@ -180,7 +202,78 @@ def _block(path, names, sub, units, rows, line_no, offset, comma, result, interv
     if not columns:
         raise IngestError(path, f"block '{result} / {interval}' has no recognised column; labels: {names[offset + 1:]}",
                           line=header_line)
-    frame, labels = canonical_frame(path, columns)
+    frame, labels = canonical_frame_at(path, columns, header_line + 2)
     check_time(path, frame, line_no[0], np.asarray(line_no))
     meta = dict(meta_common, labels=labels, first_data_line=line_no[0], result=result, interval=interval)
     return Block(name=f"{result} / {interval}", index=index, data=frame, meta=meta)
+
+
+def _cell_text(value) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, float):
+        return repr(value)
+    return str(value)
+
+
+def looks_like_rheocompass_sheet(rows: list[list[str]]) -> bool:
+    """A sheet whose first rows hold a ``Point No.`` column row or an ``Interval data:`` row."""
+    for cells in rows[:20]:
+        head = cells[0].strip().lower() if cells else ""
+        if head in _POINT_NO or head.startswith(_INTERVAL_DATA):
+            return True
+    return False
+
+
+def read_rheocompass_xlsx(path) -> list[Block]:
+    """Every interval of every sheet of a RheoCompass Excel (.xlsx) export (``instrument_formats.md`` 2.6).
+
+    Two sheet layouts are read: the text export's (``Test:``/``Result:``/``Interval:`` rows, then the column,
+    sub-label and ``[unit]`` rows) and the one with a title in row 1 and the column row in row 2. Numeric cells
+    are numbers; cells written as text with a decimal comma are read too. Errors name the sheet, the row
+    (as ``line``) and the column label. Sheets without a ``Point No.`` column row are skipped; blocks are
+    numbered through the workbook.
+    """
+    import openpyxl
+
+    path = Path(path)
+    try:
+        book = openpyxl.load_workbook(path, data_only=True)
+    except Exception as exc:  # openpyxl raises zipfile/KeyError/InvalidFileException for damaged files
+        raise IngestError(path, f"not a readable .xlsx workbook: {exc}") from exc
+    blocks: list[Block] = []
+    try:
+        for sheet in book.worksheets:
+            table = [[_cell_text(v) for v in row]
+                     for row in sheet.iter_rows(min_row=1, min_col=1, values_only=True)]
+            if not looks_like_rheocompass_sheet(table):
+                continue
+            text_cells = [c for row in table for c in row if c and not _looks_float_repr(c)]
+            comma = detect_decimal_comma(["\t".join(text_cells)], "\t")
+            title = table[0][0].strip() if table and table[0] else ""
+            extra = {"sheet": sheet.title}
+            if title and not title.endswith(":") and ":" not in title[:12]:
+                extra["test_name"] = title
+            try:
+                found = _read_rows(path, table, comma, result=sheet.title, first_index=len(blocks) + 1,
+                                   meta_extra=extra)
+            except IngestError as exc:
+                raise IngestError(path, f"sheet {sheet.title!r}: {exc.problem}", line=exc.line,
+                                  column=exc.column) from exc
+            for block in found:
+                block.meta["format"] = "anton_paar_rheocompass_xlsx"
+            blocks.extend(found)
+    finally:
+        book.close()
+    if not blocks:
+        raise IngestError(path, "no RheoCompass data sheet in the workbook (expected a 'Point No.' column row "
+                                "under a Test:/Result: header or a title row)")
+    return blocks
+
+
+def _looks_float_repr(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
