@@ -19,6 +19,7 @@ Layouts read, as the software writes them:
 """
 from __future__ import annotations
 
+import io
 import re
 from pathlib import Path
 
@@ -238,9 +239,11 @@ def read_rheocompass_xlsx(path) -> list[Block]:
 
     path = Path(path)
     try:
-        book = openpyxl.load_workbook(path, data_only=True)
+        # a file object, because openpyxl refuses paths whose extension is not .xlsx (format comes from content)
+        with open(path, "rb") as fh:
+            book = openpyxl.load_workbook(io.BytesIO(fh.read()), data_only=True)
     except Exception as exc:  # openpyxl raises zipfile/KeyError/InvalidFileException for damaged files
-        raise IngestError(path, f"not a readable .xlsx workbook: {exc}") from exc
+        raise IngestError(path, f"not a readable .xlsx workbook (truncated or damaged file?): {exc}") from exc
     blocks: list[Block] = []
     try:
         for sheet in book.worksheets:
