@@ -144,6 +144,11 @@ def is_rheometer_dataset(name):
     return bool(set(dataset_tests(name)) - HOMOGENEOUS_TESTS)
 
 
+def is_multimode_dataset(name):
+    """Homogeneous specimens tested in simple shear and uniaxially (the cross-mode diagnosis applies)."""
+    return {"simple_shear", "uniaxial"} <= set(dataset_tests(name))
+
+
 def has_shear_ramps(name):
     return "constant_shear_rate" in dataset_tests(name)
 
@@ -158,7 +163,9 @@ def all_targets():
         ]
         if dataset_scopes_of(name):
             targets += [f"results/{name}/ranking.csv", f"results/{name}/fits.csv"]
-        if diagnosis_scope(name) and is_rheometer_dataset(name):
+        if diagnosis_scope(name) and (
+            is_rheometer_dataset(name) or is_multimode_dataset(name)
+        ):
             targets.append(f"results/{name}/diagnosis.json")
         if has_shear_ramps(name):
             targets.append(f"results/{name}/fem/torsion.csv")

@@ -12,7 +12,9 @@ Entry points
 
 :func:`run_diagnosis` ``(runs_dir, fits_dir, out_json, out_nc, fig_dir, baseline=None, extensions=True,
 dataset=None) -> dict``
-    the Snakemake ``diagnose`` rule's call. ``runs_dir``: folder of canonical run netCDFs (searched
+    the Snakemake ``diagnose`` rule's call. Homogeneous-specimen datasets (simple shear + uniaxial
+    compression/tension, e.g. Budday) go to :func:`tissuemech.diagnosis.homogeneous.run_homogeneous_diagnosis`
+    (cross-mode diagnosis; same JSON contract plus ``cross_mode``). Otherwise: ``runs_dir``: folder of canonical run netCDFs (searched
     recursively, ``*.nc``); ``fits_dir``: folder of fit records ``<model>.nc``
     (:func:`tissuemech.fitting.write_fit_netcdf`); ``baseline``: model key to diagnose (default: the
     QLV-family fit with the lowest AICc, else the lowest AICc overall). Every fit's predictions on every
@@ -47,6 +49,7 @@ from . import stats as st
 from .catalogue import CATALOGUE_IDS, DETECTORS, DiagnosisContext, explains
 from .evidence import residual_table, residual_table_to_xarray
 from .generic import serial_structure, structure_tests
+from .homogeneous import is_homogeneous, run_homogeneous_diagnosis
 
 
 def _clean(obj):
@@ -291,9 +294,14 @@ def run_diagnosis(runs_dir: str | Path, fits_dir: str | Path, out_json: str | Pa
     from .baseline import predict_runs, read_fit_record
 
     runs = _read_runs(runs_dir)
-    records = [read_fit_record(p) for p in sorted(Path(fits_dir).glob("*.nc"))]
     if not runs:
         raise FileNotFoundError(f"no canonical runs (*.nc) under {runs_dir}")
+    if is_homogeneous(runs):
+        # homogeneous specimens (simple shear + uniaxial): the multi-mode diagnosis refits its own I1/I2
+        # laws per mode combination (closed forms, seconds), so the scope's fit records are not needed
+        name = dataset or str(runs[0].attrs.get("dataset", ""))
+        return run_homogeneous_diagnosis(runs, out_json, out_nc, fig_dir, dataset=name)
+    records = [read_fit_record(p) for p in sorted(Path(fits_dir).glob("*.nc"))]
     if not records:
         raise FileNotFoundError(f"no fit records (*.nc) under {fits_dir}")
     chosen = next((r for r in records if r["model_key"] == baseline), None) if baseline else _choose_baseline(records)
