@@ -1,21 +1,365 @@
-"""A self-contained HTML summary of the pipeline results (tables and figures of every dataset).
+"""Report figures the stages do not draw themselves, and a self-contained HTML summary of the results.
 
-Complements ``snakemake --report`` (provenance, runtimes, DAG): this page is what a rheologist reads first.
+Figures (PNG + SVG, written through :func:`tissuemech.plots.save_figure`):
+
+* :func:`plot_scope_fits` -- every fitted model of a scope over its averaged data, linear and log axes;
+* :func:`plot_cards` -- the material cards of a dataset as tables, one per scope (``cards.csv`` alongside);
+* :func:`plot_meshes` -- the deformed TLED meshes of the FEM experiments (VTU files), coloured by |u|;
+* :func:`plot_timing` -- TLED step time and real-time factor against mesh size.
+
+:func:`build_summary` writes ``results/summary.html``: the page a rheologist reads first (tables, named
+diagnosis findings, every figure with its caption) without any Snakemake machinery. ``snakemake --report``
+adds provenance, runtimes and the rule graph to the same figures.
 """
 from __future__ import annotations
 
 import base64
 import html
 import json
+import re
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
+import xarray as xr
+from matplotlib import colormaps
+from matplotlib.cm import ScalarMappable
+from matplotlib.colors import Normalize
+from matplotlib.figure import Figure
 
-from .canonical import write_text
+from .canonical import read_netcdf, write_text
+from .plots import _new_figure, _positive, axis_label, figure_curves, figure_table, safe_name, save_figure
 
+# ------------------------------------------------------------------------------------------------------
+# fits over their data
+# ------------------------------------------------------------------------------------------------------
+#: abscissa of a fitted curve per test kind: the variable the field plots that test against
+FIT_ABSCISSA: dict[str, str] = {
+    "stress_relaxation": "time",
+    "creep_recovery": "time",
+    "constant_shear_rate": "shear_strain",
+    "frequency_sweep": "angular_frequency",
+    "flow_curve": "shear_rate",
+    "simple_shear": "shear_strain",
+    "uniaxial": "stretch",
+}
+
+#: observables drawn in a more readable unit: name -> (factor, axis label)
+_DISPLAY_UNITS: dict[str, tuple[float, str]] = {"torque": (1e6, "torque M [µN m]")}
+
+
+def _match_in_order(values: np.ndarray, reference: np.ndarray) -> np.ndarray | None:
+    """Indices into ``reference`` of ``values`` (same numbers, same order, possibly a subset); None if absent."""
+    out, start = [], 0
+    for v in values:
+        hits = np.nonzero(np.isclose(reference[start:], v, rtol=1e-9, atol=0.0, equal_nan=False))[0]
+        if hits.size == 0:
+            return None
+        out.append(start + hits[0])
+        start += hits[0] + 1
+    return np.asarray(out, int)
+
+
+def fit_panels(fit: xr.Dataset, curves: Sequence) -> dict[tuple[str, str], list[dict]]:
+    """Group the points of a fit record by (test, observable), with their abscissa recovered from the curves.
+
+    Parameters
+    ----------
+    fit : a fit record (:func:`tissuemech.fitting.fit_to_dataset`): ``observed``, ``predicted``,
+        ``curve_index``, ``observable`` per point and ``curve_label`` per curve.
+    curves : the curves the fit was made on (:func:`tissuemech.stages.scope_curves`), matched by label.
+
+    Returns
+    -------
+    ``{(test, observable): [{"label", "x", "xname", "observed", "predicted", "sd"}, ...]}``. ``x`` is the
+    abscissa of :data:`FIT_ABSCISSA` at the fitted points; when a curve cannot be matched (its data changed
+    since the fit) the point index is used and ``xname`` is ``"point"``.
+    """
+    from .fitting import target_observations
+
+    by_label = {c.label: c for c in curves}
+    observed = np.asarray(fit["observed"].values, float)
+    predicted = np.asarray(fit["predicted"].values, float)
+    curve_index = np.asarray(fit["curve_index"].values, int)
+    observable = np.asarray(fit["observable"].values).astype(str)
+    labels = [str(v) for v in fit["curve_label"].values]
+    target = str(fit.attrs.get("target", "apparent_stress"))
+    panels: dict[tuple[str, str], list[dict]] = {}
+    for ci, label in enumerate(labels):
+        test = label.split("|", 1)[0]
+        for name in dict.fromkeys(observable[curve_index == ci]):
+            sel = (curve_index == ci) & (observable == name)
+            y, f = observed[sel], predicted[sel]
+            x, xname, sd = np.arange(y.size, dtype=float), "point", None
+            curve = by_label.get(label)
+            if curve is not None:
+                obs, sds = target_observations(curve, target)
+                if name in obs:
+                    idx = _match_in_order(y, np.asarray(obs[name], float))
+                    xname = FIT_ABSCISSA.get(test, "time")
+                    if idx is not None and xname in curve.inputs:
+                        x = curve.obs_inputs(xname)[idx]
+                        sd = np.asarray(sds[name], float)[idx] if name in sds else None
+                    else:
+                        xname = "point"
+            if xname == "angular_frequency":
+                x, xname = x / (2 * np.pi), "frequency"
+            panels.setdefault((test, str(name)), []).append(
+                {"label": label.split("|", 1)[-1], "x": x, "xname": xname, "observed": y, "predicted": f, "sd": sd})
+    return panels
+
+
+def figure_scope_fit(fit: xr.Dataset, curves: Sequence, title: str | None = None) -> Figure:
+    """A fitted model over its data: one row per (test, observable), linear axes left, log axes right.
+
+    Data are markers (± SD bars of the sample average where known), the model a line of the same colour per
+    curve. A log axis is used only where every value along it is positive (signed stress stays linear).
+    """
+    panels = fit_panels(fit, curves)
+    fig, axes = _new_figure(ncols=2, nrows=max(len(panels), 1), width=4.6, height=3.4)
+    axes = axes.reshape(-1, 2)
+    for row, ((test, name), series) in enumerate(panels.items()):
+        factor, ylabel = _DISPLAY_UNITS.get(name, (1.0, axis_label(name)))
+        xs = np.concatenate([s["x"] for s in series])
+        ys = np.concatenate([np.concatenate([s["observed"], s["predicted"]]) for s in series])
+        for ax, log in zip(axes[row], (False, True)):
+            for i, s in enumerate(series):
+                colour = f"C{i % 10}"
+                order = np.argsort(s["x"], kind="stable")
+                x, y, f = s["x"][order], factor * s["observed"][order], factor * s["predicted"][order]
+                if s["sd"] is not None:
+                    ax.errorbar(x, y, yerr=factor * s["sd"][order], fmt="o", ms=3, color=colour, ecolor=colour,
+                                elinewidth=0.6, alpha=0.8, label=f"{s['label']} data")
+                else:
+                    ax.plot(x, y, "o", ms=3, color=colour, alpha=0.8, label=f"{s['label']} data")
+                ax.plot(x, f, "-", color=colour, lw=1.6)
+            if log:
+                if _positive(xs):
+                    ax.set_xscale("log")
+                if _positive(ys):
+                    ax.set_yscale("log")
+            ax.set_xlabel(axis_label(series[0]["xname"]) if series[0]["xname"] != "point" else "point index")
+            ax.set_ylabel(ylabel)
+            ax.set_title(f"{test}: {'log' if log else 'linear'} axes", fontsize=9)
+        if len(series) <= 8:
+            axes[row][0].legend(fontsize=7)
+    if not panels:
+        for ax in axes.ravel():
+            ax.axis("off")
+        axes[0][0].text(0.5, 0.5, "no fitted points", ha="center", va="center")
+    model = fit.attrs.get("model_key", "")
+    quality = f"NRMSE = {float(fit.attrs.get('nrmse', np.nan)):.3g}, AICc = {float(fit.attrs.get('aicc', np.nan)):.4g}"
+    flags = json.loads(fit.attrs.get("flags", "[]") or "[]")
+    fig.suptitle((title or f"{model} ({fit.attrs.get('scope', '')}, target {fit.attrs.get('target', '')})")
+                 + f"\n{quality}" + (f", {len(flags)} flag(s)" if flags else ""), fontsize=10)
+    return fig
+
+
+def plot_scope_fits(averages_path, fits_dir, tests: Sequence[str], out_dir) -> list[Path]:
+    """``<out_dir>/<model>.png/.svg`` for every fit record ``<fits_dir>/<model>.nc`` of a scope.
+
+    The curves are rebuilt from the averages exactly as the fit stage builds them
+    (:func:`tissuemech.stages.scope_curves`), so each fitted point is drawn at its own time/strain/rate/frequency.
+    """
+    from .stages import scope_curves
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    averages = read_netcdf(averages_path)
+    curves_by_relaxation: dict[str, list] = {}
+    written: list[Path] = []
+    for path in sorted(Path(fits_dir).glob("*.nc")):
+        fit = read_netcdf(path)
+        relaxation = str(fit.attrs.get("relaxation", "measured"))
+        if relaxation not in curves_by_relaxation:
+            curves_by_relaxation[relaxation] = scope_curves(averages, list(tests), relaxation=relaxation)
+        fig = figure_scope_fit(fit, curves_by_relaxation[relaxation])
+        written += save_figure(fig, out_dir / safe_name(path.stem), dpi=110)
+    return written
+
+
+# ------------------------------------------------------------------------------------------------------
+# material cards
+# ------------------------------------------------------------------------------------------------------
+def card_table(cards_root, ranking_csv=None) -> pd.DataFrame:
+    """One row per material card ``<cards_root>/<scope>/<model>.json``: law, moduli, Prony terms, fit quality.
+
+    With ``ranking_csv`` the rows carry the model's rank in its scope and are sorted by scope and rank.
+    """
+    rows = []
+    for path in sorted(Path(cards_root).glob("*/*.json")):
+        card = json.loads(path.read_text())
+        prony = card.get("prony") or {}
+        quality = card.get("fit_quality") or {}
+        law_parameters = card.get("elastic_parameters") or {}
+        rows.append({
+            "scope": path.parent.name, "model": card.get("model", path.stem),
+            "elastic_law": card.get("elastic_law", ""),
+            "elastic_parameters": ", ".join(f"{k}={v:.4g}" for k, v in law_parameters.items()
+                                            if isinstance(v, (int, float))),
+            "G0_pa": card.get("initial_shear_modulus", np.nan), "K_pa": card.get("bulk_modulus", np.nan),
+            "prony_terms": int(sum(1 for g in prony.get("g", []) if g)) if prony else 0,
+            "nrmse": quality.get("nrmse", np.nan), "n_flags": len(quality.get("flags", []) or []),
+        })
+    table = pd.DataFrame(rows, columns=["scope", "model", "elastic_law", "elastic_parameters", "G0_pa", "K_pa",
+                                        "prony_terms", "nrmse", "n_flags"])
+    if ranking_csv is not None and Path(ranking_csv).is_file() and Path(ranking_csv).stat().st_size and len(table):
+        ranking = pd.read_csv(ranking_csv)
+        if {"scope", "model", "rank"} <= set(ranking.columns):
+            table = table.merge(ranking[["scope", "model", "rank"]], on=["scope", "model"], how="left")
+            table = table.sort_values(["scope", "rank"], kind="stable").reset_index(drop=True)
+            table.insert(2, "rank", table.pop("rank"))
+    return table
+
+
+def plot_cards(cards_root, ranking_csv, out_dir, out_csv) -> list[Path]:
+    """``out_csv`` (every card) and ``<out_dir>/<scope>.png/.svg``: the cards of a scope, best fit shaded."""
+    table = card_table(cards_root, ranking_csv)
+    write_text(table.to_csv(index=False), out_csv)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written: list[Path] = []
+    for scope, rows in table.groupby("scope", sort=True):
+        shown = rows.drop(columns=["scope"]).reset_index(drop=True)
+        fig = figure_table(shown, highlight_column="rank" if "rank" in shown else "nrmse",
+                           title=f"material cards: {scope} (shaded: best ranked)")
+        written += save_figure(fig, out_dir / safe_name(str(scope)), dpi=110)
+    return written
+
+
+# ------------------------------------------------------------------------------------------------------
+# meshes
+# ------------------------------------------------------------------------------------------------------
+def boundary_faces(elements: np.ndarray) -> np.ndarray:
+    """Triangles (node triples) that belong to exactly one tetrahedron: the surface of the mesh."""
+    from .fem.mesh import TET_FACES
+
+    faces = np.asarray(elements, np.int64)[:, TET_FACES].reshape(-1, 3)
+    keys = np.sort(faces, axis=1)
+    _, first, counts = np.unique(keys, axis=0, return_index=True, return_counts=True)
+    return faces[first[counts == 1]]
+
+
+def figure_mesh(nodes_m: np.ndarray, elements: np.ndarray, displacement_m: np.ndarray | None = None,
+                title: str | None = None, scale: float = 1.0) -> Figure:
+    """Surface of a tetrahedral mesh in 3-D (mm), deformed by ``scale * displacement`` and coloured by |u|."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    nodes = np.asarray(nodes_m, float)
+    magnitude = np.zeros(len(nodes))
+    if displacement_m is not None:
+        u = np.asarray(displacement_m, float)
+        nodes = nodes + scale * u
+        magnitude = np.linalg.norm(u, axis=1)
+    faces = boundary_faces(elements)
+    fig = Figure(figsize=(5.6, 4.4), layout="constrained")
+    ax = fig.add_subplot(projection="3d")
+    xyz = 1e3 * nodes
+    norm = Normalize(vmin=0.0, vmax=max(float(magnitude.max()) * 1e3, 1e-12))
+    cmap = colormaps["viridis"]
+    face_values = 1e3 * magnitude[faces].mean(axis=1)
+    poly = Poly3DCollection(xyz[faces], facecolors=cmap(norm(face_values)), edgecolors="k", linewidths=0.1)
+    ax.add_collection3d(poly)
+    lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_zlim(lo[2], hi[2])
+    ax.set_box_aspect(np.maximum(hi - lo, 1e-3 * np.max(hi - lo)))
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_zlabel("z [mm]")
+    if displacement_m is not None:
+        fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.6, pad=0.12, label="|u| [mm]")
+    ax.set_title(title or f"{len(elements)} tetrahedra, {len(nodes)} nodes", fontsize=9)
+    return fig
+
+
+def plot_meshes(vtu_dirs: Mapping[str, str | Path], out_dir, max_per_experiment: int = 4) -> list[Path]:
+    """``<out_dir>/<experiment>__<case>.png/.svg`` for the first VTU files of each FEM experiment folder.
+
+    Parameters
+    ----------
+    vtu_dirs : experiment name (``torsion``, ``indentation``) -> folder of ``*.vtu`` written by the FEM rules.
+    max_per_experiment : pictures per experiment (the meshes of one experiment differ only by card).
+    """
+    from .fem.mesh import read_mesh
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written: list[Path] = []
+    for experiment, folder in vtu_dirs.items():
+        for path in sorted(Path(folder).glob("*.vtu"))[:max_per_experiment]:
+            mesh, point_data = read_mesh(path)
+            u = point_data.get("displacement")
+            case = path.stem.replace("__", " ")
+            fig = figure_mesh(mesh.nodes, mesh.elements, u, title=f"{experiment}: {case}\n"
+                              f"{mesh.n_elements} tetrahedra, final displacement (true scale)")
+            written += save_figure(fig, out_dir / f"{experiment}__{safe_name(path.stem)}", dpi=110)
+    return written
+
+
+# ------------------------------------------------------------------------------------------------------
+# timing
+# ------------------------------------------------------------------------------------------------------
+def plot_timing(timing_csv, step_path, realtime_path) -> list[Path]:
+    """TLED wall time per explicit step and real-time factor against the number of tetrahedra.
+
+    One curve per law / precision / device (``benchmarks/fem_timing.py`` table); the real-time figure marks
+    factor 1 (a simulated second costs one wall-clock second) as the reference.
+    """
+    table = pd.read_csv(timing_csv)
+    required = {"n_elements", "law", "precision", "device", "steps_per_s", "real_time_factor"}
+    missing = sorted(required - set(table.columns))
+    if missing:
+        raise ValueError(f"{timing_csv}: timing table lacks columns {missing}")
+    step, realtime = {}, {}
+    for (law, precision, device), rows in table.groupby(["law", "precision", "device"], sort=True):
+        rows = rows.sort_values("n_elements")
+        name = f"{law} {precision} {device}"
+        n = rows["n_elements"].to_numpy(float)
+        step[name] = (n, 1.0 / rows["steps_per_s"].to_numpy(float))
+        realtime[name] = (n, rows["real_time_factor"].to_numpy(float))
+    log_y = all(_positive(v[1]) for v in step.values())
+    written = save_figure(figure_curves(step, xlabel="tetrahedra", ylabel="wall time per step [s]", log_x=True,
+                                        log_y=log_y, title="TLED explicit step time"), step_path)
+    fig = figure_curves(realtime, xlabel="tetrahedra", ylabel="real-time factor [–]", log_x=True,
+                        log_y=all(_positive(v[1]) for v in realtime.values()),
+                        title="TLED real-time factor (> 1: faster than real time)")
+    fig.axes[0].axhline(1.0, color="k", ls="--", lw=1)
+    written += save_figure(fig, realtime_path)
+    return written
+
+
+# ------------------------------------------------------------------------------------------------------
+# HTML summary
+# ------------------------------------------------------------------------------------------------------
 _STYLE = """body{font-family:sans-serif;margin:2em;max-width:1200px}table{border-collapse:collapse;font-size:12px}
 td,th{border:1px solid #ccc;padding:2px 6px}h2{border-bottom:2px solid #345}img{max-width:560px;margin:4px}
-.finding{background:#fff3e0;padding:4px;margin:4px 0}"""
+figure{display:inline-block;vertical-align:top;margin:4px}figcaption{font-size:11px;max-width:560px}
+.finding{background:#fff3e0;padding:4px;margin:4px 0}.caption{color:#333;font-size:13px;max-width:900px}"""
+
+#: summary sections: (title, caption file stem, glob of figures under results/<dataset>/)
+SECTIONS: tuple[tuple[str, str, str], ...] = (
+    ("Raw runs vs sample averages", "averages", "figures/averages/*.png"),
+    ("LVE limit of the amplitude sweeps", "lve", "figures/lve/*.png"),
+    ("Fits over their data", "fits", "figures/fits/*/*.png"),
+    ("Model ranking", "ranking", "figures/ranking.png"),
+    ("Diagnosis", "diagnosis", "figures/diagnosis/*.png"),
+    ("Material cards", "cards", "figures/cards/*.png"),
+    ("FEM experiments", "fem", "figures/fem_*.png"),
+    ("FEM meshes", "meshes", "figures/meshes/*.png"),
+)
+
+
+def caption_text(path: Path) -> str:
+    """Plain text of a report caption (reStructuredText with Jinja): markup and template tags removed."""
+    if not path.is_file():
+        return ""
+    text = re.sub(r"\{[{%].*?[%}]\}", "", path.read_text(encoding="utf-8"))
+    text = re.sub(r"^\.\. .*$", "", text, flags=re.M)
+    text = re.sub(r"[`*]+", "", text)
+    return " ".join(text.split())
 
 
 def _table(path: Path, columns: list[str] | None = None, rows: int = 25) -> str:
@@ -27,9 +371,11 @@ def _table(path: Path, columns: list[str] | None = None, rows: int = 25) -> str:
     return frame.head(rows).to_html(index=False, float_format=lambda v: f"{v:.4g}", na_rep="")
 
 
-def _img(path: Path) -> str:
+def _img(path: Path, label: str) -> str:
     data = base64.b64encode(path.read_bytes()).decode()
-    return f'<img alt="{html.escape(path.stem)}" title="{html.escape(path.stem)}" src="data:image/png;base64,{data}">'
+    name = html.escape(label)
+    return (f'<figure><img alt="{name}" title="{name}" src="data:image/png;base64,{data}">'
+            f"<figcaption>{name}</figcaption></figure>")
 
 
 def _diagnosis(path: Path) -> str:
@@ -54,14 +400,35 @@ def _diagnosis(path: Path) -> str:
     return "".join(out) or "<p>no named cause and no unexplained structure at the family-wise α</p>"
 
 
-def build_summary(results_dir, datasets: list[str], out_html, max_figures: int = 12) -> Path:
-    """Write ``out_html`` summarising every dataset's ingest, LVE, ranking, diagnosis, FEM and figures."""
+def _figures(root: Path, pattern: str) -> str:
+    paths = sorted(root.glob(pattern))
+    if not paths:
+        return "<p><i>no figures</i></p>"
+    return "".join(_img(p, str(p.relative_to(root).with_suffix(""))) for p in paths)
+
+
+def build_summary(results_dir, datasets: list[str], out_html, captions_dir=None) -> Path:
+    """Write ``out_html``: per dataset its ingest, LVE, ranking, diagnosis and FEM tables and every figure.
+
+    Parameters
+    ----------
+    results_dir : the ``results`` folder.
+    datasets : dataset names, in display order.
+    out_html : the page to write (figures are embedded as base64 PNG: one file to mail or archive).
+    captions_dir : folder of the report captions (``workflow/report``); their text heads each section.
+    """
     root = Path(results_dir)
+    captions = Path(captions_dir) if captions_dir is not None else None
+
+    def caption(stem: str) -> str:
+        text = caption_text(captions / f"{stem}.rst") if captions is not None else ""
+        return f'<p class="caption">{html.escape(text)}</p>' if text else ""
+
     parts = [f"<html><head><meta charset='utf-8'><title>tissuemech results</title><style>{_STYLE}</style></head><body>",
-             "<h1>tissuemech results</h1>"]
+             "<h1>tissuemech results</h1>", caption("workflow")]
     for name in datasets:
         d = root / name
-        parts.append(f"<h2>{html.escape(name)}</h2>")
+        parts.append(f'<h2 id="{html.escape(name)}">{html.escape(name)}</h2>')
         parts.append("<h3>Ingest</h3>" + _table(d / "ingest_report.csv", ["run", "file", "test", "status", "reason"], 12))
         parts.append("<h3>LVE limits</h3>" + _table(d / "lve.csv"))
         parts.append("<h3>Ranking</h3>" + _table(d / "ranking.csv", ["scope", "model", "family", "rank", "aicc",
@@ -73,10 +440,17 @@ def build_summary(results_dir, datasets: list[str], out_html, max_figures: int =
             if "recommendation" in frame:
                 for scope, text in frame.groupby("scope")["recommendation"].first().items():
                     parts.append(f"<p><b>{html.escape(str(scope))}</b>: {html.escape(str(text))}</p>")
-        parts.append("<h3>Diagnosis</h3>" + _diagnosis(d / "diagnosis.json"))
+        parts.append("<h3>Diagnosis findings</h3>" + _diagnosis(d / "diagnosis.json"))
         parts.append("<h3>FEM torsion vs measured torque</h3>" + _table(d / "fem" / "torsion.csv"))
-        figures = sorted((d / "figures").rglob("*.png")) if (d / "figures").is_dir() else []
-        parts.append("<h3>Figures</h3>" + "".join(_img(p) for p in figures[:max_figures]))
-    parts.append("<h2>TLED timing</h2>" + _table(root / "fem" / "timing.csv", rows=60))
+        for title, stem, pattern in SECTIONS:
+            if any(d.glob(pattern)):
+                parts.append(f"<h3>{html.escape(title)}</h3>" + caption(stem) + _figures(d, pattern))
+    parts.append("<h2>TLED timing</h2>" + caption("timing") + _table(root / "fem" / "timing.csv", rows=60)
+                 + _figures(root / "fem", "figures/*.png"))
     parts.append("</body></html>")
     return write_text("\n".join(parts), out_html)
+
+
+__all__ = ["FIT_ABSCISSA", "SECTIONS", "boundary_faces", "build_summary", "caption_text", "card_table",
+           "figure_mesh", "figure_scope_fit", "fit_panels", "plot_cards", "plot_meshes", "plot_scope_fits",
+           "plot_timing"]

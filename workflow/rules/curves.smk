@@ -6,7 +6,18 @@ rule average:
         runs="results/{dataset}/runs",
     output:
         averages="results/{dataset}/averages.nc",
-        figures=directory("results/{dataset}/figures/averages"),
+        figures=report(
+            directory("results/{dataset}/figures/averages"),
+            patterns=["{test}__{condition}__{variable}.png"],
+            caption="../report/averages.rst",
+            category="{dataset}",
+            subcategory="1 raw runs vs averages",
+            labels={
+                "test": "{test}",
+                "condition": "{condition}",
+                "variable": "{variable}",
+            },
+        ),
     log:
         "logs/{dataset}/average.log",
     benchmark:
@@ -23,8 +34,21 @@ rule lve:
         averages="results/{dataset}/averages.nc",
     output:
         lve="results/{dataset}/lve.nc",
-        summary="results/{dataset}/lve.csv",
-        figures=directory("results/{dataset}/figures/lve"),
+        summary=report(
+            "results/{dataset}/lve.csv",
+            caption="../report/lve_table.rst",
+            category="{dataset}",
+            subcategory="2 LVE limit",
+            labels={"source": "table", "sweep": "all"},
+        ),
+        figures=report(
+            directory("results/{dataset}/figures/lve"),
+            patterns=["lve__{source}__{sweep}.png"],
+            caption="../report/lve.rst",
+            category="{dataset}",
+            subcategory="2 LVE limit",
+            labels={"source": "{source}", "sweep": "{sweep}"},
+        ),
     log:
         "logs/{dataset}/lve.log",
     benchmark:

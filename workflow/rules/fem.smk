@@ -6,9 +6,21 @@ rule fem_torsion:
         ranking="results/{dataset}/ranking.csv",
         averages="results/{dataset}/averages.nc",
     output:
-        table="results/{dataset}/fem/torsion.csv",
+        table=report(
+            "results/{dataset}/fem/torsion.csv",
+            caption="../report/fem_torsion_table.rst",
+            category="{dataset}",
+            subcategory="7 FEM experiments",
+            labels={"experiment": "torsion", "item": "error table"},
+        ),
         data="results/{dataset}/fem/torsion.nc",
-        figure="results/{dataset}/figures/fem_torsion.png",
+        figure=report(
+            "results/{dataset}/figures/fem_torsion.png",
+            caption="../report/fem_torsion.rst",
+            category="{dataset}",
+            subcategory="7 FEM experiments",
+            labels={"experiment": "torsion", "item": "torque vs rim strain"},
+        ),
         vtu=directory("results/{dataset}/fem/torsion_vtu"),
     log:
         "logs/{dataset}/fem_torsion.log",
@@ -27,7 +39,13 @@ rule fem_indentation:
         ranking="results/{dataset}/ranking.csv",
     output:
         data="results/{dataset}/fem/indentation.nc",
-        figure="results/{dataset}/figures/fem_indentation.png",
+        figure=report(
+            "results/{dataset}/figures/fem_indentation.png",
+            caption="../report/fem_indentation.rst",
+            category="{dataset}",
+            subcategory="7 FEM experiments",
+            labels={"experiment": "indentation", "item": "force vs depth"},
+        ),
         vtu=directory("results/{dataset}/fem/indentation_vtu"),
     log:
         "logs/{dataset}/fem_indentation.log",
@@ -43,7 +61,12 @@ rule fem_indentation:
 
 rule fem_timing:
     output:
-        table="results/fem/timing.csv",
+        table=report(
+            "results/fem/timing.csv",
+            caption="../report/timing_table.rst",
+            category="FEM timing",
+            labels={"figure": "table"},
+        ),
     log:
         "logs/fem_timing.log",
     benchmark:

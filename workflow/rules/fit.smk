@@ -37,9 +37,21 @@ rule rank:
         rankings=scope_rankings,
         fits=scope_fit_dirs,
     output:
-        ranking="results/{dataset}/ranking.csv",
+        ranking=report(
+            "results/{dataset}/ranking.csv",
+            caption="../report/ranking_table.rst",
+            category="{dataset}",
+            subcategory="4 ranking",
+            labels={"item": "ranking table"},
+        ),
         fits="results/{dataset}/fits.csv",
-        figure="results/{dataset}/figures/ranking.png",
+        figure=report(
+            "results/{dataset}/figures/ranking.png",
+            caption="../report/ranking.rst",
+            category="{dataset}",
+            subcategory="4 ranking",
+            labels={"item": "ranking figure"},
+        ),
     log:
         "logs/{dataset}/rank.log",
     benchmark:

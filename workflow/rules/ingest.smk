@@ -6,7 +6,13 @@ rule ingest:
         dataset_files,
     output:
         runs=directory("results/{dataset}/runs"),
-        report="results/{dataset}/ingest_report.csv",
+        report=report(
+            "results/{dataset}/ingest_report.csv",
+            caption="../report/ingest.rst",
+            category="{dataset}",
+            subcategory="0 ingest",
+            labels={"table": "ingest report"},
+        ),
     log:
         "logs/{dataset}/ingest.log",
     benchmark:

@@ -1,9 +1,148 @@
-# Human-readable summary page (figures + tables); `snakemake --report results/report.html` adds provenance.
+# Report figures the stages do not draw (fits over data, cards, meshes, timing) and the self-contained summary page.
+# `snakemake --report results/report.html` collects every output marked report(...) with its caption
+# (workflow/report/*.rst); the summary page is the same content without Snakemake, built by the default target.
+
+
+def report_figure_targets():
+    """Figure folders/files of the report rules for every dataset (inputs of the summary, so in the default target)."""
+    targets = ["results/fem/figures/timing_step.png"]
+    for name in DATASETS:
+        for scope in dataset_scopes_of(name):
+            targets.append(f"results/{name}/figures/fits/{scope}")
+        if dataset_scopes_of(name):
+            targets.append(f"results/{name}/figures/cards")
+        if fem_vtu_dirs_of(name):
+            targets.append(f"results/{name}/figures/meshes")
+    return targets
+
+
+def fem_vtu_dirs_of(name):
+    """FEM experiment name -> VTU folder of the experiments run on a dataset."""
+    dirs = {}
+    if has_shear_ramps(name):
+        dirs["torsion"] = f"results/{name}/fem/torsion_vtu"
+    if name in config["fem"].get("indentation_datasets", []):
+        dirs["indentation"] = f"results/{name}/fem/indentation_vtu"
+    return dirs
+
+
+def scope_card_dirs(wildcards):
+    return [
+        f"results/{wildcards.dataset}/cards/{scope}"
+        for scope in dataset_scopes_of(wildcards.dataset)
+    ]
+
+
+rule fit_figures:
+    input:
+        averages="results/{dataset}/averages.nc",
+        fits="results/{dataset}/fits/{scope}",
+    output:
+        figures=report(
+            directory("results/{dataset}/figures/fits/{scope}"),
+            patterns=["{model}.png"],
+            caption="../report/fits.rst",
+            category="{dataset}",
+            subcategory="3 fits: {scope}",
+            labels={"scope": "{scope}", "model": "{model}"},
+        ),
+    log:
+        "logs/{dataset}/fit_figures_{scope}.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/fit_figures_{scope}.tsv"
+    params:
+        tests=lambda wildcards: scope_spec(wildcards)["tests"],
+        pkg=package_hash("summary.py", "plots.py", "stages.py", "fitting.py"),
+    script:
+        "../scripts/fit_figures.py"
+
+
+rule card_figures:
+    input:
+        ranking="results/{dataset}/ranking.csv",
+        cards=scope_card_dirs,
+    output:
+        table=report(
+            "results/{dataset}/cards.csv",
+            caption="../report/cards_table.rst",
+            category="{dataset}",
+            subcategory="6 material cards",
+            labels={"table": "all cards"},
+        ),
+        figures=report(
+            directory("results/{dataset}/figures/cards"),
+            patterns=["{scope}.png"],
+            caption="../report/cards.rst",
+            category="{dataset}",
+            subcategory="6 material cards",
+            labels={"table": "{scope}"},
+        ),
+    log:
+        "logs/{dataset}/card_figures.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/card_figures.tsv"
+    params:
+        cards_root="results/{dataset}/cards",
+        pkg=package_hash("summary.py", "plots.py"),
+    script:
+        "../scripts/card_figures.py"
+
+
+rule mesh_figures:
+    input:
+        vtu=lambda wildcards: list(fem_vtu_dirs_of(wildcards.dataset).values()),
+    output:
+        figures=report(
+            directory("results/{dataset}/figures/meshes"),
+            patterns=["{experiment}__{case}.png"],
+            caption="../report/meshes.rst",
+            category="{dataset}",
+            subcategory="8 FEM meshes",
+            labels={"experiment": "{experiment}", "case": "{case}"},
+        ),
+    log:
+        "logs/{dataset}/mesh_figures.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/mesh_figures.tsv"
+    params:
+        vtu_dirs=lambda wildcards: fem_vtu_dirs_of(wildcards.dataset),
+        pkg=package_hash("summary.py", "plots.py", "fem/mesh.py"),
+    script:
+        "../scripts/mesh_figures.py"
+
+
+rule timing_figures:
+    input:
+        table="results/fem/timing.csv",
+    output:
+        step=report(
+            "results/fem/figures/timing_step.png",
+            caption="../report/timing.rst",
+            category="FEM timing",
+            labels={"figure": "step time"},
+        ),
+        step_svg="results/fem/figures/timing_step.svg",
+        realtime=report(
+            "results/fem/figures/timing_realtime.png",
+            caption="../report/timing.rst",
+            category="FEM timing",
+            labels={"figure": "real-time factor"},
+        ),
+        realtime_svg="results/fem/figures/timing_realtime.svg",
+    log:
+        "logs/timing_figures.log",
+    benchmark:
+        "benchmarks/runs/timing_figures.tsv"
+    params:
+        pkg=package_hash("summary.py", "plots.py"),
+    script:
+        "../scripts/timing_figures.py"
 
 
 rule summary:
     input:
         targets=[t for t in all_targets() if t != "results/summary.html"],
+        figures=report_figure_targets(),
     output:
         html="results/summary.html",
     log:
@@ -12,6 +151,7 @@ rule summary:
         "benchmarks/runs/summary.tsv"
     params:
         datasets=list(DATASETS),
+        captions=f"{workflow.basedir}/workflow/report",
         pkg=package_hash("summary.py"),
     script:
         "../scripts/summary.py"

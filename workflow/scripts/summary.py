@@ -1,6 +1,8 @@
-"""Snakemake adapter: every dataset's results -> results/summary.html."""
+"""Snakemake adapter: every dataset's results -> results/summary.html (self-contained, figures embedded)."""
 from tissuemech.pipeline import job_log
 from tissuemech.summary import build_summary
 
-with job_log(snakemake.log[0]):
-    build_summary("results", snakemake.params.datasets, snakemake.output.html)
+with job_log(snakemake.log[0]) as log:
+    page = build_summary("results", snakemake.params.datasets, snakemake.output.html,
+                         captions_dir=snakemake.params.captions)
+    log.info("summary page %s (%.1f MB)", page, page.stat().st_size / 1e6)
