@@ -92,8 +92,9 @@ def unit_factor(unit: str, expected: str | None = None) -> tuple[float, float]:
     if key not in UNITS:
         raise UnknownUnitError(f"unknown unit {unit!r}")
     if expected is not None and SI_UNIT[key] not in _SAME.get(expected, {expected}):
-        shown = "no unit" if key == "" else f"unit {unit!r} (a {SI_UNIT[key]} quantity)"
-        raise UnknownUnitError(f"{shown} where {expected} is expected: not converted, never assumed")
+        if key == "":
+            raise UnknownUnitError(f"no unit given where {expected} is expected (never assumed)")
+        raise UnknownUnitError(f"unit {unit!r} (a {SI_UNIT[key]} quantity) cannot be converted to {expected}")
     return UNITS[key]
 
 

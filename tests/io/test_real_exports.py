@@ -248,7 +248,8 @@ def test_malvern_kinexus_multistep(shared_real):
     blocks = read_export(path)
     assert len(blocks) == 17
     # line 2: "Pre Shear Initial;112,3;1,000;30,54;47,57;4,75275E+003;0,2044;;;;;;;1,284E-003;4,516;20,93;9,1500"
-    assert lines[1] == "Pre Shear Initial;112,3;1,000;30,54;47,57;4,75275E+003;0,2044;;;;;;;1,284E-003;4,516;20,93;9,1500"
+    assert lines[1] == ("Pre Shear Initial;112,3;1,000;30,54;47,57;4,75275E+003;0,2044;;;;;;;1,284E-003;4,516;"
+                        "20,93;9,1500")
     pre = blocks[0]
     assert pre.name == "Pre Shear Initial" and len(pre.data) == 300
     p = pre.data.iloc[0]
