@@ -278,3 +278,33 @@ def test_malvern_kinexus_multistep(shared_real):
     assert single.data.iloc[0]["time"] == pytest.approx(4.031)
     assert single.data.iloc[0]["storage_modulus"] == pytest.approx(134.3)
     assert single.data.iloc[0]["frequency"] == pytest.approx(0.25)
+
+
+def test_ingest_stage_on_real_lims_and_kinexus(shared_real, tmp_path):
+    """The ingest stage reads the real exports in place (source_dir) into canonical runs, block by name/index."""
+    import pandas as pd
+
+    from tissuemech.canonical import read_netcdf
+    from tissuemech.io.ingest import ingest_dataset
+
+    dataset = tmp_path / "raw" / "real_mix"
+    dataset.mkdir(parents=True)
+    (dataset / "dataset.yaml").write_text(f"material: mixed\nlicense: see shared README\ncitation: n/a\n"
+                                          f"source_dir: {shared_real}\n")
+    pd.DataFrame([
+        {"file": "ta_lims/ares_g2_frequency_sweep_tts.txt", "specimen": "p", "sample": "1", "test": "frequency_sweep",
+         "order": 1, "block": "Frequency sweep (150.0 °C)"},
+        {"file": "malvern/kinexus_multistep.csv", "specimen": "k", "sample": "1", "test": "flow_curve", "order": 1,
+         "block": "4"},
+    ]).to_csv(dataset / "samples.csv", index=False)
+    out = tmp_path / "results"
+    report = ingest_dataset(dataset, out / "runs", out / "ingest_report.csv")
+    assert list(report["status"]) == ["ok", "ok"], list(report["reason"])
+    lims = read_netcdf(out / "runs" / f"{report['run'][0]}.nc")
+    assert lims.attrs["format"] == "ta_lims" and lims.sizes["point"] == 17
+    assert float(lims["torque"][0]) == pytest.approx(0.108450026649023 * GF_CM)
+    flow = read_netcdf(out / "runs" / f"{report['run'][1]}.nc")
+    # "Flow Curve Down;496,3;5,000;110,7;500,0;2,46236E+005;0,2234;;;;;;;4,656E-003;234,0;21,00;9,1500" (line 352)
+    assert flow.attrs["block"] == "Flow Curve Down" and flow.sizes["point"] == 58
+    assert float(flow["shear_stress"][0]) == pytest.approx(110.7) and float(flow["shear_rate"][0]) == 500.0
+    assert float(flow["shear_strain"][0]) == pytest.approx(2462.36)
