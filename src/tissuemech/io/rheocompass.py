@@ -16,6 +16,10 @@ Layouts read, as the software writes them:
 
 ``Time`` is the interval time when no separate interval-time column exists; with both (``Temps`` and
 ``Intervalle Temps``) the interval time is ``time`` and the other ``total_time``.
+
+A file cut short is reported: an interval with fewer points than its ``Interval and data points:`` count, or a
+point row with fewer cells than the column row (real exports write every cell, empty ones included).
+Excel exports (.xlsx, section 2.6) go through the same parsing, sheet by sheet (:func:`read_rheocompass_xlsx`).
 """
 from __future__ import annotations
 
