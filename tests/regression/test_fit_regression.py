@@ -1,0 +1,178 @@
+"""Fitted-parameter regression: fresh fits of the bundled datasets against the committed tables in this folder."""
+from __future__ import annotations
+
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tissuemech import regression as REG
+
+# one worker computes the fresh fits once for every test of this module (make test runs with --dist loadgroup)
+pytestmark = pytest.mark.xdist_group("fit_regression")
+
+
+@pytest.fixture(scope="module")
+def reference_dir(repo_root):
+    return repo_root / "tests" / "regression"
+
+
+@pytest.fixture(scope="module")
+def fresh(repo_root):
+    return REG.fresh_table(repo_root / "raw", repo_root / "config" / "config.yaml")
+
+
+@pytest.fixture
+def reference_copy(tmp_path, reference_dir):
+    for path in reference_dir.glob("*.csv"):
+        shutil.copy(path, tmp_path / path.name)
+    return tmp_path
+
+
+def _perturb(folder, dataset, scope, model, parameter, tolerances):
+    """Shift one committed value by ``tolerances`` of its own tolerance; return (old value, tolerance)."""
+    path = folder / f"{dataset}.csv"
+    table = pd.read_csv(path)
+    row = (table["scope"] == scope) & (table["model"] == model) & (table["parameter"] == parameter)
+    assert row.sum() == 1, f"{dataset}/{scope}/{model}/{parameter} not exactly once in {path}"
+    old, tol = float(table.loc[row, "value"].iloc[0]), float(table.loc[row, "tolerance"].iloc[0])
+    table.loc[row, "value"] = old + tolerances * tol
+    table.to_csv(path, index=False)
+    return old, tol
+
+
+def test_fresh_fits_pass_the_committed_table(reference_dir, fresh):
+    passed, comparison, message = REG.check(reference_dir, fresh=fresh)
+    assert passed, message
+    fitted = set(zip(comparison["dataset"], comparison["scope"], comparison["model"]))
+    wanted = {(d, s, m) for d, scopes in REG.REFERENCE_FITS.items() for s, models in scopes.items() for m in models}
+    assert fitted == wanted
+    # a deterministic refit on the same platform reproduces the table far inside the tolerance
+    assert comparison["difference/tolerance"].abs().max() < 0.01
+
+
+@pytest.mark.parametrize("dataset, scope, model, parameter", [
+    ("porcine_brain_thesis", "viscoelastic_joint", "qlv_rp3_prony4", "C10"),
+    ("agar_3pct_thesis", "flow_curve", "power_law", "n"),
+])
+def test_a_perturbed_reference_value_fails_naming_the_parameter(reference_copy, fresh, dataset, scope, model,
+                                                                parameter):
+    _perturb(reference_copy, dataset, scope, model, parameter, 5.0)
+    passed, comparison, message = REG.check(reference_copy, fresh=fresh)
+    assert not passed
+    bad = comparison[comparison["status"] != "ok"]
+    assert list(zip(bad["dataset"], bad["scope"], bad["model"], bad["parameter"])) == [(dataset, scope, model, parameter)]
+    # fresh - reference = -5 tolerances; the message table names the row and says by how much
+    assert bad["difference/tolerance"].iloc[0] == pytest.approx(-5.0, abs=0.01)
+    line = next(ln for ln in message.splitlines() if f" {model} " in ln and f" {parameter} " in ln)
+    assert dataset in line and scope in line and "-5" in line and "moved" in line
+    assert "difference/tolerance" in message
+
+
+def test_a_shift_inside_the_tolerance_passes(reference_copy, fresh):
+    _perturb(reference_copy, "porcine_brain_thesis", "viscoelastic_joint", "qlv_rp3_prony4", "C10", 0.5)
+    passed, _, message = REG.check(reference_copy, fresh=fresh)
+    assert passed, message
+
+
+def test_check_command_exits_1_with_the_table(reference_copy, fresh, monkeypatch, capsys):
+    _perturb(reference_copy, "agar_3pct_thesis", "creep_recovery", "sls2", "eta1", 5.0)
+    monkeypatch.setattr(REG, "fresh_table", lambda *a, **k: fresh)
+    assert REG.main(["--check", "--reference-dir", str(reference_copy)]) == 1
+    out = capsys.readouterr().out
+    assert "1 of" in out and "creep_recovery" in out and "eta1" in out and "make regression-update" in out
+
+
+def test_update_rewrites_the_tables_and_prints_the_diff(reference_copy, fresh, monkeypatch, capsys):
+    old, _ = _perturb(reference_copy, "porcine_brain_thesis", "frequency_sweep", "springpot", "alpha", 3.0)
+    monkeypatch.setattr(REG, "fresh_table", lambda *a, **k: fresh)
+    assert REG.main(["--update", "--reference-dir", str(reference_copy)]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("1 of ") and "springpot" in out and "alpha" in out and "-3" in out
+    rewritten = REG.read_reference_file(reference_copy / "porcine_brain_thesis.csv")
+    alpha = rewritten[(rewritten["model"] == "springpot") & (rewritten["parameter"] == "alpha")]["value"].iloc[0]
+    assert alpha == old  # full float precision round trip
+    assert REG.check(reference_copy, fresh=fresh)[0]
+
+
+@pytest.mark.parametrize("path", sorted(Path(__file__).parent.glob("*.csv")), ids=lambda p: p.name)
+def test_committed_table_is_well_formed(path):
+    table = REG.read_reference_file(path)  # raises naming line and column on a bad row
+    assert (table["tolerance"] > 0).all() and np.isfinite(table["tolerance"]).all()
+    assert table["reason"].str.strip().str.len().gt(0).all()
+    assert (table["dataset"] == path.stem).all()
+    # the stated rule, row by row: max(k * stderr, 1e-6 |value|), never a blanket percentage
+    for row in table.itertuples():
+        expected, _ = REG.tolerance_for(row.value, row.stderr)
+        assert math.isclose(row.tolerance, expected, rel_tol=1e-12), row
+    assert table["tolerance"].div(table["value"].abs()).nunique() > 1
+
+
+@pytest.mark.filterwarnings("ignore:All-NaN axis encountered:RuntimeWarning")  # ranking of strain-free flow curves
+def test_the_regression_refits_what_the_pipeline_writes(repo_root, tmp_path, fresh):
+    """``stages.run_fit_scope`` (the Snakemake fit rule) gives the same values as the regression's refit."""
+    from tissuemech.canonical import read_netcdf
+    from tissuemech.curves import write_averages
+    from tissuemech.stages import run_fit_scope
+
+    settings = REG.fit_settings(repo_root / "config" / "config.yaml")
+    averages, _ = REG.dataset_averages(repo_root / "raw" / "agar_3pct_thesis", tmp_path / "work")
+    write_averages(averages, tmp_path / "averages.nc")
+    models = list(REG.REFERENCE_FITS["agar_3pct_thesis"]["flow_curve"])
+    run_fit_scope(tmp_path / "averages.nc", "flow_curve", {"tests": ["flow_curve"], "models": models},
+                  target=settings["plate_target"], seed=settings["seed"], multistart=settings["multistart"],
+                  fits_dir=tmp_path / "fits", cards_dir=tmp_path / "cards", ranking_path=tmp_path / "ranking.csv",
+                  dataset="agar_3pct_thesis")
+    for model in models:
+        fit = read_netcdf(tmp_path / "fits" / f"{model}.nc")
+        mine = fresh[(fresh["dataset"] == "agar_3pct_thesis") & (fresh["model"] == model)].set_index("parameter")
+        for name, value in zip(fit["param"].values, fit["value"].values):
+            assert float(value) == pytest.approx(mine.loc[str(name), "value"], rel=1e-12)
+
+
+def test_malformed_tables_are_rejected_with_line_and_column(reference_copy):
+    path = reference_copy / "agar_3pct_thesis.csv"
+    table = pd.read_csv(path)
+    table.loc[2, "tolerance"] = 0.0
+    table.to_csv(path, index=False)
+    with pytest.raises(REG.ReferenceTableError, match=r"agar_3pct_thesis\.csv, line 4, column 'tolerance'.*positive"):
+        REG.read_reference(reference_copy)
+    table.loc[2, "tolerance"] = 1.0
+    table.loc[5, "reason"] = ""
+    table.to_csv(path, index=False)
+    with pytest.raises(REG.ReferenceTableError, match=r"line 7, column 'reason': empty reason"):
+        REG.read_reference(reference_copy)
+    table.loc[5, "reason"] = "ok"
+    table = pd.concat([table, table.iloc[[0]]], ignore_index=True)
+    table.to_csv(path, index=False)
+    with pytest.raises(REG.ReferenceTableError, match=r"line 12: duplicated parameter"):
+        REG.read_reference(reference_copy)
+
+
+def test_unmatched_and_failed_fits_fail_the_comparison():
+    def row(model, parameter, value, tolerance=1.0, reason="0.1 x standard error 10"):
+        return {"dataset": "d", "scope": "s", "model": model, "parameter": parameter, "unit": "Pa", "value": value,
+                "stderr": 10.0, "tolerance": tolerance, "reason": reason}
+
+    reference = pd.DataFrame([row("a", "G", 100.0), row("a", "eta", 5.0), row("b", "mu", 7.0)])
+    fresh = pd.DataFrame([row("a", "G", 100.5), row("a", "tau", 1.0),
+                          row("b", "<fit failed>", float("nan"), float("nan"), "RuntimeError: every start failed")])
+    comparison = REG.compare(reference, fresh).set_index(["model", "parameter"])["status"]
+    assert comparison[("a", "G")] == "ok"
+    assert comparison[("a", "eta")] == "missing from fresh fits"
+    assert comparison[("a", "tau")] == "not in reference"
+    assert comparison[("b", "mu")] == "missing from fresh fits"
+    assert comparison[("b", "<fit failed>")] == "fit failed: RuntimeError: every start failed"
+
+
+def test_tolerance_rule():
+    assert REG.tolerance_for(100.0, 2.0) == (pytest.approx(0.2), "0.1 x standard error 2")
+    tol, why = REG.tolerance_for(100.0, 1e-9)
+    assert tol == pytest.approx(1e-4) and why.startswith("reproducibility floor 1e-06")
+    tol, why = REG.tolerance_for(100.0, float("nan"))
+    assert tol == pytest.approx(1e-4) and "not estimated" in why
+    tol, _ = REG.tolerance_for(0.0, 0.0)
+    assert tol == REG.ABSOLUTE_FLOOR > 0
