@@ -315,7 +315,14 @@ def curves_from_averages(avg: xr.Dataset, radius_m: float | Mapping[str, float] 
     labels = _as_str(avg["condition"].values)
     for test, label in zip(tests_all, labels):
         test, label = str(test), str(label)
-        if test not in TEST_RESPONSE or (tests is not None and test not in tests):
+        if tests is not None and test not in tests:
+            continue
+        if test == "amplitude_sweep":
+            curve = amplitude_sweep_lve_curve(select_average(avg, test, label))
+            if curve is not None:
+                out.append(curve)
+            continue
+        if test not in TEST_RESPONSE:
             continue
         one = select_average(avg, test, label)
         grid = one[next(iter(one.coords))]
@@ -345,6 +352,56 @@ def curves_from_averages(avg: xr.Dataset, radius_m: float | Mapping[str, float] 
         sd = {k: sds[k][ok][rows] for k in curve.observed if k in sds}
         out.append(replace(curve, sd=sd))
     return out
+
+
+def amplitude_sweep_lve_curve(sweep: xr.Dataset, tolerance: float = 0.05) -> Curve | None:
+    """The linear part of an averaged amplitude sweep as an elastic shear curve (linear shear modulus G).
+
+    Inside the LVE range a linear material's in-phase stress amplitude is ``G' * gamma_0``, so the points with
+    amplitude up to the ISO 6721-10 limit of the mean G' (:func:`tissuemech.lve.lve_limit`, 5 % band) become an
+    ``elastic_shear`` curve: input ``shear_strain`` = amplitude [1], observed ``shear_stress`` = G' * amplitude [Pa].
+    A fitted linear elastic law then returns the thesis's "linear G from the amplitude sweep" (Table 4.4).
+    The instrument's G' is already a modulus (plate geometry cancels for a linear material), so the curve is
+    homogeneous (no plate radius). A sweep that never leaves the band is used whole.
+
+    Parameters
+    ----------
+    sweep : one averaged amplitude sweep (``curves.select_average``), grid ``shear_strain`` [1], with
+        ``storage_modulus_mean`` [Pa] (and ``_sd``)
+    tolerance : relative band of the LVE limit rule
+
+    Returns
+    -------
+    Curve or None when the sweep has fewer than two usable points inside the LVE range.
+    """
+    from .lve import lve_limit
+
+    if "storage_modulus_mean" not in sweep:
+        return None
+    strain = np.abs(np.asarray(sweep[next(iter(sweep.coords))].values, float))
+    storage = np.asarray(sweep["storage_modulus_mean"].values, float)
+    sd = np.asarray(sweep["storage_modulus_sd"].values, float) if "storage_modulus_sd" in sweep else None
+    ok = np.isfinite(strain) & np.isfinite(storage) & (strain > 0) & (storage > 0)
+    try:
+        limit = lve_limit(strain[ok], storage[ok], tolerance=tolerance).strain
+    except ValueError:
+        return None
+    if np.isfinite(limit):
+        ok &= strain <= limit
+    if ok.sum() < 2:
+        return None
+    order = np.argsort(strain[ok])
+    gamma = strain[ok][order]
+    attrs = {k: v for k, v in sweep.attrs.items() if isinstance(v, (int, float, str))}
+    nominal = {"frequency_hz": float(attrs["frequency_hz"])} if "frequency_hz" in attrs else {}
+    nominal["lve_limit_strain"] = float(limit)
+    curve = Curve(test="amplitude_sweep", condition=str(attrs.get("condition", "amplitude_sweep")),
+                  response="elastic_shear", inputs={"shear_strain": gamma},
+                  observed={"shear_stress": storage[ok][order] * gamma}, specimen="mean",
+                  n_samples=int(attrs.get("n_samples", 1)), nominal=nominal)
+    if sd is not None and np.isfinite(sd[ok]).all():
+        curve = replace(curve, sd={"shear_stress": sd[ok][order] * gamma})
+    return curve
 
 
 def with_relaxation_history(curve: Curve, mode: str) -> Curve:
@@ -1115,7 +1172,7 @@ def fits_csv_row(result: FitResult, dataset: str = "") -> dict:
 
 
 __all__ = [
-    "PLATE_TARGETS", "TEST_RESPONSE", "Curve", "curve_from_run", "curves_from_averages", "geometry_from_runs", "relaxation_history",
+    "PLATE_TARGETS", "TEST_RESPONSE", "Curve", "amplitude_sweep_lve_curve", "curve_from_run", "curves_from_averages", "geometry_from_runs", "relaxation_history",
     "thin", "select_strain", "with_relaxation_history", "curve_ranges", "plate_factor", "target_observations", "predict",
     "NoiseModel", "FitProblem", "FitResult", "fit", "evaluate", "information_criteria", "log_spaced_taus",
     "prony_nnls", "prony_start", "fit_to_dataset", "write_fit_netcdf", "fits_csv_row",

@@ -120,7 +120,7 @@ def ogden_dw_dlambda(p, lam):
     return s
 
 
-@njit(cache=True)
+@njit(cache=False)  # takes jitted callables: numba cannot cache those reliably (numba#2956)
 def _invariant_shear(dw1, dw2, p, gamma):
     n = gamma.size
     sigma = np.empty(n)
@@ -135,7 +135,7 @@ def _invariant_shear(dw1, dw2, p, gamma):
     return sigma, n2
 
 
-@njit(cache=True)
+@njit(cache=False)  # takes jitted callables: numba cannot cache those reliably (numba#2956)
 def _invariant_uniaxial(dw1, dw2, p, lam):
     out = np.empty(lam.size)
     for k in range(lam.size):
@@ -146,7 +146,7 @@ def _invariant_uniaxial(dw1, dw2, p, lam):
     return out
 
 
-@njit(cache=True)
+@njit(cache=False)  # takes jitted callables: numba cannot cache those reliably (numba#2956)
 def _stretch_shear(dwl, p, gamma):
     n = gamma.size
     sigma = np.empty(n)
@@ -166,7 +166,7 @@ def _stretch_shear(dwl, p, gamma):
     return sigma, n2
 
 
-@njit(cache=True)
+@njit(cache=False)  # takes jitted callables: numba cannot cache those reliably (numba#2956)
 def _stretch_uniaxial(dwl, p, lam):
     out = np.empty(lam.size)
     for k in range(lam.size):
