@@ -16,6 +16,7 @@ cross-validation records, the recommendation, and material cards of every conver
 from __future__ import annotations
 
 import json
+import logging
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -29,6 +30,8 @@ from . import fitting as F
 from . import ranking as R
 from .canonical import read_netcdf, write_text
 from .models.registry import available_models, get_model
+
+logger = logging.getLogger(__name__)
 
 JOINT_SCOPE = "viscoelastic_joint"
 ALL_MODES_SCOPE = "all_modes"
@@ -243,6 +246,7 @@ def run_fem_torsion(card_paths: Sequence, averages_path, out_nc, out_csv, figure
     normalised RMS error and the error at the largest strain, per card and rate.
     """
     from .fem.experiments import rheometer_torsion
+    from .fem.tled import DynamicRelaxationError, ElementInversionError
     from .plots import plot_torque
 
     avg = read_netcdf(averages_path)
@@ -272,17 +276,25 @@ def run_fem_torsion(card_paths: Sequence, averages_path, out_nc, out_csv, figure
             vtu = None if vtu_dir is None else Path(vtu_dir) / f"{Path(path).parent.name}__{Path(path).stem}__{rate:g}.vtu"
             if vtu is not None:
                 vtu.parent.mkdir(parents=True, exist_ok=True)
-            ds = rheometer_torsion(card, gamma_sim / rate, gamma_sim, radius_m=radius, gap_m=gap,
-                                   element_size_m=element_size_m, n_threads=1, vtu_path=vtu)
-            sim = np.asarray(ds["torque"].values, float)
             meas = np.interp(gamma_sim, strain, torque_measured)
+            card_name = f"{Path(path).parent.name}/{Path(path).stem}"
+            try:
+                ds = rheometer_torsion(card, gamma_sim / rate, gamma_sim, radius_m=radius, gap_m=gap,
+                                       element_size_m=element_size_m, n_threads=1, vtu_path=vtu)
+            except (ElementInversionError, DynamicRelaxationError) as err:
+                logger.warning("torsion %s: %s", label, err)
+                rows.append({"card": card_name, "rate_1_s": rate, "nrmse": float("nan"),
+                             "rel_error_at_max_strain": float("nan"), "max_strain": float(gamma_sim[-1]),
+                             "normal_force_at_max_strain_n": float("nan"), "status": f"failed: {err}"})
+                continue
+            sim = np.asarray(ds["torque"].values, float)
             series[label] = (gamma_sim, sim)
             measured[label] = meas
-            rows.append({"card": f"{Path(path).parent.name}/{Path(path).stem}", "rate_1_s": rate,
+            rows.append({"card": card_name, "rate_1_s": rate,
                          "nrmse": float(np.sqrt(np.mean((sim - meas) ** 2)) / np.mean(np.abs(meas))),
                          "rel_error_at_max_strain": float((sim[-1] - meas[-1]) / meas[-1]),
                          "max_strain": float(gamma_sim[-1]),
-                         "normal_force_at_max_strain_n": float(ds["normal_force"].values[-1])})
+                         "normal_force_at_max_strain_n": float(ds["normal_force"].values[-1]), "status": "ok"})
     table = pd.DataFrame(rows)
     write_text(table.to_csv(index=False), out_csv)
     combined = xr.Dataset(
@@ -303,9 +315,10 @@ def run_fem_indentation(card_paths: Sequence, out_nc, figure_path, punch_diamete
                         vtu_dir=None) -> xr.Dataset:
     """Flat-punch indentation (8 and 15 mm punches, constant slow speed) of a tissue sample per card."""
     from .fem.experiments import flat_punch_indentation
+    from .fem.tled import DynamicRelaxationError, ElementInversionError
     from .plots import plot_force_depth
 
-    series, parts = {}, []
+    series, parts, status = {}, [], {}
     for path in card_paths:
         card = _card_for_fem(Path(path))
         for d in punch_diameters_m:
@@ -313,13 +326,26 @@ def run_fem_indentation(card_paths: Sequence, out_nc, figure_path, punch_diamete
             vtu = None if vtu_dir is None else Path(vtu_dir) / f"{Path(path).parent.name}__{Path(path).stem}__{d * 1e3:g}mm.vtu"
             if vtu is not None:
                 vtu.parent.mkdir(parents=True, exist_ok=True)
-            ds = flat_punch_indentation(card, d, max_depth_m, speed_m_s, element_size_m=min(element_size_m, d / 4),
-                                        n_increments=10, n_threads=1, vtu_path=vtu)
+            n_increments = 10
+            try:
+                ds = flat_punch_indentation(card, d, max_depth_m, speed_m_s, element_size_m=min(element_size_m, d / 4),
+                                            n_increments=n_increments, n_threads=1, vtu_path=vtu)
+            except (ElementInversionError, DynamicRelaxationError) as err:
+                # a card fitted in one mode can be unstable in another (e.g. a shear-only polynomial in
+                # compression): the failure is a result to report for that card, not a reason to lose the others
+                depth = np.linspace(0.0, max_depth_m, n_increments + 1)[1:]
+                failed_at = speed_m_s * getattr(err, "time_s", float("nan"))
+                series[label] = (depth, np.full(depth.size, np.nan))
+                status[label] = f"failed at depth {failed_at * 1e3:.3g} mm: {err}"
+                logger.warning("indentation %s: %s", label, status[label])
+                continue
             series[label] = (np.asarray(ds["displacement"].values), np.asarray(ds["force"].values))
+            status[label] = "ok"
             parts.append((label, ds))
     out = xr.Dataset(
         {"depth": (("case", "point"), np.array([s[0] for s in series.values()]), {"units": "m"}),
-         "force": (("case", "point"), np.array([s[1] for s in series.values()]), {"units": "N"})},
+         "force": (("case", "point"), np.array([s[1] for s in series.values()]), {"units": "N"}),
+         "status": ("case", np.array([status[k] for k in series], dtype=str))},
         coords={"case": list(series)}) if series else xr.Dataset()
     from .canonical import write_netcdf
 
