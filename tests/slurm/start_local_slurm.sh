@@ -55,7 +55,7 @@ start() {
       return 3
     fi
     export DEBIAN_FRONTEND=noninteractive
-    if ! { apt-get update -qq && apt-get install -y -qq --no-install-recommends slurm-wlm munge; } \
+    if ! { apt-get update -qq -o DPkg::Lock::Timeout=120 && apt-get install -y -qq -o DPkg::Lock::Timeout=120 --no-install-recommends slurm-wlm munge; } \
       >/tmp/tissuemech-slurm-apt.log 2>&1; then
       echo "apt-get install slurm-wlm munge failed:" >&2
       tail -5 /tmp/tissuemech-slurm-apt.log >&2
