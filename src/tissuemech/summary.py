@@ -27,6 +27,7 @@ from matplotlib import colormaps
 from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
+from matplotlib.ticker import NullFormatter
 
 from .canonical import read_netcdf, write_text
 from .plots import _new_figure, _positive, axis_label, figure_curves, figure_table, safe_name, save_figure
@@ -110,6 +111,15 @@ def fit_panels(fit: xr.Dataset, curves: Sequence) -> dict[tuple[str, str], list[
     return panels
 
 
+def _quiet_minor_labels(axis, values: np.ndarray) -> None:
+    """Drop minor-tick labels of a log axis spanning more than a decade (they overlap in narrow panels);
+    shorter spans keep them, as they may be the only labels."""
+    values = np.asarray(values, float)
+    values = values[np.isfinite(values) & (values > 0)]
+    if values.size and np.log10(values.max() / values.min()) >= 1.0:
+        axis.set_minor_formatter(NullFormatter())
+
+
 def figure_scope_fit(fit: xr.Dataset, curves: Sequence, title: str | None = None) -> Figure:
     """A fitted model over its data: one row per (test, observable), linear axes left, log axes right.
 
@@ -137,8 +147,10 @@ def figure_scope_fit(fit: xr.Dataset, curves: Sequence, title: str | None = None
             if log:
                 if _positive(xs):
                     ax.set_xscale("log")
+                    _quiet_minor_labels(ax.xaxis, xs)
                 if _positive(ys):
                     ax.set_yscale("log")
+                    _quiet_minor_labels(ax.yaxis, ys)
             ax.set_xlabel(axis_label(series[0]["xname"]) if series[0]["xname"] != "point" else "point index")
             ax.set_ylabel(ylabel)
             ax.set_title(f"{test}: {'log' if log else 'linear'} axes", fontsize=9)
