@@ -1,20 +1,28 @@
 """Power study of the diagnosis (not a test): detection rate vs effect magnitude.
 
-For every catalogue cause, designs with that single effect at 0.5x, 1x and 2x its typical magnitude
-(``science.md`` section 3) are generated over several seeds and diagnosed; a run counts as a detection
-when the cause is the *top* finding (correct naming), and the table also shows how often anything at all
-was named and how often the null design raised a false alarm (alpha = 0.01, Holm).
+Rheometer designs: for every catalogue cause, designs with that single effect at 0.5x, 1x and 2x its
+typical magnitude (``science.md`` section 3) are generated over several seeds and diagnosed; a run counts
+as a detection when the cause is the *top* finding (correct naming); ``(gain>0)`` counts those whose fix
+also improved the held-out metric. The designs are the constructed homogeneous-shear QLV designs of
+``tests/diagnosis/constructed.py`` (6 specimens x 3 samples, specimen SD 25 %, sample SD 10 %, 1 % + 0.03 Pa
+noise; ``--small``: 4 x 2, 16 points, the CI design). The null design counts runs with any finding.
 
-The designs are the constructed homogeneous-shear QLV designs of ``tests/diagnosis/constructed.py``
-(6 specimens x 3 samples, specimen SD 25 %, sample SD 10 %, 1 % + 0.03 Pa noise).
+Multi-mode designs (``--multimode-seeds``): the Budday-like design of
+``tests/diagnosis/constructed_homogeneous.py`` (simple shear to gamma = 0.2, compression to lambda = 0.9,
+tension to 1.1; Mooney-Rivlin truth with C10 + C01 = 600 Pa, 1 % + 0.03 Pa noise), I2 share
+C01/(C10 + C01) = 0.4 x magnitude, diagnosed by :func:`tissuemech.diagnosis.homogeneous.diagnose_homogeneous`.
+Both ``unidentified_i2_dependence`` (the cause) and ``tension_compression_asymmetry`` (its symptom) may be
+named for the same truth, so a detection there is "named", not "top"; the null truth is C01 = 0.
 
 Usage::
 
     NUMBA_CACHE_DIR=.numba_cache .venv/bin/python benchmarks/power_study.py --seeds 5
+    .venv/bin/python benchmarks/power_study.py --small --seeds 3 --multimode-seeds 10 --markdown docs/power_study.md
 """
 from __future__ import annotations
 
 import argparse
+import platform
 import sys
 import time
 import warnings
@@ -24,9 +32,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "diagnosis"))
 
 from constructed import make_design  # noqa: E402
+from constructed_homogeneous import TYPICAL_SHARE, make_multimode  # noqa: E402
 
 from tissuemech.diagnosis import CATALOGUE_IDS  # noqa: E402
 from tissuemech.diagnosis.evidence import residual_table  # noqa: E402
+from tissuemech.diagnosis.homogeneous import ASYMMETRY_ID, I2_ID, diagnose_homogeneous  # noqa: E402
 from tissuemech.diagnosis.report import diagnose, top_finding  # noqa: E402
 
 
@@ -40,32 +50,81 @@ def one(effect, magnitude, seed, design):
     return top_finding(res), any(f["detected"] for f in res["findings"]) or bool(res["unexplained"]), gain
 
 
+def one_multimode(magnitude, seed):
+    """Named findings (id -> fix gain) and whether anything unexplained was reported."""
+    res, _ = diagnose_homogeneous(make_multimode(TYPICAL_SHARE * magnitude, seed=seed), n_random=2, n_grid=15)
+    named = {f["effect"]: (f["fix"] or {}).get("gain") for f in res["findings"] if f["detected"]}
+    return named, bool(res["unexplained"])
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--seeds", type=int, default=3, help="seeds per rheometer cell (0 skips the rheometer part)")
+    ap.add_argument("--multimode-seeds", type=int, default=0, help="seeds per multi-mode cell (0 skips it)")
     ap.add_argument("--magnitudes", type=float, nargs="+", default=[0.5, 1.0, 2.0])
     ap.add_argument("--effects", nargs="+", default=list(CATALOGUE_IDS))
     ap.add_argument("--small", action="store_true", help="the CI test design (4 specimens x 2 samples, 16 points)")
+    ap.add_argument("--markdown", type=Path, help="also write the tables as Markdown to this file")
     args = ap.parse_args(argv)
     design = ({"n_specimens": 4, "n_samples": 2, "n_points": 16} if args.small
               else {"n_specimens": 6, "n_samples": 3, "n_points": 30})
     warnings.simplefilter("ignore")
     t0 = time.perf_counter()
-    false_alarms = sum(one(None, 1.0, 1000 + s, design)[1] for s in range(args.seeds))
-    print(f"design {design}, {args.seeds} seeds; null design: {false_alarms}/{args.seeds} runs with any finding")
-    header = "effect".ljust(28) + "".join(f"{m:>5g}x correct  (gain>0)" for m in args.magnitudes)
-    print(header)
-    for eff in args.effects:
-        cells = []
-        for m in args.magnitudes:
-            hits, gains = 0, 0
-            for s in range(args.seeds):
-                top, _, gain = one(eff, m, s, design)
-                hits += top == eff
-                gains += top == eff and (gain is None or gain > 0)
-            cells.append(f"{hits:>6d}/{args.seeds}     ({gains}/{args.seeds})  ")
-        print(eff.ljust(28) + "".join(cells), flush=True)
-    print(f"total {time.perf_counter() - t0:.0f} s")
+    mags = args.magnitudes
+    def flush(lines):
+        # written after every row so that a run cut short keeps what it measured
+        if args.markdown:
+            args.markdown.parent.mkdir(parents=True, exist_ok=True)
+            args.markdown.write_text("\n".join(lines + [""]))
+
+    md = [f"Generated by `benchmarks/power_study.py {' '.join(sys.argv[1:] if argv is None else argv)}` "
+          f"({time.strftime('%Y-%m-%d')}, Python {platform.python_version()}); alpha = 0.01 family-wise (Holm).", ""]
+    if args.multimode_seeds:
+        n = args.multimode_seeds
+        null = [one_multimode(0.0, 1000 + s) for s in range(n)]
+        alarms = sum(bool(named) or unexpl for named, unexpl in null)
+        head = (f"Multi-mode designs (Mooney-Rivlin truth, 1x = C01/(C10 + C01) = {TYPICAL_SHARE}), seeds 0..{n - 1} "
+                f"(null C01 = 0: seeds 1000..{999 + n}): null design {alarms}/{n} runs with any finding")
+        print(head)
+        md += [head + ".", "", "Cell: runs where the effect is named / seeds (of those, fix gain > 0).", "",
+               "| effect | " + " | ".join(f"{m:g}x" for m in mags) + " |", "|---|" + "---|" * len(mags)]
+        results = {m: [one_multimode(m, s) for s in range(n)] for m in mags}
+        for eff in (I2_ID, ASYMMETRY_ID):
+            cells, md_cells = [], []
+            for m in mags:
+                hits = sum(eff in named for named, _ in results[m])
+                gains = sum(eff in named and (named[eff] is None or named[eff] > 0) for named, _ in results[m])
+                cells.append(f"{hits:>6d}/{n}     ({gains}/{n})  ")
+                md_cells.append(f"{hits}/{n} ({gains})")
+            print((eff + " [multimode]").ljust(40) + "".join(cells), flush=True)
+            md.append(f"| {eff} (multi-mode) | " + " | ".join(md_cells) + " |")
+            flush(md)
+        md.append("")
+    if args.seeds:
+        false_alarms = sum(one(None, 1.0, 1000 + s, design)[1] for s in range(args.seeds))
+        head = (f"Rheometer designs {design}, seeds 0..{args.seeds - 1} (null design seeds 1000..{999 + args.seeds}): "
+                f"null design {false_alarms}/{args.seeds} runs with any finding")
+        print(head)
+        print("effect".ljust(28) + "".join(f"{m:>5g}x correct  (gain>0)" for m in mags))
+        md += [head + ".", "", "Cell: runs where the effect is the top finding / seeds (of those, fix gain > 0).", "",
+               "| effect | " + " | ".join(f"{m:g}x" for m in mags) + " |", "|---|" + "---|" * len(mags)]
+        for eff in args.effects:
+            cells, md_cells = [], []
+            for m in mags:
+                hits, gains = 0, 0
+                for s in range(args.seeds):
+                    top, _, gain = one(eff, m, s, design)
+                    hits += top == eff
+                    gains += top == eff and (gain is None or gain > 0)
+                cells.append(f"{hits:>6d}/{args.seeds}     ({gains}/{args.seeds})  ")
+                md_cells.append(f"{hits}/{args.seeds} ({gains})")
+            print(eff.ljust(28) + "".join(cells), flush=True)
+            md.append(f"| {eff} | " + " | ".join(md_cells) + " |")
+            flush(md)
+        md.append("")
+    total = f"total {time.perf_counter() - t0:.0f} s wall"
+    print(total)
+    flush(md + [total + "."])
 
 
 if __name__ == "__main__":

@@ -24,6 +24,10 @@ alone; preconditioning by the model-free paired comparison of the first-load amp
 later frequency sweep of the same sample where the design has it. A cause is named (in :mod:`.report`)
 only when it passes Holm, is practically relevant and its fix does not lose on held-out data.
 
+Homogeneous multi-mode data (simple shear + uniaxial compression/tension) are diagnosed by
+:mod:`.homogeneous`, which adds the cross-mode id ``tension_compression_asymmetry`` and tests
+``unidentified_i2_dependence`` from the mode combination instead of the normal force.
+
 Inputs (:class:`DiagnosisContext`): the canonical runs, the residual table of the baseline model
 (:func:`tissuemech.diagnosis.evidence.residual_table`) and ``fit_info`` -- how the baseline was fitted:
 ``target`` (``"apparent_stress"``: reported 2M/(pi R^3) taken as rim stress, the thesis method;
