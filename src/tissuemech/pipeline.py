@@ -1,10 +1,13 @@
-"""Small helpers shared by the Snakemake adapter scripts (``workflow/scripts``): logging and run loading."""
+"""Small helpers shared by the Snakemake adapter scripts (``workflow/scripts``): logging, progress, run loading."""
 from __future__ import annotations
 
 import logging
 import sys
+import time
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TypeVar
 
 import xarray as xr
 
@@ -16,7 +19,9 @@ def job_log(log_path: str | Path):
     """Send warnings, ``logging`` records and stderr of a job to its Snakemake log file.
 
     Uncaught exceptions are written to the log with their traceback before they propagate, so
-    ``--show-failed-logs`` shows the cause.
+    ``--show-failed-logs`` shows the cause. When the job runs interactively (the process's original stderr
+    is a terminal) the records are also echoed there, prefixed with the log's name, so a long job shows
+    what it is doing; :func:`progress` bars go to the terminal too.
     """
     log_path = Path(log_path)
     log_path.parent.mkdir(parents=True, exist_ok=True)
@@ -25,6 +30,13 @@ def job_log(log_path: str | Path):
         handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
         root = logging.getLogger()
         root.addHandler(handler)
+        echo = None
+        if _interactive():
+            echo = logging.StreamHandler(sys.__stderr__)
+            echo.setLevel(logging.INFO)
+            echo.addFilter(logging.Filter("tissuemech"))  # the package's own records, not every library's
+            echo.setFormatter(logging.Formatter(f"[{log_path.with_suffix('').as_posix()}] %(message)s"))
+            root.addHandler(echo)
         root.setLevel(logging.INFO)
         logging.captureWarnings(True)
         old_stderr = sys.stderr
@@ -37,7 +49,40 @@ def job_log(log_path: str | Path):
         finally:
             sys.stderr = old_stderr
             root.removeHandler(handler)
+            if echo is not None:
+                root.removeHandler(echo)
             logging.captureWarnings(False)
+
+
+def _interactive() -> bool:
+    """True when the process's original stderr is a terminal (an interactive ``snakemake`` run)."""
+    stream = sys.__stderr__
+    return bool(stream is not None and hasattr(stream, "isatty") and stream.isatty())
+
+
+_Item = TypeVar("_Item")
+
+
+def progress(items: Iterable[_Item], desc: str, total: int | None = None,
+             logger: logging.Logger | None = None) -> Iterator[_Item]:
+    """Iterate ``items`` with a tqdm bar on the terminal (interactive runs only) and start/end lines in the log.
+
+    Inside :func:`job_log` ``sys.stderr`` is the job's log file, so the bar is drawn on the process's original
+    stderr and is disabled when that is not a terminal (batch or cluster jobs keep clean logs).
+    """
+    from tqdm import tqdm
+
+    log = logger or logging.getLogger("tissuemech")
+    if total is None and hasattr(items, "__len__"):
+        total = len(items)  # type: ignore[arg-type]
+    log.info("%s: %s items", desc, "?" if total is None else total)
+    start, done = time.perf_counter(), 0
+    bar = tqdm(items, desc=desc, total=total, file=sys.__stderr__, disable=not _interactive(), leave=False,
+               dynamic_ncols=True)
+    for item in bar:
+        yield item
+        done += 1
+    log.info("%s: %d items in %.1f s", desc, done, time.perf_counter() - start)
 
 
 def load_runs(runs_dir: str | Path) -> list[xr.Dataset]:

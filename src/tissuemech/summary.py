@@ -30,6 +30,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import NullFormatter
 
 from .canonical import read_netcdf, write_text
+from .pipeline import progress
 from .plots import _new_figure, _positive, axis_label, figure_curves, figure_table, safe_name, save_figure
 
 # ------------------------------------------------------------------------------------------------------
@@ -181,7 +182,7 @@ def plot_scope_fits(averages_path, fits_dir, tests: Sequence[str], out_dir) -> l
     averages = read_netcdf(averages_path)
     curves_by_relaxation: dict[str, list] = {}
     written: list[Path] = []
-    for path in sorted(Path(fits_dir).glob("*.nc")):
+    for path in progress(sorted(Path(fits_dir).glob("*.nc")), f"fit figures {Path(fits_dir).name}"):
         fit = read_netcdf(path)
         relaxation = str(fit.attrs.get("relaxation", "measured"))
         if relaxation not in curves_by_relaxation:
@@ -301,7 +302,7 @@ def plot_meshes(vtu_dirs: Mapping[str, str | Path], out_dir, max_per_experiment:
     out_dir.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
     for experiment, folder in vtu_dirs.items():
-        for path in sorted(Path(folder).glob("*.vtu"))[:max_per_experiment]:
+        for path in progress(sorted(Path(folder).glob("*.vtu"))[:max_per_experiment], f"{experiment} meshes"):
             mesh, point_data = read_mesh(path)
             u = point_data.get("displacement")
             case = path.stem.replace("__", " ")

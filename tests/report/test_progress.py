@@ -1,0 +1,53 @@
+"""Per-job logs and progress: records go to the job's log file; bars and echoes only on a terminal."""
+from __future__ import annotations
+
+import io
+import logging
+import sys
+
+import pytest
+
+from tissuemech.pipeline import job_log, progress
+
+
+class _Terminal(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_batch_job_logs_to_file_only(tmp_path, monkeypatch):
+    terminal = io.StringIO()  # not a tty: a batch/cluster job
+    monkeypatch.setattr(sys, "__stderr__", terminal)
+    log_file = tmp_path / "logs" / "demo" / "fit.log"
+    with job_log(log_file) as log:
+        total = sum(progress(range(5), "fitting models"))
+        log.info("ranked %d models", 5)
+        print("solver chatter", file=sys.stderr)
+    text = log_file.read_text()
+    assert total == 10
+    assert "fitting models: 5 items" in text and "fitting models: 5 items in" in text
+    assert "ranked 5 models" in text and "solver chatter" in text
+    assert terminal.getvalue() == ""
+
+
+def test_interactive_job_shows_bar_and_echo_on_terminal(tmp_path, monkeypatch):
+    terminal = _Terminal()
+    monkeypatch.setattr(sys, "__stderr__", terminal)
+    log_file = tmp_path / "logs" / "demo" / "fem.log"
+    with job_log(log_file) as log:
+        list(progress(["a", "b", "c"], "torsion cards"))
+        logging.getLogger("numba.core").info("library noise")
+        log.info("done")
+    shown = terminal.getvalue()
+    assert "\rtorsion cards:   0%" in shown and "0/3" in shown  # the tqdm bar (cleared when done)
+    assert f"[{(tmp_path / 'logs' / 'demo' / 'fem').as_posix()}] done" in shown
+    assert "library noise" not in shown and "library noise" in log_file.read_text()
+
+
+def test_failed_job_leaves_its_traceback_in_the_log(tmp_path):
+    log_file = tmp_path / "job.log"
+    with pytest.raises(ValueError, match="bad curve"):
+        with job_log(log_file):
+            raise ValueError("bad curve")
+    text = log_file.read_text()
+    assert "job failed" in text and "ValueError: bad curve" in text
