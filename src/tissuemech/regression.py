@@ -28,6 +28,7 @@ Command line::
 
     python -m tissuemech.regression --check    # exit 1 with a table of what moved and by how much
     python -m tissuemech.regression --update   # rewrite tests/regression/*.csv and print the diff table
+    python -m tissuemech.regression --check --dataset agar_3pct_thesis   # one dataset only
 """
 from __future__ import annotations
 
@@ -270,8 +271,8 @@ def read_reference(reference_dir=DEFAULT_REFERENCE_DIR) -> pd.DataFrame:
     return pd.concat(tables, ignore_index=True) if tables else pd.DataFrame(columns=list(COLUMNS))
 
 
-def write_reference(table: pd.DataFrame, reference_dir=DEFAULT_REFERENCE_DIR) -> list[Path]:
-    """Write one CSV per dataset (full float precision) and remove tables of datasets no longer checked."""
+def write_reference(table: pd.DataFrame, reference_dir=DEFAULT_REFERENCE_DIR, remove_stale: bool = True) -> list[Path]:
+    """Write one CSV per dataset (full float precision); ``remove_stale`` deletes tables of other datasets."""
     from .canonical import write_text
 
     reference_dir = Path(reference_dir)
@@ -279,11 +280,22 @@ def write_reference(table: pd.DataFrame, reference_dir=DEFAULT_REFERENCE_DIR) ->
     written = []
     for dataset, part in table.groupby("dataset", sort=True):
         path = reference_dir / f"{dataset}.csv"
-        write_text(part[list(COLUMNS)].to_csv(index=False, float_format=None), path)
+        write_text(part[list(COLUMNS)].to_csv(index=False), path)
         written.append(path)
-    for stale in set(reference_dir.glob("*.csv")) - set(written):
-        stale.unlink()
+    if remove_stale:
+        for stale in set(reference_dir.glob("*.csv")) - set(written):
+            stale.unlink()
     return written
+
+
+def select_datasets(datasets: Sequence[str] | None) -> dict[str, dict[str, tuple[str, ...]]]:
+    """The part of :data:`REFERENCE_FITS` for ``datasets`` (all when ``None`` or empty)."""
+    if not datasets:
+        return dict(REFERENCE_FITS)
+    unknown = sorted(set(datasets) - set(REFERENCE_FITS))
+    if unknown:
+        raise ValueError(f"no reference fits for datasets {unknown}; known: {sorted(REFERENCE_FITS)}")
+    return {d: REFERENCE_FITS[d] for d in datasets}
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -332,17 +344,21 @@ def format_table(table: pd.DataFrame) -> str:
 
 
 def check(reference_dir=DEFAULT_REFERENCE_DIR, fresh: pd.DataFrame | None = None, raw_dir=DEFAULT_RAW_DIR,
-          config_path=DEFAULT_CONFIG) -> tuple[bool, pd.DataFrame, str]:
-    """Compare fresh fits (computed unless given) with the committed table.
+          config_path=DEFAULT_CONFIG, datasets: Sequence[str] | None = None) -> tuple[bool, pd.DataFrame, str]:
+    """Compare fresh fits (computed unless given) with the committed table, for every dataset or ``datasets``.
 
     Returns ``(passed, comparison, message)``; the message holds the table of every failing parameter.
     """
+    selection = select_datasets(datasets)
     reference = read_reference(reference_dir)
+    if datasets:
+        reference = reference[reference["dataset"].isin(selection)]
     if reference.empty:
         return False, pd.DataFrame(columns=list(REPORT_COLUMNS)), (
             f"no reference table under {reference_dir}: run `python -m tissuemech.regression --update`")
     if fresh is None:
-        fresh = fresh_table(raw_dir, config_path)
+        fresh = fresh_table(raw_dir, config_path, selection)
+    fresh = fresh[fresh["dataset"].isin(selection)]
     comparison = compare(reference, fresh)
     bad = failures(comparison)
     if bad.empty:
@@ -357,20 +373,27 @@ def check(reference_dir=DEFAULT_REFERENCE_DIR, fresh: pd.DataFrame | None = None
 
 
 def update(reference_dir=DEFAULT_REFERENCE_DIR, fresh: pd.DataFrame | None = None, raw_dir=DEFAULT_RAW_DIR,
-           config_path=DEFAULT_CONFIG) -> tuple[list[Path], str]:
-    """Rewrite the reference tables from fresh fits; return the files and the diff table against the old ones."""
+           config_path=DEFAULT_CONFIG, datasets: Sequence[str] | None = None) -> tuple[list[Path], str]:
+    """Rewrite the reference tables (of every dataset or ``datasets``) from fresh fits.
+
+    Returns the files written and the diff table against the old tables.
+    """
+    selection = select_datasets(datasets)
     try:
         old = read_reference(reference_dir)
     except ReferenceTableError as exc:  # a broken table is replaced, and said so
         log.warning("old reference table unreadable, replaced without a diff: %s", exc)
         old = pd.DataFrame(columns=list(COLUMNS))
+    if datasets:
+        old = old[old["dataset"].isin(selection)]
     if fresh is None:
-        fresh = fresh_table(raw_dir, config_path)
+        fresh = fresh_table(raw_dir, config_path, selection)
+    fresh = fresh[fresh["dataset"].isin(selection)]
     failed = fresh[fresh["parameter"] == "<fit failed>"]
     if not failed.empty:
         raise RuntimeError("refusing to write a reference with failed fits:\n"
                            + failed[["dataset", "scope", "model", "reason"]].to_string(index=False))
-    written = write_reference(fresh, reference_dir)
+    written = write_reference(fresh, reference_dir, remove_stale=not datasets)
     comparison = compare(old, fresh)
     changed = comparison[(comparison["difference"] != 0) | comparison["difference"].isna()]
     if changed.empty:
@@ -390,6 +413,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--reference-dir", type=Path, default=DEFAULT_REFERENCE_DIR)
     parser.add_argument("--raw-dir", type=Path, default=DEFAULT_RAW_DIR)
     parser.add_argument("--config", type=Path, default=DEFAULT_CONFIG)
+    parser.add_argument("--dataset", action="append", dest="datasets", metavar="NAME",
+                        help=f"only this dataset (repeatable; default: all of {sorted(REFERENCE_FITS)})")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     # the pipeline stages log every ingested run; only the regression's own records belong in a CI log
@@ -398,12 +423,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     started = time.perf_counter()
     try:
         if args.update:
-            written, diff = update(args.reference_dir, raw_dir=args.raw_dir, config_path=args.config)
+            written, diff = update(args.reference_dir, raw_dir=args.raw_dir, config_path=args.config,
+                                   datasets=args.datasets)
             print(diff)
             print("wrote " + ", ".join(str(p) for p in written))
             status = 0
         else:
-            passed, _, message = check(args.reference_dir, raw_dir=args.raw_dir, config_path=args.config)
+            passed, _, message = check(args.reference_dir, raw_dir=args.raw_dir, config_path=args.config,
+                                       datasets=args.datasets)
             print(message)
             status = 0 if passed else 1
     except (ReferenceTableError, FileNotFoundError, ValueError, RuntimeError) as exc:

@@ -86,6 +86,30 @@ def test_check_command_exits_1_with_the_table(reference_copy, fresh, monkeypatch
     assert "1 of" in out and "creep_recovery" in out and "eta1" in out and "make regression-update" in out
 
 
+def test_a_changed_pipeline_setting_fails_the_check(repo_root, reference_dir, monkeypatch):
+    """A code-side regression: fitting 30 instead of 40 points per curve moves the agar fits beyond tolerance."""
+    from tissuemech import stages
+
+    monkeypatch.setattr(stages, "POINTS_PER_CURVE", 30)
+    passed, comparison, message = REG.check(reference_dir, raw_dir=repo_root / "raw",
+                                            config_path=repo_root / "config" / "config.yaml",
+                                            datasets=["agar_3pct_thesis"])
+    assert not passed
+    assert set(comparison["dataset"]) == {"agar_3pct_thesis"}
+    moved = comparison[comparison["status"] == "moved"]
+    assert len(moved) >= 3 and (moved["difference/tolerance"].abs() > 1).all()
+    assert all(f" {p} " in message for p in moved["parameter"])
+
+
+def test_update_of_one_dataset_leaves_the_other_table(reference_copy, fresh):
+    brain = (reference_copy / "porcine_brain_thesis.csv").read_text()
+    (reference_copy / "porcine_brain_thesis.csv").write_text(brain.replace("0.1 x standard error", "edited"))
+    written, diff = REG.update(reference_copy, fresh=fresh, datasets=["agar_3pct_thesis"])
+    assert written == [reference_copy / "agar_3pct_thesis.csv"]
+    assert diff.startswith("reference unchanged: 10 parameters")
+    assert "edited" in (reference_copy / "porcine_brain_thesis.csv").read_text()
+
+
 def test_update_rewrites_the_tables_and_prints_the_diff(reference_copy, fresh, monkeypatch, capsys):
     old, _ = _perturb(reference_copy, "porcine_brain_thesis", "frequency_sweep", "springpot", "alpha", 3.0)
     monkeypatch.setattr(REG, "fresh_table", lambda *a, **k: fresh)
