@@ -375,6 +375,39 @@ def caption_text(path: Path) -> str:
     return " ".join(text.split())
 
 
+class _Wildcards:
+    """Wildcards of a caption rendered for a whole section: known ones by value, the others as ``<name>``."""
+
+    def __init__(self, known: Mapping[str, str]):
+        self._known = dict(known)
+
+    def __getattr__(self, name: str) -> str:
+        if name.startswith("__"):
+            raise AttributeError(name)
+        return self._known.get(name, f"<{name}>")
+
+
+def render_caption(path: Path, config: Mapping | None = None, wildcards: Mapping[str, str] | None = None,
+                   keep_title: bool = False) -> str:
+    """HTML of a report caption, rendered as ``snakemake --report`` does (Jinja, then reStructuredText).
+
+    ``snakemake.config`` is ``config``; wildcards not given appear as ``<name>`` (a section caption stands for
+    every figure of the section). Without jinja2/docutils (Snakemake's own dependencies) the caption's plain
+    text (:func:`caption_text`) is returned, escaped.
+    """
+    if not path.is_file():
+        return ""
+    try:
+        from docutils.core import publish_parts
+        from jinja2 import Template
+    except ImportError:
+        return f"<p>{html.escape(caption_text(path))}</p>"
+    context = type("Snakemake", (), {"config": dict(config or {}), "wildcards": _Wildcards(wildcards or {})})
+    text = Template(path.read_text(encoding="utf-8")).render(snakemake=context)
+    parts = publish_parts(text, writer="html", settings_overrides={"report_level": 5, "halt_level": 5})
+    return parts["html_body"] if keep_title else parts["body"]
+
+
 def _table(path: Path, columns: list[str] | None = None, rows: int = 25) -> str:
     if not path.is_file() or path.stat().st_size == 0:
         return f"<p><i>{html.escape(path.name)} not produced</i></p>"
@@ -420,7 +453,7 @@ def _figures(root: Path, pattern: str) -> str:
     return "".join(_img(p, str(p.relative_to(root).with_suffix(""))) for p in paths)
 
 
-def build_summary(results_dir, datasets: list[str], out_html, captions_dir=None) -> Path:
+def build_summary(results_dir, datasets: list[str], out_html, captions_dir=None, config: Mapping | None = None) -> Path:
     """Write ``out_html``: per dataset its ingest, LVE, ranking, diagnosis and FEM tables and every figure.
 
     Parameters
@@ -428,25 +461,31 @@ def build_summary(results_dir, datasets: list[str], out_html, captions_dir=None)
     results_dir : the ``results`` folder.
     datasets : dataset names, in display order.
     out_html : the page to write (figures are embedded as base64 PNG: one file to mail or archive).
-    captions_dir : folder of the report captions (``workflow/report``); their text heads each section.
+    captions_dir : folder of the report captions (``workflow/report``); each heads its section, rendered by
+        :func:`render_caption` with ``config`` and the dataset name.
+    config : the workflow configuration the captions may quote.
     """
     root = Path(results_dir)
     captions = Path(captions_dir) if captions_dir is not None else None
 
-    def caption(stem: str) -> str:
-        text = caption_text(captions / f"{stem}.rst") if captions is not None else ""
-        return f'<p class="caption">{html.escape(text)}</p>' if text else ""
+    def caption(stem: str, dataset: str | None = None, keep_title: bool = False) -> str:
+        if captions is None:
+            return ""
+        body = render_caption(captions / f"{stem}.rst", config, {"dataset": dataset} if dataset else {},
+                              keep_title=keep_title)
+        return f'<div class="caption">{body}</div>' if body else ""
 
     parts = [f"<html><head><meta charset='utf-8'><title>tissuemech results</title><style>{_STYLE}</style></head><body>",
-             "<h1>tissuemech results</h1>", caption("workflow")]
+             "<h1>tissuemech results</h1>", caption("workflow", keep_title=False)]
     for name in datasets:
         d = root / name
         parts.append(f'<h2 id="{html.escape(name)}">{html.escape(name)}</h2>')
         parts.append("<h3>Ingest</h3>" + _table(d / "ingest_report.csv", ["run", "file", "test", "status", "reason"], 12))
         parts.append("<h3>LVE limits</h3>" + _table(d / "lve.csv"))
+        # flags are spelled out in ranking.csv; here their count keeps the table readable
         parts.append("<h3>Ranking</h3>" + _table(d / "ranking.csv", ["scope", "model", "family", "rank", "aicc",
                                                                      "delta_aicc", "bic", "rmse", "nrmse", "cv_nrmse",
-                                                                     "flags", "recommended"], 40))
+                                                                     "n_flags", "recommended"], 40))
         rec = d / "ranking.csv"
         if rec.is_file() and rec.stat().st_size:
             frame = pd.read_csv(rec)
@@ -457,7 +496,7 @@ def build_summary(results_dir, datasets: list[str], out_html, captions_dir=None)
         parts.append("<h3>FEM torsion vs measured torque</h3>" + _table(d / "fem" / "torsion.csv"))
         for title, stem, pattern in SECTIONS:
             if any(d.glob(pattern)):
-                parts.append(f"<h3>{html.escape(title)}</h3>" + caption(stem) + _figures(d, pattern))
+                parts.append(f"<h3>{html.escape(title)}</h3>" + caption(stem, name) + _figures(d, pattern))
     parts.append("<h2>TLED timing</h2>" + caption("timing") + _table(root / "fem" / "timing.csv", rows=60)
                  + _figures(root / "fem", "figures/*.png"))
     parts.append("</body></html>")
@@ -466,4 +505,4 @@ def build_summary(results_dir, datasets: list[str], out_html, captions_dir=None)
 
 __all__ = ["FIT_ABSCISSA", "SECTIONS", "boundary_faces", "build_summary", "caption_text", "card_table",
            "figure_mesh", "figure_scope_fit", "fit_panels", "plot_cards", "plot_meshes", "plot_scope_fits",
-           "plot_timing"]
+           "plot_timing", "render_caption"]

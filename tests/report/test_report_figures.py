@@ -175,10 +175,15 @@ def test_summary_page_embeds_every_figure_with_its_caption(tmp_path, repo_root):
     plot_timings(["a"], [1.0], results / "demo" / "figures" / "fits" / "flow_curve" / "cross")
     pd.DataFrame({"scope": ["flow_curve"], "model": ["cross"], "rank": [1],
                   "recommendation": ["cross fits best"]}).to_csv(results / "demo" / "ranking.csv", index=False)
-    page = build_summary(results, ["demo"], tmp_path / "summary.html", captions_dir=repo_root / "workflow" / "report")
+    config = {"fit": {"seed": 424242, "plate_target": "torque"}, "fem": {"poisson_ratio": 0.45},
+              "diagnosis": {"alpha": 0.05}}
+    page = build_summary(results, ["demo"], tmp_path / "summary.html", captions_dir=repo_root / "workflow" / "report",
+                         config=config)
     text = page.read_text()
     assert "Raw runs (thin grey lines) and the sample average" in text
-    assert "fitted to scope of dataset" in text  # the fits caption, Jinja tags removed
+    # captions rendered like the Snakemake report: Jinja with the config and dataset, then reStructuredText
+    assert "Model <strong>&lt;model&gt;</strong> fitted to scope <strong>&lt;scope&gt;</strong> of dataset\ndemo" in text
+    assert "multistart seed 424242" in text and "Poisson ratio 0.45" in text
     assert "cross fits best" in text
     images = re.findall(r'src="data:image/png;base64,([^"]+)"', text)
     assert len(images) == 2
