@@ -1,4 +1,6 @@
 # What the model gets wrong, why, the extension that fixes it and the held-out gain.
+# Homogeneous multi-mode datasets (simple shear + compression + tension, e.g. Budday) are dispatched to the
+# cross-mode diagnosis, which refits its I1/I2 laws per mode combination; their fits input only orders the job.
 
 
 rule diagnose:

@@ -665,8 +665,16 @@ def write_figures(by_mode, table: pd.DataFrame, result: dict, fig_dir) -> list:
     rot = result["cross_mode"]["rotations"]
     fig, ax = plt.subplots(figsize=(7, 4))
     y = np.arange(len(rot))
-    ax.barh(y - 0.2, [r[base] for r in rot], height=0.4, label=f"{base} (I1 only)")
-    ax.barh(y + 0.2, [r[ext] for r in rot], height=0.4, label=f"{ext} (+ C01)")
+    ref = "ogden1" if "ogden1" in rot[0] else None
+    width = 0.27 if ref else 0.4
+    ax.barh(y - width, [r[base] for r in rot], height=width, label=f"{base} (I1 only)")
+    ax.barh(y, [r[ext] for r in rot], height=width, label=f"{ext} (+ C01)")
+    if ref:
+        ax.barh(y + width, [r[ref] for r in rot], height=width, label=f"{ref} (reference)")
+    shear_only = [(i, r["shear_only_baseline"]) for i, r in enumerate(rot) if "shear_only_baseline" in r]
+    if shear_only:
+        ax.plot([v for _, v in shear_only], [i for i, _ in shear_only], "kx", ms=9,
+                label=f"{base} calibrated on shear alone")
     ax.set_yticks(y, [r["label"] for r in rot], fontsize=8)
     ax.set_xlabel("held-out NRMSE")
     ax.legend(fontsize=8)
