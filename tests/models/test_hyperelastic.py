@@ -76,3 +76,132 @@ def test_law_table_is_shared_with_fem():
         spec = laws[key]
         fn = entry.get("dW_dI1") or entry.get("dW_dlambda")
         assert fn in (spec.dw_di1, spec.dw_dlambda), key
+
+
+# ------------------------------------------------------------------------------------------------------
+# Nunes, Amin and the full polynomial: checked against the energy differentiated along the deformation path
+# (simple shear sigma12 = dW/dgamma at I1 = I2 = 3 + gamma^2; uniaxial P = dW/dlambda at I1 = lambda^2 + 2/lambda,
+# I2 = 2 lambda + lambda^-2), which is independent of the dW/dI1, dW/dI2 implementation.
+# ------------------------------------------------------------------------------------------------------
+LAM = np.linspace(0.6, 1.6, 21)
+SHEAR = np.linspace(0.02, 0.8, 17)
+
+
+def _path_derivative(energy, x, h=1e-6):
+    """Central difference (relative step) of a scalar energy path."""
+    return (energy(x + h * x) - energy(x - h * x)) / (2 * h * x)
+
+
+def _shear_energy(W):
+    return lambda g: W(3 + g**2, 3 + g**2)
+
+
+def _uniaxial_energy(W):
+    return lambda lam: W(lam**2 + 2 / lam, 2 * lam + lam**-2)
+
+
+def _polynomial_energy(coefficients):
+    return lambda i1, i2: sum(c * (i1 - 3) ** i * (i2 - 3) ** j for (i, j), c in coefficients.items())
+
+
+def test_nunes_simple_shear_normal_stress_and_uniaxial_closed_forms():
+    m = get_model("nunes")
+    c1, c2 = 60.0, 15.0
+    p = {"C1": c1, "C2": c2}
+    # sigma = 2 gamma (W1 + W2), W1 = C1, W2 = C2 (I2 - 3)^(-1/4) = C2 gamma^(-1/2)
+    np.testing.assert_allclose(m.elastic_shear_stress(p, SHEAR), 2 * c1 * SHEAR + 2 * c2 * np.sqrt(SHEAR), rtol=1e-12)
+    np.testing.assert_allclose(m.elastic_shear_stress(p, -SHEAR), -m.elastic_shear_stress(p, SHEAR), rtol=1e-12)
+    assert m.elastic_shear_stress(p, np.array([0.0]))[0] == 0.0
+    n1, n2 = m.normal_stress_differences(p, SHEAR)
+    np.testing.assert_allclose(n1, SHEAR * (2 * c1 * SHEAR + 2 * c2 * np.sqrt(SHEAR)), rtol=1e-12)
+    np.testing.assert_allclose(n2, -2 * c2 * SHEAR**1.5, rtol=1e-12)
+    W = lambda i1, i2: c1 * (i1 - 3) + 4 / 3 * c2 * np.abs(i2 - 3) ** 0.75  # noqa: E731
+    np.testing.assert_allclose(m.uniaxial_nominal_stress(p, LAM[LAM != 1.0]),
+                               _path_derivative(_uniaxial_energy(W), LAM[LAM != 1.0]), rtol=1e-6)
+    np.testing.assert_allclose(m.elastic_shear_stress(p, SHEAR), _path_derivative(_shear_energy(W), SHEAR), rtol=1e-6)
+    # square-root start: no finite initial modulus, the secant modulus grows like gamma^(-1/2) as gamma -> 0
+    secant = m.elastic_shear_stress(p, np.array([1e-6, 1e-4])) / np.array([1e-6, 1e-4])
+    assert secant[0] / secant[1] > 9.0
+
+
+def test_amin_energy_derivatives_and_yamashita_kawabata_limit():
+    m = get_model("amin")
+    p = {"C5": 60.0, "C3": 40.0, "C4": 300.0, "C2": 15.0, "N": 0.5, "M": 2.5}
+
+    def W(i1, i2):
+        x = i1 - 3
+        return (p["C5"] * x + p["C3"] / (p["N"] + 1) * x ** (p["N"] + 1) + p["C4"] / (p["M"] + 1) * x ** (p["M"] + 1)
+                + p["C2"] * (i2 - 3))
+
+    np.testing.assert_allclose(m.elastic_shear_stress(p, SHEAR), _path_derivative(_shear_energy(W), SHEAR), rtol=1e-6)
+    lam = LAM[LAM != 1.0]
+    np.testing.assert_allclose(m.uniaxial_nominal_stress(p, lam), _path_derivative(_uniaxial_energy(W), lam), rtol=1e-6)
+    _, n2 = m.normal_stress_differences(p, SHEAR)
+    np.testing.assert_allclose(n2, -2 * p["C2"] * SHEAR**2, rtol=1e-12)
+    # C4 = 0 is Yamashita-Kawabata; with N = 1 that is Mooney-Rivlin plus C3/2 (I1-3)^2 (a Yeoh-type term)
+    yk = {**p, "C4": 0.0, "N": 1.0}
+    expected = 2 * SHEAR * (p["C5"] + p["C3"] * SHEAR**2 + p["C2"])
+    np.testing.assert_allclose(m.elastic_shear_stress(yk, SHEAR), expected, rtol=1e-12)
+    # a negative exponent (low-strain softening) keeps sigma finite and zero at the origin: 2 C3 gamma^(2N+1)
+    soft = {**p, "C5": 0.0, "C4": 0.0, "C2": 0.0, "N": -0.3}
+    np.testing.assert_allclose(m.elastic_shear_stress(soft, SHEAR), 2 * 40.0 * SHEAR**0.4, rtol=1e-12)
+    assert m.elastic_shear_stress(soft, np.array([0.0]))[0] == 0.0
+
+
+def test_polynomial_order_one_is_mooney_rivlin_and_order_two_matches_polynomial2():
+    from tissuemech.models.hyperelastic import polynomial
+
+    p1 = polynomial(1)
+    assert p1.param_names == ("C10", "C01")
+    mr = get_model("mooney_rivlin")
+    p = {"C10": 60.0, "C01": 25.0}
+    np.testing.assert_allclose(p1.elastic_shear_stress(p, SHEAR), mr.elastic_shear_stress(p, SHEAR), rtol=1e-14)
+    np.testing.assert_allclose(p1.uniaxial_nominal_stress(p, LAM), mr.uniaxial_nominal_stress(p, LAM), rtol=1e-14)
+    np.testing.assert_allclose(p1.normal_stress_differences(p, SHEAR)[1], -2 * 25.0 * SHEAR**2, rtol=1e-12)
+    q = {"C10": 60.0, "C01": 25.0, "C20": 30.0, "C11": -12.0, "C02": 7.0}
+    general, fixed = polynomial(2), get_model("polynomial2")
+    assert general.param_names == fixed.param_names
+    np.testing.assert_allclose(general.uniaxial_nominal_stress(q, LAM), fixed.uniaxial_nominal_stress(q, LAM),
+                               rtol=1e-13)
+    np.testing.assert_allclose(general.normal_stress_differences(q, SHEAR)[1],
+                               fixed.normal_stress_differences(q, SHEAR)[1], rtol=1e-13)
+
+
+@pytest.mark.parametrize("order", [3, 4, 5, 6])
+def test_full_polynomial_against_its_energy(order):
+    m = get_model(f"polynomial{order}")
+    # Abaqus order: C10, C01, C20, C11, C02, C30, ... (total degree, then rising power of I2 - 3)
+    expected_names = tuple(f"C{t - j}{j}" for t in range(1, order + 1) for j in range(t + 1))
+    assert m.param_names == expected_names and len(expected_names) == order * (order + 3) // 2
+    rng = np.random.default_rng(order)
+    coefficients = {(int(n[1]), int(n[2])): float(v) for n, v in
+                    zip(expected_names, rng.uniform(5.0, 60.0, len(expected_names)) / np.arange(1, len(expected_names) + 1))}
+    p = {f"C{i}{j}": c for (i, j), c in coefficients.items()}
+    W = _polynomial_energy(coefficients)
+    np.testing.assert_allclose(m.elastic_shear_stress(p, SHEAR), _path_derivative(_shear_energy(W), SHEAR), rtol=1e-6)
+    lam = LAM[LAM != 1.0]
+    np.testing.assert_allclose(m.uniaxial_nominal_stress(p, lam), _path_derivative(_uniaxial_energy(W), lam), rtol=1e-6)
+    # N2 = -2 gamma^2 W2, W2 = sum j C_ij x^i y^(j-1) at x = y = gamma^2
+    w2 = sum(j * c * SHEAR ** (2 * (i + j - 1)) for (i, j), c in coefficients.items() if j > 0)
+    np.testing.assert_allclose(m.normal_stress_differences(p, SHEAR)[1], -2 * SHEAR**2 * w2, rtol=1e-12)
+
+
+@pytest.mark.parametrize("key,params", [
+    ("nunes", {"C1": 60.0, "C2": 15.0}),
+    ("amin", {"C5": 60.0, "C3": 40.0, "C4": 300.0, "C2": 15.0, "N": 0.5, "M": 2.5}),
+    ("polynomial3", {"C10": 40.0, "C01": 15.0, "C20": 60.0, "C11": -10.0, "C02": 20.0, "C30": 50.0, "C21": 10.0,
+                     "C12": -5.0, "C03": 8.0}),
+])
+def test_new_laws_reach_the_fem_material_routine(key, params):
+    """The FEM adopts the law table: one material point in simple shear gives the 1-D closed form."""
+    mats = pytest.importorskip("tissuemech.fem.materials")
+    mats.available_laws.cache_clear()
+    assert key in HYPERELASTIC_LAWS and key in mats.available_laws()
+    model = get_model(key)
+    mu_ref = float(model.elastic_shear_stress(params, np.array([0.05]))[0] / 0.05)
+    mat = mats.make_material(key, params, bulk_modulus_pa=1e4 * mu_ref)
+    for g in (0.05, 0.3, 0.6):
+        F = np.eye(3)
+        F[0, 1] = g
+        assert mats.cauchy_stress(mat, F)[0, 1] == pytest.approx(model.elastic_shear_stress(params, np.array([g]))[0],
+                                                                 rel=2e-3)

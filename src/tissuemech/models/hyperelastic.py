@@ -15,6 +15,10 @@ Closed forms (incompressible, ``science.md`` sections 1.7 and 2.2; ``fem.md`` se
 * uniaxial nominal stress: ``P = 2 (lambda - lambda^-2)(W1 + W2/lambda)``, or for stretch laws
   ``P = (t(lambda) - t(lambda^-1/2)) / lambda``.
 
+Laws: neo-Hookean, Mooney-Rivlin, full polynomial (orders 2-6, Abaqus coefficient order), reduced polynomial /
+Yeoh, Gent, Arruda-Boyce, Ogden, Lopez-Pamies, Nunes (``W = C1 (I1-3) + 4/3 C2 (I2-3)^(3/4)``) and Amin
+(``W = C5 (I1-3) + C3/(N+1) (I1-3)^(N+1) + C4/(M+1) (I1-3)^(M+1) + C2 (I2-3)``); see the factories.
+
 Parameter names follow the Abaqus/FEBio conventions used by :mod:`tissuemech.cards`: ``mu`` (neo-Hookean
 shear modulus, ``C10 = mu/2``), ``C10, C01, C20, ...`` (polynomial coefficients, Pa), ``mu1, alpha1, ...``
 (Ogden ``W = sum 2 mu_p/alpha_p^2 (l1^a + l2^a + l3^a - 3)`` and Lopez-Pamies
@@ -118,6 +122,83 @@ def ogden_dw_dlambda(p, lam):
         mu, a = p[2 * r], p[2 * r + 1]
         s += 2.0 * mu / a * lam ** (a - 1.0)
     return s
+
+
+@njit(cache=True)
+def polynomial_dw_di1(p, i1, i2):
+    """Full polynomial ``W = sum_{1 <= i+j <= N} C_ij (I1-3)^i (I2-3)^j``; ``p`` in the Abaqus order
+    ``[C10, C01, C20, C11, C02, C30, C21, C12, C03, ...]`` (total degree ascending, then rising power of
+    ``I2 - 3``), ``N(N+3)/2`` coefficients for order ``N`` (Pa)."""
+    x = i1 - 3.0
+    y = i2 - 3.0
+    s = 0.0
+    idx = 0
+    total = 1
+    while idx < p.size:
+        for j in range(total + 1):
+            i = total - j
+            if i > 0:
+                s += i * p[idx] * x ** (i - 1) * y ** j
+            idx += 1
+        total += 1
+    return s
+
+
+@njit(cache=True)
+def polynomial_dw_di2(p, i1, i2):
+    x = i1 - 3.0
+    y = i2 - 3.0
+    s = 0.0
+    idx = 0
+    total = 1
+    while idx < p.size:
+        for j in range(total + 1):
+            i = total - j
+            if j > 0:
+                s += j * p[idx] * x ** i * y ** (j - 1)
+            idx += 1
+        total += 1
+    return s
+
+
+@njit(cache=True)
+def nunes_dw_di1(p, i1, i2):
+    """Nunes (2011) ``W = C1 (I1bar - 3) + 4/3 C2 (I2bar - 3)^(3/4)``; ``p = [C1, C2]`` (Pa)."""
+    return p[0]
+
+
+@njit(cache=True)
+def nunes_dw_di2(p, i1, i2):
+    # W2 = C2 (I2 - 3)^(-1/4) is singular at the reference state, but every stress it enters is multiplied by
+    # a factor vanishing faster (simple shear: 2 gamma W2 = 2 C2 gamma^(1/2)), so the limit 0 is the right
+    # value there; round-off can also make I2bar - 3 slightly negative in the FEM
+    y = i2 - 3.0
+    if y <= 0.0:
+        return 0.0
+    return p[1] * y ** -0.25
+
+
+@njit(cache=True)
+def _power_term(c, x, e):
+    """``c x^e`` for ``x = I1 - 3 >= 0``; 0 at the reference state when ``e < 0`` (same limit as Nunes)."""
+    if e == 0.0:
+        return c
+    if x <= 0.0:
+        return 0.0
+    return c * x ** e
+
+
+@njit(cache=True)
+def amin_dw_di1(p, i1, i2):
+    """Amin ``W = C5 (I1-3) + C3/(N+1) (I1-3)^(N+1) + C4/(M+1) (I1-3)^(M+1) + C2 (I2-3)``;
+    ``p = [C5, C3, C4, C2, N, M]``."""
+    x = i1 - 3.0
+    return p[0] + _power_term(p[1], x, p[4]) + _power_term(p[2], x, p[5])
+
+
+@njit(cache=True)
+def amin_dw_di2(p, i1, i2):
+    return p[3]
 
 
 @njit(cache=False)  # takes jitted callables: numba cannot cache those reliably (numba#2956)
@@ -330,6 +411,48 @@ def arruda_boyce() -> HyperelasticModel:
     return HyperelasticModel(name="arruda_boyce", param_specs=specs, dw_di1=arruda_boyce_dw_di1)
 
 
+def polynomial(order: int) -> HyperelasticModel:
+    """Full polynomial (generalized Mooney-Rivlin) of order ``order``: ``W = sum_{1<=i+j<=N} C_ij x^i y^j``,
+    ``x = I1 - 3``, ``y = I2 - 3``; parameters in the Abaqus ``*HYPERELASTIC, POLYNOMIAL, N=order`` order.
+
+    ``C10`` and ``C01`` are positive moduli (fitted on a log scale, as in Mooney-Rivlin); higher coefficients
+    may be negative. Order 1 is Mooney-Rivlin. In simple shear ``x = y = gamma^2``, so only the sums
+    ``sum_{i+j=k} C_ij`` are identifiable from shear data alone.
+    """
+    names = [f"C{t - j}{j}" for t in range(1, order + 1) for j in range(t + 1)]
+    specs = tuple(_modulus(n, 80.0 if n == "C10" else 20.0) if n in ("C10", "C01") else _coefficient(n)
+                  for n in names)
+    return HyperelasticModel(name=f"polynomial{order}", param_specs=specs, dw_di1=polynomial_dw_di1,
+                             dw_di2=polynomial_dw_di2, structure={"order": order})
+
+
+def nunes() -> HyperelasticModel:
+    """Nunes law ``W = C1 (I1bar - 3) + 4/3 C2 (I2bar - 3)^(3/4)`` (L.C.S. Nunes 2011, Mater. Sci. Eng. A
+    528:1799-1804, PDMS in simple shear): ``sigma12 = 2 C1 gamma + 2 C2 gamma^(1/2)``,
+    ``N2 = -2 C2 gamma^(3/2)``. Its initial tangent modulus is infinite (square-root softening from zero).
+    """
+    specs = (_modulus("C1", 80.0, "I1 modulus"), _modulus("C2", 10.0, "I2 modulus of the (I2-3)^(3/4) term"))
+    return HyperelasticModel(name="nunes", param_specs=specs, dw_di1=nunes_dw_di1, dw_di2=nunes_dw_di2)
+
+
+def amin() -> HyperelasticModel:
+    """Amin law ``W = C5 (I1-3) + C3/(N+1) (I1-3)^(N+1) + C4/(M+1) (I1-3)^(M+1) + C2 (I2-3)``.
+
+    Introduced for natural and high-damping rubber by Amin et al. (2002, Mech. Mater. 34:75-95) as an extension of
+    Yamashita-Kawabata (1992) by a second power term of ``I1 - 3``. Form checked against Hyperelastics.jl's
+    ``Amin`` (citing Amin, Wiraguna, Bhuiyan & Okui 2006, J. Eng. Mech. 132(1):54-64), which writes it
+    ``C1 (I1-3) + C2/(N+1) (I1-3)^(N+1) + C3/(M+1) (I1-3)^(M+1) + C4 (I2-3)``: the same law with relabelled
+    constants (C1 -> C5, C2 -> C3, C3 -> C4, C4 -> C2 here).
+    ``W1 = C5 + C3 x^N + C4 x^M`` (``x = I1 - 3``), ``W2 = C2``. Exponents are bounded
+    to ``[-0.45, 10]`` so that ``sigma12 = 2 gamma (W1 + W2)`` tends to 0 at ``gamma -> 0``.
+    """
+    specs = (_modulus("C5", 80.0, "linear I1 modulus"), _coefficient("C3", 10.0), _coefficient("C4", 10.0),
+             _modulus("C2", 20.0, "I2 modulus"),
+             ParamSpec("N", "1", 1.0, -0.45, 10.0, log=False, description="exponent of the C3 term"),
+             ParamSpec("M", "1", 2.0, -0.45, 10.0, log=False, description="exponent of the C4 term"))
+    return HyperelasticModel(name="amin", param_specs=specs, dw_di1=amin_dw_di1, dw_di2=amin_dw_di2)
+
+
 MODELS: dict[str, Callable[[], ConstitutiveModel]] = {
     "linear_elastic": LinearElasticShear,
     "neo_hookean": neo_hookean,
@@ -338,7 +461,11 @@ MODELS: dict[str, Callable[[], ConstitutiveModel]] = {
     "yeoh": lambda: reduced_polynomial(3, name="yeoh"),
     "gent": gent,
     "arruda_boyce": arruda_boyce,
+    "nunes": nunes,
+    "amin": amin,
 }
+for _n in range(3, 7):
+    MODELS[f"polynomial{_n}"] = (lambda n=_n: polynomial(n))
 for _n in range(2, 7):
     MODELS[f"reduced_polynomial{_n}"] = (lambda n=_n: reduced_polynomial(n))
 for _n in (1, 2, 3):
