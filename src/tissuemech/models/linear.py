@@ -27,6 +27,10 @@ Arrangements (Pa, Pa s, s):
                               J(t) = 1/G1 + t/eta1 + (1 - exp(-t G2/eta2))/G2; relaxation = two exponentials
 ``prony{n}`` (G_inf, G_1..G_n, tau_1..tau_n)   generalized Maxwell solid
 ``prony{n}_liquid`` (G_1..G_n, tau_1..tau_n)   generalized Maxwell liquid (no equilibrium spring)
+``gkv{n}`` (G0, G_1..G_n, tau_ret_1..tau_ret_n)  generalized Kelvin-Voigt solid: spring G0 in series with n
+                              Kelvin-Voigt units (spring G_i, retardation time tau_ret_i = eta_i/G_i): creep
+                              compliance J(t) = 1/G0 + sum_i (1 - exp(-t/tau_ret_i))/G_i (closed-form creep);
+                              relaxation spectrum by exact interconversion (:func:`gkv_relaxation_spectrum`)
 """
 from __future__ import annotations
 
@@ -230,6 +234,93 @@ def nnls_prony_weights(time_s: np.ndarray, modulus_pa: np.ndarray, taus: np.ndar
     return 0.0, weights, float(resid)
 
 
+# ------------------------------------------------------------------------------------------------------
+# generalized Kelvin-Voigt: a retardation spectrum, converted exactly to the relaxation spectrum
+# ------------------------------------------------------------------------------------------------------
+def gkv_relaxation_spectrum(g0: float, g_voigt: np.ndarray, tau_ret: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """Relaxation spectrum ``(G_inf, G_k, theta_k)`` of a spring ``g0`` in series with Kelvin-Voigt units.
+
+    Under a strain step the Voigt strains ``e`` obey ``D de/dt = G0 gamma 1 - K e`` with ``D = diag(eta_i)``,
+    ``K = diag(G_i) + G0 1 1^T`` (the series spring carries ``G0 (gamma - sum e)``). The relaxation rates are
+    the eigenvalues ``l_k`` of the symmetric ``S = D^-1/2 K D^-1/2`` (``scipy.linalg.eigh``), and with
+    ``w = V^T D^-1/2 1`` the step response is ``G(t) = G0 - G0^2 sum_k w_k^2/l_k (1 - exp(-l_k t))``, i.e.
+    ``G_k = G0^2 w_k^2 / l_k``, ``theta_k = 1/l_k`` and ``G_inf = 1/(1/G0 + sum 1/G_i)``. The relaxation times
+    interlace the retardation times (``theta_1 < tau_1 < theta_2 < ...``).
+    """
+    from scipy.linalg import eigh
+
+    g_voigt = np.atleast_1d(np.asarray(g_voigt, float))
+    tau_ret = np.atleast_1d(np.asarray(tau_ret, float))
+    eta = g_voigt * tau_ret
+    inv_sqrt_eta = 1.0 / np.sqrt(eta)
+    stiffness = np.diag(g_voigt) + g0
+    rates, vectors = eigh(inv_sqrt_eta[:, None] * stiffness * inv_sqrt_eta[None, :])
+    w = vectors.T @ inv_sqrt_eta
+    g_k = g0 * g0 * w * w / rates
+    g_inf = 1.0 / (1.0 / g0 + np.sum(1.0 / g_voigt))
+    order = np.argsort(1.0 / rates)
+    return float(g_inf), g_k[order], (1.0 / rates)[order]
+
+
+def _gkv_parts(p: Params, n: int) -> tuple[float, np.ndarray, np.ndarray]:
+    return (float(p["G0"]), np.array([p[f"G_{i}"] for i in range(1, n + 1)], float),
+            np.array([p[f"tau_ret_{i}"] for i in range(1, n + 1)], float))
+
+
+@dataclass
+class GeneralizedKelvinVoigt(SpectrumModel):
+    """Spring ``G0`` in series with ``n_units`` Kelvin-Voigt units (``G_i``, ``tau_ret_i``).
+
+    Creep is evaluated in closed form from the creep compliance (Boltzmann superposition, exact for a
+    piecewise-linear stress history); strain-controlled histories, oscillation and the relaxation modulus go
+    through the exactly interconverted relaxation spectrum (:func:`gkv_relaxation_spectrum`), so
+    ``G*(omega) J*(omega) = 1``.
+    """
+
+    n_units: int = 1
+
+    def spectrum(self, p: Params) -> tuple[float, np.ndarray, np.ndarray, float]:
+        g_inf, g_k, theta = gkv_relaxation_spectrum(*_gkv_parts(p, self.n_units))
+        return g_inf, g_k, theta, 0.0
+
+    def relaxation_spectrum(self, p: Params) -> tuple[float, np.ndarray, np.ndarray]:
+        """``(G_inf, G_k, theta_k)`` (Pa, Pa, s): the Prony (generalized Maxwell) form of the model."""
+        return gkv_relaxation_spectrum(*_gkv_parts(p, self.n_units))
+
+    def creep_compliance(self, p: Params, time_s: np.ndarray) -> np.ndarray:
+        """``J(t) = 1/G0 + sum_i (1 - exp(-t/tau_ret_i))/G_i`` in 1/Pa."""
+        g0, g_v, tau = _gkv_parts(p, self.n_units)
+        t = np.asarray(time_s, float)
+        return 1.0 / g0 + np.sum((1.0 - np.exp(-t[..., None] / tau)) / g_v, axis=-1)
+
+    def complex_compliance(self, p: Params, angular_frequency_rad_s: np.ndarray) -> np.ndarray:
+        """``J*(omega) = 1/G0 + sum_i 1/(G_i (1 + i omega tau_ret_i))`` in 1/Pa (``J' - i J''``)."""
+        g0, g_v, tau = _gkv_parts(p, self.n_units)
+        w = np.asarray(angular_frequency_rad_s, float)
+        return 1.0 / g0 + np.sum(1.0 / (g_v * (1.0 + 1j * w[..., None] * tau)), axis=-1)
+
+    def creep_strain(self, p: Params, time_s: np.ndarray, stress_pa: np.ndarray) -> np.ndarray:
+        """``gamma(t) = sigma(t) J(inf) - sum_i q_i(t)/G_i`` with ``q_i = int exp(-(t-s)/tau_ret_i) dsigma(s)``,
+        updated exactly for a stress piecewise linear in time (the first sample is a step from rest)."""
+        g0, g_v, tau = _gkv_parts(p, self.n_units)
+        t = np.ascontiguousarray(time_s, dtype=float)
+        sigma = np.ascontiguousarray(stress_pa, dtype=float)
+        q = prony_branch_histories(t, np.tile(sigma, (self.n_units, 1)), tau)
+        return sigma * (1.0 / g0 + np.sum(1.0 / g_v)) - np.sum(q / g_v[:, None], axis=0)
+
+
+def gkv(n_units: int) -> GeneralizedKelvinVoigt:
+    """Generalized Kelvin-Voigt solid with ``n_units`` Voigt units (retardation times initialised one per
+    decade from 0.1 s)."""
+    specs = [_mod("G0", 200.0)]
+    specs += [ParamSpec(f"G_{i}", "Pa", 200.0, 1e-4, 1e9, log=True, description=f"spring modulus of Voigt unit {i}")
+              for i in range(1, n_units + 1)]
+    specs += [ParamSpec(f"tau_ret_{i}", "s", 0.1 * 10.0 ** (i - 1), 1e-5, 1e6, log=True,
+                        description=f"retardation time of Voigt unit {i}") for i in range(1, n_units + 1)]
+    return GeneralizedKelvinVoigt(name=f"gkv{n_units}", param_specs=tuple(specs), n_units=n_units,
+                                  structure={"voigt_units": n_units})
+
+
 MODELS: dict[str, Callable[[], ConstitutiveModel]] = {
     "maxwell": maxwell,
     "kelvin_voigt": kelvin_voigt,
@@ -240,3 +331,4 @@ MODELS: dict[str, Callable[[], ConstitutiveModel]] = {
 for _n in range(1, 7):
     MODELS[f"prony{_n}"] = (lambda n=_n: prony(n))
     MODELS[f"prony{_n}_liquid"] = (lambda n=_n: prony(n, liquid=True))
+    MODELS[f"gkv{_n}"] = (lambda n=_n: gkv(n))
