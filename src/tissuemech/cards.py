@@ -32,6 +32,14 @@ forms, against the fitted model):
   ``*UNIAXIAL TEST DATA`` generated from the *fitted simple-shear law* through the I1-only equivalence
   W'(I1 = 3 + gamma^2) = sigma(gamma) / (2 gamma), P(lambda) = 2 (lambda - lambda^-2) W'(lambda^2 + 2/lambda):
   exact in simple shear over the validity range; an I2 dependence of the original law is not carried over.
+* A generalized Kelvin-Voigt model (retardation spectrum) is written through its exactly interconverted
+  relaxation spectrum: ``*HYPERELASTIC, NEO HOOKE, MODULI=INSTANTANEOUS`` with C10 = G0/2 plus
+  ``*VISCOELASTIC, TIME=PRONY`` on the relaxation times (which interlace the retardation times).
+* Full polynomial laws of order N <= 6 are written as ``POLYNOMIAL, N=k`` with the constants in Abaqus's order
+  C10, C01, C20, C11, C02, C30, C21, C12, C03, ... followed by D1..DN.
+* The Nunes law has an infinite initial tangent modulus (W2 ~ (I2-3)^(-1/4)); its card's
+  ``initial_shear_modulus`` (and the bulk modulus derived from it) is the secant modulus at gamma_max/20 (any
+  law whose tangent keeps growing as gamma -> 0 is treated so) and the notes say so.
 * FEBio (uncoupled materials, nearly incompressible ``k`` = bulk modulus): ``Mooney-Rivlin`` c1 = C10,
   c2 = C01 (neo-Hooke: c2 = 0); ``Ogden`` W = sum c_i/m_i^2 (...) so c_i = 2 mu_i, m_i = alpha_i;
   viscoelasticity as ``uncoupled viscoelastic`` with S = g0 S_e + sum g_i H_i (FEBio's own update, see
@@ -214,17 +222,24 @@ def _data_lines(values: list[float], per_line: int = 8) -> str:
 
 
 def marlow_uniaxial_table(law: ConstitutiveModel, lp: Mapping[str, float], strain_max: float,
-                          n_points: int = MARLOW_POINTS) -> tuple[np.ndarray, np.ndarray]:
+                          n_points: int = MARLOW_POINTS, spacing: str = "linear") -> tuple[np.ndarray, np.ndarray]:
     """Uniaxial nominal stress (Pa) vs nominal strain table equivalent in simple shear to an elastic law.
 
     Uses the I1-only equivalence W'(I1) = sigma(gamma) / (2 gamma) at I1 = 3 + gamma^2, with the stretch range
-    chosen so that lambda^2 + 2/lambda - 3 covers gamma up to ``strain_max``.
+    chosen so that lambda^2 + 2/lambda - 3 covers gamma up to ``strain_max``. ``spacing="geometric"`` places
+    the stretches log-uniformly in ``lambda - 1`` over three decades, for laws whose W' is singular at
+    I1 = 3 (unbounded initial tangent modulus), which a linear grid cannot resolve at small strain.
     """
     from scipy.optimize import brentq
 
     i1_max = 3.0 + strain_max ** 2
     lam_max = brentq(lambda lam: lam ** 2 + 2.0 / lam - i1_max, 1.0 + 1e-12, 10.0 + strain_max * 10)
-    lam = np.linspace(1.0, lam_max, n_points)[1:]
+    if spacing == "geometric":
+        lam = 1.0 + np.geomspace(1e-3 * (lam_max - 1.0), lam_max - 1.0, n_points - 1)
+    elif spacing == "linear":
+        lam = np.linspace(1.0, lam_max, n_points)[1:]
+    else:
+        raise ValueError(f"unknown MARLOW table spacing {spacing!r}; use 'linear' or 'geometric'")
     gamma = np.sqrt(np.maximum(lam ** 2 + 2.0 / lam - 3.0, 0.0))
     w1 = np.asarray(law.elastic_shear_stress(lp, gamma), float) / (2.0 * gamma)
     nominal = 2.0 * (lam - lam ** -2) * w1
@@ -249,6 +264,17 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float 
         g_inf, g, taus = model.prony_weights(p)
         prony = {"g": [float(x) for x in g], "tau": [float(x) for x in taus], "g_inf": float(g_inf),
                  "source": "QLV reduced relaxation function"}
+    elif model.family == "linear_viscoelastic" and hasattr(model, "relaxation_spectrum"):
+        # retardation-spectrum models (generalized Kelvin-Voigt): their Prony series is known exactly
+        g_inf, g_k, theta = model.relaxation_spectrum(p)
+        g0 = float(g_inf + np.sum(g_k))
+        prony = {"g": [float(x) for x in g_k / g0], "tau": [float(x) for x in theta], "g_inf": float(g_inf / g0),
+                 "fit_rel_error": 0.0,
+                 "source": "exact interconversion of the Kelvin-Voigt retardation spectrum (relaxation times "
+                           "= eigenvalues of the series chain)"}
+        from .models.qlv import LinearElasticShear
+
+        law, lp = LinearElasticShear(), {"G0": g0}
     elif model.family in ("linear_viscoelastic", "fractional") and (model.supports("shear_history")
                                                                       or model.supports("oscillation")):
         taus = _model_taus(model, p)
@@ -285,6 +311,15 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float 
             notes.append("more than 6 Prony terms: the FEBio block cannot hold them")
     card["prony"] = prony
     mu0 = initial_shear_modulus(law, lp) if law is not None else float("nan")
+    singular_origin = law is not None and np.isfinite(mu0) and not math.isclose(
+        mu0, initial_shear_modulus(law, lp, step=1e-4), rel_tol=1e-3)
+    if singular_origin:
+        # tangent still growing as gamma -> 0 (Nunes, Amin with a negative exponent): the law has no finite
+        # initial modulus, so the bulk modulus is based on the secant modulus at the smallest checked strain
+        gamma_ref = strain_max / 20.0
+        mu0 = float(np.asarray(law.elastic_shear_stress(lp, np.array([gamma_ref])), float)[0] / gamma_ref)
+        notes.append(f"the law has an unbounded initial tangent modulus; initial_shear_modulus is its secant "
+                     f"modulus at gamma = {gamma_ref:.3g}")
     card["elastic_law"] = None if law is None else law.name
     card["elastic_parameters"] = lp
     if law is not None and law.name.startswith("linear_elastic"):
@@ -298,6 +333,8 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float 
                             if np.isfinite(mu0) else float("nan"))
     card["validity"] = {**result.ranges, "plate_target": result.target,
                         "marlow_strain_max": strain_max * strain_margin}
+    if singular_origin:
+        card["validity"]["marlow_spacing"] = "geometric"
     card["provenance"] = {"dataset": dataset, "scope": result.scope, "target": result.target,
                           "curves": result.curve_labels, "fit_file": fit_file, "software": "tissuemech"}
     card["fit_quality"] = {"success": result.success, "chisqr": result.chisqr, "rmse": result.rmse,
@@ -335,6 +372,8 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float 
         if card["abaqus_form"] == "MARLOW":
             notes.append("no native Abaqus form: MARLOW with uniaxial data equivalent in simple shear (I1-only)")
     card["febio_form"] = _febio_form(card)
+    if card["febio_form"] is None and card.get("abaqus_form") is not None:
+        notes.append(f"no FEBio block: no verified FEBio material equivalent to Abaqus {card['abaqus_form']}")
     card["notes"] = notes
     card["_law"] = law  # runtime only (not serialised)
     return card
@@ -363,7 +402,8 @@ def abaqus_block(card: Mapping, material_name: str | None = None) -> str | None:
     moduli = ", MODULI=INSTANTANEOUS" if card.get("prony") else ""
     if form == "MARLOW":
         smax = float(card["validity"]["marlow_strain_max"])
-        strain, stress = marlow_uniaxial_table(law, card["elastic_parameters"], smax)
+        strain, stress = marlow_uniaxial_table(law, card["elastic_parameters"], smax,
+                                               spacing=card["validity"].get("marlow_spacing", "linear"))
         # compressibility of the Marlow form through its POISSON parameter (no data line)
         lines.append(f"*HYPERELASTIC, MARLOW, POISSON={card['poisson_ratio']:g}{moduli}")
         lines.append("*UNIAXIAL TEST DATA")

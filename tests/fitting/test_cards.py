@@ -216,3 +216,97 @@ def test_classical_ogden_convention_is_converted_and_checked():
     assert any("do not reproduce" in n for n in card["notes"])
     np.testing.assert_allclose(C.abaqus_simple_shear_stress(C.abaqus_block(card), GAMMA),
                                model.elastic_shear_stress(truth, GAMMA), rtol=0.01)
+
+
+# ------------------------------------------------------------------------------------------------
+# laws added with issue 4: Nunes, Amin, full polynomial N = 3..6, generalized Kelvin-Voigt
+# ------------------------------------------------------------------------------------------------
+POLY3 = {"C10": 40.0, "C01": 15.0, "C20": 60.0, "C11": -10.0, "C02": 20.0, "C30": 50.0, "C21": 10.0, "C12": -5.0,
+         "C03": 8.0}
+
+
+def _poly6_truth():
+    names = [f"C{t - j}{j}" for t in range(1, 7) for j in range(t + 1)]
+    return {n: (40.0 if n == "C10" else 15.0 if n == "C01" else 30.0 / (int(n[1]) + int(n[2])) ** 2) for n in names}
+
+
+@pytest.mark.parametrize("key,truth,form", [
+    ("nunes", {"C1": 60.0, "C2": 15.0}, "MARLOW"),
+    ("amin", {"C5": 60.0, "C3": 40.0, "C4": 300.0, "C2": 15.0, "N": 1.0, "M": 3.0}, "MARLOW"),
+    ("polynomial3", POLY3, "POLYNOMIAL, N=3"),
+    ("polynomial6", _poly6_truth(), "POLYNOMIAL, N=6"),
+])
+def test_round_trip_cards_of_the_new_hyperelastic_laws(key, truth, form):
+    model = get_model(key)
+    res = fitted(model, truth, key)
+    card = C.make_card(res, model)
+    assert card["abaqus_form"] == form and card["elastic_law"] == key
+    fitted_curve = model.elastic_shear_stress(res.params, GAMMA)
+    block = C.abaqus_block(card)
+    np.testing.assert_allclose(C.abaqus_simple_shear_stress(block, GAMMA), fitted_curve, rtol=0.01)
+    # no FEBio material for these forms: no block, and the card says why
+    assert C.febio_block(card) is None and any("no FEBio block" in n for n in card["notes"])
+    np.testing.assert_allclose(fem_simple_shear(card, GAMMA), fitted_curve, rtol=0.01)
+
+
+def test_polynomial_card_writes_the_constants_in_abaqus_order():
+    model = get_model("polynomial3")
+    card = C.make_card(fitted(model, POLY3, "polynomial3"), model)
+    parsed = C.parse_abaqus_block(C.abaqus_block(card))
+    values = [v for row in parsed["*HYPERELASTIC, POLYNOMIAL, N=3"] for v in row]
+    # Abaqus data lines: C10, C01, C20, C11, C02, C30, C21, C12 / C03, D1, D2, D3
+    expected = [40.0, 15.0, 60.0, -10.0, 20.0, 50.0, 10.0, -5.0, 8.0, 2 / card["bulk_modulus"], 0.0, 0.0]
+    np.testing.assert_allclose(values, expected, rtol=1e-6)
+    assert [len(row) for row in parsed["*HYPERELASTIC, POLYNOMIAL, N=3"]] == [8, 4]
+    assert card["initial_shear_modulus"] == pytest.approx(2 * (40.0 + 15.0), rel=1e-6)
+
+
+def test_nunes_card_has_no_finite_initial_modulus_and_a_log_spaced_marlow_table():
+    model = get_model("nunes")
+    card = C.make_card(fitted(model, {"C1": 60.0, "C2": 15.0}, "nunes"), model)
+    gamma_ref = 0.5 / 20
+    assert card["initial_shear_modulus"] == pytest.approx(2 * 60.0 + 2 * 15.0 / np.sqrt(gamma_ref), rel=1e-9)
+    assert any("unbounded initial tangent modulus" in n for n in card["notes"])
+    assert card["bulk_modulus"] == pytest.approx(2 * card["initial_shear_modulus"] * 1.49 / (3 * 0.02), rel=1e-9)
+    stress, strain = np.array(C.parse_abaqus_block(C.abaqus_block(card))["*UNIAXIAL TEST DATA"]).T
+    assert np.all(np.diff(strain) > 0) and np.all(np.diff(stress) > 0)
+    # three decades of nominal strain resolve the square-root start
+    assert strain[1] == pytest.approx(1e-3 * strain[-1], rel=1e-9)
+    # an ordinary law keeps its secant-free initial modulus and the linear table
+    rp = get_model("reduced_polynomial3")
+    rp_card = C.make_card(fitted(rp, {"C10": 40.0, "C20": 100.0, "C30": 400.0}, "reduced_polynomial3"), rp)
+    assert rp_card["initial_shear_modulus"] == pytest.approx(80.0, rel=1e-6)
+    assert "marlow_spacing" not in rp_card["validity"]
+
+
+def test_gkv_card_prony_series_is_the_exact_relaxation_spectrum():
+    model = get_model("gkv3")
+    truth = {"G0": 800.0, "G_1": 300.0, "G_2": 150.0, "G_3": 400.0, "tau_ret_1": 0.05, "tau_ret_2": 2.0,
+             "tau_ret_3": 80.0}
+    t = np.r_[0.0, np.geomspace(0.005, 500.0, 80)]
+    stress = np.full_like(t, 5.0)
+    curve = F.Curve(test="creep_recovery", condition="5 Pa", response="creep", inputs={"time": t, "shear_stress": stress},
+                    observed={"shear_strain": model.creep_strain(truth, t, stress)})
+    res = F.fit(F.FitProblem(model, [curve], target="none", model_key="gkv3"), starts=[truth], n_random=0)
+    card = C.make_card(res, model)
+    assert card["initial_shear_modulus"] == pytest.approx(800.0, rel=1e-6)
+    assert card["prony"]["fit_rel_error"] == 0.0 and "Kelvin-Voigt" in card["prony"]["source"]
+    parsed = C.parse_abaqus_block(C.abaqus_block(card))
+    (c10, d1), = parsed["*HYPERELASTIC, NEO HOOKE, MODULI=INSTANTANEOUS"]
+    assert c10 == pytest.approx(400.0, rel=1e-6)
+    rows = np.array(parsed["*VISCOELASTIC, TIME=PRONY"])
+    assert rows.shape == (3, 3) and np.all(rows[:, 1] == 0.0)
+    g, tau = rows[:, 0], rows[:, 2]
+    # independent check: the card's G*(omega) = 2 C10 (1 - sum g_i + sum g_i i w tau_i/(1 + i w tau_i)) inverts the
+    # Kelvin-Voigt complex compliance J*(omega) = 1/G0 + sum 1/(G_i (1 + i w tau_ret_i))
+    w = np.geomspace(1e-4, 1e4, 41)
+    g_star = 2 * c10 * (1 - g.sum() + np.sum(g * (1j * w[:, None] * tau) / (1 + 1j * w[:, None] * tau), axis=1))
+    gv = np.array([300.0, 150.0, 400.0])
+    j_star = 1 / 800.0 + np.sum(1 / (gv * (1 + 1j * w[:, None] * np.array([0.05, 2.0, 80.0]))), axis=1)
+    np.testing.assert_allclose(g_star * j_star, 1.0, atol=1e-6)
+    # long-term modulus: the springs in series
+    assert 2 * c10 * (1 - g.sum()) == pytest.approx(1 / (1 / 800.0 + np.sum(1 / gv)), rel=1e-6)
+    root = ET.fromstring(C.febio_block(card))
+    assert root.get("type") == "uncoupled viscoelastic"
+    assert float(root.findtext("g0")) == pytest.approx(1 - g.sum(), rel=1e-6) and root.find("g4") is None
+    np.testing.assert_allclose(fem_simple_shear(card, GAMMA), 800.0 * GAMMA, rtol=0.01)
