@@ -36,7 +36,8 @@ forms, against the fitted model):
   relaxation spectrum: ``*HYPERELASTIC, NEO HOOKE, MODULI=INSTANTANEOUS`` with C10 = G0/2 plus
   ``*VISCOELASTIC, TIME=PRONY`` on the relaxation times (which interlace the retardation times).
 * Full polynomial laws of order N <= 6 are written as ``POLYNOMIAL, N=k`` with the constants in Abaqus's order
-  C10, C01, C20, C11, C02, C30, C21, C12, C03, ... followed by D1..DN.
+  C10, C01, C20, C11, C02, C30, C21, C12, C03, ... followed by D1..DN, eight values per data line (the layout
+  of the Abaqus-compatible CalculiX ``*HYPERELASTIC`` documentation for N=3: line 1 C10..C12, line 2 C03, D1-D3).
 * The Nunes law has an infinite initial tangent modulus (W2 ~ (I2-3)^(-1/4)); its card's
   ``initial_shear_modulus`` (and the bulk modulus derived from it) is the secant modulus at gamma_max/20 (any
   law whose tangent keeps growing as gamma -> 0 is treated so) and the notes say so.

@@ -205,3 +205,18 @@ def test_new_laws_reach_the_fem_material_routine(key, params):
         F[0, 1] = g
         assert mats.cauchy_stress(mat, F)[0, 1] == pytest.approx(model.elastic_shear_stress(params, np.array([g]))[0],
                                                                  rel=2e-3)
+
+
+def test_nunes_fit_from_default_start_recovers_noisy_truth():
+    """Two linear coefficients: a default-start least-squares fit to 1 % noise lands on the truth."""
+    from tissuemech import fitting as F
+
+    m = get_model("nunes")
+    truth = {"C1": 120.0, "C2": 35.0}
+    g = np.linspace(0.01, 0.5, 40)
+    rng = np.random.default_rng(4)
+    observed = m.elastic_shear_stress(truth, g) * (1 + 0.01 * rng.standard_normal(g.size))
+    curve = F.Curve(test="simple_shear", condition="shear", response="elastic_shear", inputs={"shear_strain": g},
+                    observed={"shear_stress": observed})
+    res = F.fit(F.FitProblem(m, [curve], target="none", model_key="nunes"), n_random=0)
+    assert res.params["C1"] == pytest.approx(120.0, rel=0.05) and res.params["C2"] == pytest.approx(35.0, rel=0.05)
