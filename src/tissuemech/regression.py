@@ -49,16 +49,17 @@ import yaml
 
 #: model fits redone on every check: dataset -> scope (``stages.dataset_scopes``) -> registry keys. Chosen to
 #: cover every response kind the fitter handles (flow, shear history of relaxation and CSR ramps, creep,
-#: oscillation) and every family (viscous, linear viscoelastic, fractional, hyperelastic, QLV, beyond-QLV),
-#: while staying well under a minute on two cores. Amplitude sweeps are absent because the fitter cannot
-#: fit them yet (``fitting.TEST_RESPONSE`` has no entry, so that pipeline scope has no curves).
+#: oscillation, the LVE part of amplitude sweeps) and every family (viscous, linear elastic and viscoelastic,
+#: fractional, hyperelastic, QLV, beyond-QLV), while staying well under a minute on two cores.
 REFERENCE_FITS: dict[str, dict[str, tuple[str, ...]]] = {
     "agar_3pct_thesis": {
+        "amplitude_sweep": ("linear_elastic",),
         "flow_curve": ("power_law", "bingham"),
         "stress_relaxation": ("sls2",),
         "creep_recovery": ("sls2",),
     },
     "porcine_brain_thesis": {
+        "amplitude_sweep": ("linear_elastic",),
         "constant_shear_rate": ("linear_elastic", "neo_hookean", "reduced_polynomial3"),
         "stress_relaxation": ("prony3",),
         "creep_recovery": ("burgers",),
