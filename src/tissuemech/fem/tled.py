@@ -42,6 +42,9 @@ STATUS_INVERTED = 1
 STATUS_NOT_FINITE = 2
 STATUS_NOT_CONVERGED = 3
 
+#: cumulative energy terms of an explicit run (``RunResult.energy_j``)
+ENERGY_TERMS = ("internal_work", "external_work", "damping_work", "constraint_work")
+
 
 class ElementInversionError(RuntimeError):
     """An element reached ``J <= 0`` (or the state became non-finite) during a TLED run."""
@@ -470,19 +473,49 @@ def _cd_node_pass(fbuf, fint, fext_ref, s_ext, u, u_old, u_new, coef_a, coef_b, 
 
 
 @njit(cache=True)
+def _energy_increments(u_new, u, u_old, fint, fext_ref, s_ext, mass, damping, dt, acc):
+    """Add one central-difference step's energy increments to ``acc``.
+
+    With ``dc = (u_new - u_old)/2`` (the displacement over the step centred at ``u``):
+    ``acc[0]`` internal work ``sum f_int . dc`` (equals the stored energy for a conservative law),
+    ``acc[1]`` work of the applied loads, ``acc[2]`` mass-proportional damping dissipation
+    ``alpha m |dc|^2 / dt`` (all dofs: a prescribed node's drag is carried by its support), ``acc[3]`` work of the kinematic constraints (prescribed dofs
+    and contact projection): the force ``m a + alpha m v + f_int - f_ext`` they exert, times ``dc``.
+    Discretely, ``KE_(n+1/2) - KE_(1/2) + W_int + W_damp = W_ext + W_constraint`` holds for the
+    update actually performed, so the balance checks the integrator against the damping law it claims.
+    """
+    idt2 = 1.0 / (dt * dt)
+    for n in range(u.shape[0]):
+        m = mass[n]
+        for i in range(3):
+            dc = 0.5 * (u_new[n, i] - u_old[n, i])
+            fe = s_ext * fext_ref[n, i]
+            acc[0] += fint[n, i] * dc
+            damp = damping * m * dc / dt
+            acc[1] += fe * dc
+            acc[2] += damp * dc
+            r = m * (u_new[n, i] - 2.0 * u[n, i] + u_old[n, i]) * idt2 + damp + fint[n, i] - fe
+            # free dofs carry no constraint force except where the contact projection moved them
+            acc[3] += r * dc
+    return acc
+
+
+@njit(cache=True)
 def _run_explicit(X, elements, dndx, vol0, chunk_lo, vnode, mass, kind, w1fn, w2fn, wlfn, params, kappa,
                   use_anp, prony_g, prony_tau, h_state, s_prev, bfn, branch_params, w_prev, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate,
                   rot_center, n_groups, free, hist_time, hist_vals, fext_ref, contact_kind, cparams,
-                  contact_nodes, dt, n_steps, damping, out_every, u, u_old, fbuf, pbuf):
+                  contact_nodes, dt, n_steps, damping, out_every, u, u_old, fbuf, pbuf, track_energy):
     """Central-difference time loop. ``u``/``u_old`` hold the state at steps 0 and -1 on entry and the
     last two states on exit (``u`` newest)."""
     nn = X.shape[0]
-    n_out = n_steps // out_every + 1
+    n_out = n_steps // out_every + 2  # every out_every-th step and always the last one
     out_t = np.zeros(n_out)
     out_force = np.zeros((n_out, n_groups, 3))
     out_torque = np.zeros((n_out, n_groups))
     out_contact = np.zeros((n_out, 3))
     out_ke = np.zeros(n_out)
+    out_energy = np.zeros((n_out, 4))
+    energy = np.zeros(4)
     fint = np.zeros((nn, 3), dtype=u.dtype)
     u_new = np.empty_like(u)
     p_node = np.zeros(nn)
@@ -514,11 +547,14 @@ def _run_explicit(X, elements, dndx, vol0, chunk_lo, vnode, mass, kind, w1fn, w2
                                  s_prev, bfn, branch_params, w_prev, True, bad, False)
         if bad_e >= 0:
             return STATUS_INVERTED, bad_e, step, u, u_old, out_t[:k_out], out_force[:k_out], \
-                out_torque[:k_out], out_contact[:k_out], out_ke[:k_out]
+                out_torque[:k_out], out_contact[:k_out], out_ke[:k_out], out_energy[:k_out]
+        # the balance at step n uses the loads at t_n; the prescribed motions are needed at t_(n+1)
+        _history_values(t, hist_time, hist_vals, hv)
+        s_ext = hv[2 * n_groups + 1]
         _history_values(t + dt, hist_time, hist_vals, hv)
         # reduces fbuf into fint and computes u_new on the free dofs
-        _cd_node_pass(fbuf, fint, fext_ref, hv[2 * n_groups + 1], u, u_old, u_new, coef_a, coef_b, coef_c, free)
-        if step % out_every == 0:
+        _cd_node_pass(fbuf, fint, fext_ref, s_ext, u, u_old, u_new, coef_a, coef_b, coef_c, free)
+        if step % out_every == 0 or step == n_steps:
             _reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_g, torque_g)
             _contact_force(fint, contact_nodes, in_contact, cforce)
             ke = 0.0
@@ -528,8 +564,9 @@ def _run_explicit(X, elements, dndx, vol0, chunk_lo, vnode, mass, kind, w1fn, w2
                     ke += 0.5 * mass[n] * v * v
             if not np.isfinite(ke):
                 return STATUS_NOT_FINITE, -1, step, u, u_old, out_t[:k_out], out_force[:k_out], \
-                    out_torque[:k_out], out_contact[:k_out], out_ke[:k_out]
+                    out_torque[:k_out], out_contact[:k_out], out_ke[:k_out], out_energy[:k_out]
             out_t[k_out] = t
+            out_energy[k_out] = energy
             out_force[k_out] = force_g
             out_torque[k_out] = torque_g
             out_contact[k_out] = cforce
@@ -540,9 +577,11 @@ def _run_explicit(X, elements, dndx, vol0, chunk_lo, vnode, mass, kind, w1fn, w2
         _apply_bcs(u_new, X, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups)
         if contact_kind > 0:
             _contact_project(u_new, X, contact_nodes, in_contact, contact_kind, cparams, hv[2 * n_groups])
+        if track_energy:
+            _energy_increments(u_new, u, u_old, fint, fext_ref, s_ext, mass, damping, dt, energy)
         u_old, u, u_new = u, u_new, u_old
     return STATUS_OK, -1, n_steps, u, u_old, out_t[:k_out], out_force[:k_out], out_torque[:k_out], \
-        out_contact[:k_out], out_ke[:k_out]
+        out_contact[:k_out], out_ke[:k_out], out_energy[:k_out]
 
 
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
@@ -932,6 +971,11 @@ class RunResult:
     time_step_s : explicit step (NaN for quasi-static)
     iterations : (nt,) dynamic-relaxation iterations per increment (quasi-static) else empty
     state : final viscoelastic element states ``(h_state, s_prev, w_prev)`` (pass as ``state=`` to continue)
+    energy_j : explicit runs: cumulative energies (J) at the outputs, keys :data:`ENERGY_TERMS`:
+        ``internal_work`` (work of the internal forces = stored + viscously dissipated energy),
+        ``external_work`` (applied loads), ``damping_work`` (mass-proportional damping) and
+        ``constraint_work`` (prescribed dofs and contact); with ``kinetic_energy_j`` (half-step velocities)
+        ``KE + internal + damping = KE(0) + external + constraint``
     """
 
     time_s: np.ndarray
@@ -944,6 +988,7 @@ class RunResult:
     time_step_s: float
     iterations: np.ndarray
     state: tuple
+    energy_j: dict = field(default_factory=dict)
 
 
 def _state(model: TLEDModel, state: tuple | None):
@@ -984,7 +1029,7 @@ def _check_status(status, bad, where, time_s):
 def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None, safety: float = 0.7,
                  damping_1_s: float = 0.0, n_outputs: int = 100, u0_m: np.ndarray | None = None,
                  v0_m_s: np.ndarray | None = None, state: tuple | None = None,
-                 n_threads: int | None = None) -> RunResult:
+                 n_threads: int | None = None, track_energy: bool = True) -> RunResult:
     """Explicit dynamic run from ``t = 0`` to ``t_end_s``.
 
     Parameters
@@ -995,6 +1040,8 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
     u0_m, v0_m_s : initial displacement (m) and velocity (m/s) fields
     state : viscoelastic ``RunResult.state`` to start from (default virgin)
     n_threads : numba threads for this run (None: numba's current setting)
+    track_energy : accumulate the energy balance (``RunResult.energy_j``; a serial pass over the nodes per
+        step, a few % of the step time)
     """
     m = model.material
     dt = critical_time_step(model, safety) if dt_s is None else float(dt_s)
@@ -1015,12 +1062,13 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
                         m.prony_g, m.prony_tau_s, h_state, s_prev, bfn, m.branch_params, w_prev, model.bc_nodes, model.bc_group, model.bc_mask,
                         model.bc_dir, model.bc_rotate, model.rot_center, ng, model.free, model.hist_time,
                         model.hist_vals, model.fext_ref, model.contact_kind, model.cparams, model.contact_nodes,
-                        dt, n_steps, damping_1_s, out_every, u, u_old, fbuf, pbuf)
-    status, bad, step, u, u_old, t, force, torque, cforce, ke = res
+                        dt, n_steps, damping_1_s, out_every, u, u_old, fbuf, pbuf, bool(track_energy))
+    status, bad, step, u, u_old, t, force, torque, cforce, ke, energy = res
     _check_status(status, bad, f"step {step}", step * dt)
     names = model.group_names
     return RunResult(t, {n: force[:, i] for i, n in enumerate(names)}, {n: torque[:, i] for i, n in enumerate(names)},
-                     cforce, ke, u, u_old, dt, np.zeros(0, np.int64), (h_state, s_prev, w_prev))
+                     cforce, ke, u, u_old, dt, np.zeros(0, np.int64), (h_state, s_prev, w_prev),
+                     {k: energy[:, i] for i, k in enumerate(ENERGY_TERMS)} if track_energy else {})
 
 
 def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, min_iter: int = 20,
@@ -1063,4 +1111,4 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
     _check_status(status, bad, f"increment {k}", float(times[min(k, times.size - 1)]))
     names = model.group_names
     return RunResult(times, {n: force[:, i] for i, n in enumerate(names)}, {n: torque[:, i] for i, n in enumerate(names)},
-                     cforce, np.full(times.size, np.nan), u, u.copy(), float("nan"), iters, (h_state, s_prev, w_prev))
+                     cforce, np.full(times.size, np.nan), u, u.copy(), float("nan"), iters, (h_state, s_prev, w_prev), {})
