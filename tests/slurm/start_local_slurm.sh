@@ -117,7 +117,9 @@ MpiDefault=none
 # finished jobs stay in slurmctld (and squeue --states=all) for an hour: the status source without sacct
 MinJobAge=3600
 ${node} NodeAddr=127.0.0.1 State=UNKNOWN
-PartitionName=debug Nodes=${host} Default=YES MaxTime=INFINITE State=UP
+# a test cluster on a small machine: up to two jobs may share a core (a grouped job holding every core
+# does not have to wait for a one-core job to finish)
+PartitionName=debug Nodes=${host} Default=YES MaxTime=INFINITE State=UP OverSubscribe=FORCE:2
 CONF
 
   if ! pgrep -x slurmctld >/dev/null; then
