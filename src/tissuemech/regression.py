@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import re
 import sys
 import tempfile
 import time
@@ -162,13 +163,47 @@ def tolerance_for(value: float, stderr: float, k: float = STDERR_MULTIPLIER, rel
     return floor, f"reproducibility floor {relative_floor:g} x |value| (exceeds {k:g} x standard error {stderr:.3g})"
 
 
+def mode_labels(params: Mapping[str, float]) -> dict[str, str]:
+    """Canonical name -> fitted name that numbers exchangeable relaxation modes by increasing time.
+
+    The modes of a Prony series (``G_i``, ``tau_i``) or a generalized Kelvin-Voigt chain (``G_i``,
+    ``tau_ret_i``) can be relabelled without changing the model, and the multistart fit does land on
+    permuted labellings whose chi-square differs from the best by ~1e-9 relative, below the solver's
+    stopping tolerance. So which labelling wins can change with the platform, and the reference compares modes
+    sorted by time instead. Models without free mode times map every name to itself.
+    """
+    identity = {name: name for name in params}
+    time_prefix = next((t for t in ("tau_ret", "tau") if f"{t}_1" in params), None)
+    if time_prefix is None:
+        return identity
+    indices = sorted(int(m.group(1)) for n in params if (m := re.fullmatch(rf"{time_prefix}_(\d+)", n)))
+    groups = {}
+    for name in params:
+        m = re.fullmatch(r"(.+)_(\d+)", name)
+        if m and int(m.group(2)) in indices:
+            groups.setdefault(m.group(1), set()).add(int(m.group(2)))
+    if any(found != set(indices) for found in groups.values()):
+        return identity  # not a set of complete, exchangeable modes
+    order = sorted(indices, key=lambda i: params[f"{time_prefix}_{i}"])
+    labels = dict(identity)
+    for new, old in zip(indices, order):
+        for prefix in groups:
+            labels[f"{prefix}_{new}"] = f"{prefix}_{old}"
+    return labels
+
+
 def reference_rows(dataset: str, result) -> list[dict]:
-    """Reference-table rows of one :class:`tissuemech.fitting.FitResult`."""
+    """Reference-table rows of one :class:`tissuemech.fitting.FitResult` (modes sorted by :func:`mode_labels`)."""
     rows = []
-    for name, value in result.params.items():
-        stderr = float(result.stderr.get(name, float("nan")))
+    labels = mode_labels(result.params)
+    for name in result.params:
+        fitted = labels[name]
+        value = result.params[fitted]
+        stderr = float(result.stderr.get(fitted, float("nan")))
         tolerance, reason = tolerance_for(float(value), stderr)
-        caveats = _parameter_flags(result.flags, name)
+        caveats = _parameter_flags(result.flags, fitted)
+        if fitted != name:
+            caveats.insert(0, f"fitted as {fitted} (modes numbered by increasing time)")
         if not result.success:
             caveats.insert(0, f"fit not converged: {result.message}")
         if caveats:

@@ -202,3 +202,25 @@ def test_tolerance_rule():
     assert tol == pytest.approx(1e-4) and "not estimated" in why
     tol, _ = REG.tolerance_for(0.0, 0.0)
     assert tol == REG.ABSOLUTE_FLOOR > 0
+
+
+def test_exchangeable_prony_modes_are_numbered_by_time():
+    """A permuted labelling of the same Prony spectrum (seen among the multistart optima) gives the same rows."""
+    from types import SimpleNamespace
+
+    spectrum = {"G_inf": 73.1, "G_1": 231.7, "G_2": 73.7, "G_3": 48.2, "tau_1": 0.0138, "tau_2": 0.428, "tau_3": 6.35}
+    permuted = {"G_inf": 73.1, "G_1": 231.7, "G_2": 48.2, "G_3": 73.7, "tau_1": 0.0138, "tau_2": 6.35, "tau_3": 0.428}
+
+    def rows(params):
+        result = SimpleNamespace(params=params, stderr={k: 0.1 * v for k, v in params.items()}, flags=[],
+                                 success=True, message="", scope="stress_relaxation", model_key="prony3",
+                                 units={k: "s" if k.startswith("tau") else "Pa" for k in params})
+        return {r["parameter"]: (r["value"], r["stderr"]) for r in REG.reference_rows("d", result)}
+
+    assert rows(permuted) == rows(spectrum)
+    assert REG.mode_labels(permuted)["tau_2"] == "tau_3" and REG.mode_labels(spectrum)["tau_2"] == "tau_2"
+    gkv = {"G0": 1.0, "G_1": 2.0, "G_2": 3.0, "tau_ret_1": 5.0, "tau_ret_2": 0.5}
+    assert REG.mode_labels(gkv) == {"G0": "G0", "G_1": "G_2", "G_2": "G_1", "tau_ret_1": "tau_ret_2",
+                                    "tau_ret_2": "tau_ret_1"}
+    qlv = {"C10": 1.0, "beta_1": 2.0, "beta_2": 0.1}  # fixed relaxation times: labels are not exchangeable
+    assert REG.mode_labels(qlv) == {k: k for k in qlv}
