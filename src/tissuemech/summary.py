@@ -27,7 +27,7 @@ from matplotlib import colormaps
 from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
-from matplotlib.ticker import NullFormatter
+from matplotlib.ticker import MaxNLocator, NullFormatter
 
 from .canonical import read_netcdf, write_text
 from .pipeline import progress
@@ -282,6 +282,8 @@ def figure_mesh(nodes_m: np.ndarray, elements: np.ndarray, displacement_m: np.nd
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
     ax.set_zlabel("z [mm]")
+    for axis, bins in ((ax.xaxis, 4), (ax.yaxis, 4), (ax.zaxis, 1 if hi[2] - lo[2] < 0.3 * np.ptp(xyz[:, 0]) else 4)):
+        axis.set_major_locator(MaxNLocator(bins))  # a thin sample (2 mm gap) has room for its bounds only
     if displacement_m is not None:
         fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.6, pad=0.12, label="|u| [mm]")
     ax.set_title(title or f"{len(elements)} tetrahedra, {len(nodes)} nodes", fontsize=9)
