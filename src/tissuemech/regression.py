@@ -13,16 +13,18 @@ Tolerance of a parameter: ``max(k * stderr, floor)`` with ``k`` = :data:`STDERR_
 ``floor`` = :data:`RELATIVE_FLOOR` ``* |value|`` (at least :data:`ABSOLUTE_FLOOR`).
 
 * Why ``k = 0.1``: the standard error is what the data can resolve. A tenth of it is far below what would change a
-  scientific conclusion, yet catches any code or data change that shifts an estimate noticeably (halving the
-  points per curve, changing a noise floor, a different start winning). It is still far above the numerical noise of
-  a refit: the least-squares solver stops at relative tolerances 1e-8, and refitting every reference fit to
-  1e-14 moved no parameter by more than 3.2e-4 standard errors (measured when the table was made).
+  scientific conclusion, yet catches any code or data change that shifts an estimate noticeably (thinning to 30
+  instead of 40 points per curve moves the agar relaxation and creep fits by 0.14-0.42 standard errors). It is still
+  far above the numerical noise of a refit: the least-squares solver stops at relative tolerances 1e-8, and
+  refitting every reference fit to 1e-14 moved no parameter by more than 3.2e-4 standard errors (measured when the
+  table was made).
 * Why the floor: a parameter whose standard error is tiny or missing (singular covariance, parameter held at a
   bound) would otherwise get a tolerance that BLAS/CPU differences alone can exceed; 1e-6 relative is six
   significant digits, the NIST StRD certification level.
 
 The ``reason`` column says which rule set the tolerance and lists the fit's flags that concern the parameter
-(at a bound, poorly determined, strongly correlated), so a reviewer knows which rows are fragile.
+(at a bound, poorly determined, strongly correlated), so a reviewer knows which rows are fragile. Exchangeable
+Prony modes are numbered by increasing time before they are stored or compared (:func:`mode_labels`).
 
 Command line::
 
