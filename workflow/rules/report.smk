@@ -52,7 +52,15 @@ rule fit_figures:
         "benchmarks/runs/{dataset}/fit_figures_{scope}.tsv"
     params:
         tests=lambda wildcards: scope_spec(wildcards)["tests"],
-        pkg=package_hash("summary.py", "plots.py", "stages.py", "fitting.py"),
+        pkg=package_hash(
+            "summary.py",
+            "plots.py",
+            "canonical.py",
+            "pipeline.py",
+            "stages.py",
+            "fitting.py",
+            "models",
+        ),
     script:
         "../scripts/fit_figures.py"
 
@@ -83,7 +91,7 @@ rule card_figures:
         "benchmarks/runs/{dataset}/card_figures.tsv"
     params:
         cards_root="results/{dataset}/cards",
-        pkg=package_hash("summary.py", "plots.py"),
+        pkg=package_hash("summary.py", "plots.py", "canonical.py", "pipeline.py"),
     script:
         "../scripts/card_figures.py"
 
@@ -106,7 +114,9 @@ rule mesh_figures:
         "benchmarks/runs/{dataset}/mesh_figures.tsv"
     params:
         vtu_dirs=lambda wildcards: fem_vtu_dirs_of(wildcards.dataset),
-        pkg=package_hash("summary.py", "plots.py", "fem/mesh.py"),
+        pkg=package_hash(
+            "summary.py", "plots.py", "canonical.py", "pipeline.py", "fem/mesh.py"
+        ),
     script:
         "../scripts/mesh_figures.py"
 
@@ -134,7 +144,7 @@ rule timing_figures:
     benchmark:
         "benchmarks/runs/timing_figures.tsv"
     params:
-        pkg=package_hash("summary.py", "plots.py"),
+        pkg=package_hash("summary.py", "plots.py", "canonical.py", "pipeline.py"),
     script:
         "../scripts/timing_figures.py"
 
@@ -152,6 +162,6 @@ rule summary:
     params:
         datasets=list(DATASETS),
         captions=f"{workflow.basedir}/workflow/report",
-        pkg=package_hash("summary.py"),
+        pkg=package_hash("summary.py", "plots.py", "canonical.py", "pipeline.py"),
     script:
         "../scripts/summary.py"
