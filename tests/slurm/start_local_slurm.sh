@@ -21,6 +21,10 @@ partition_state() {
 
 is_up() {
   local state
+  # our own configuration but no controller: down (sinfo would retry for ~10 s)
+  if [ -f "$CONF" ] && grep -qF "$MARKER" "$CONF" && ! pgrep -x slurmctld >/dev/null; then
+    return 1
+  fi
   state=$(partition_state)
   [ "$state" = "idle" ] || [ "$state" = "mix" ] || [ "$state" = "alloc" ]
 }

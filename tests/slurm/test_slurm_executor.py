@@ -70,6 +70,9 @@ def _job_env() -> dict[str, str]:
 def _slurm_answers() -> bool:
     if shutil.which("sinfo") is None:
         return False
+    if shutil.which("slurmctld") and subprocess.run(["pgrep", "-x", "slurmctld"], capture_output=True).returncode:
+        # the local test cluster is installed but stopped (sinfo would retry its controller for ~10 s)
+        return False
     done = subprocess.run(["sinfo", "-h", "-o", "%t"], capture_output=True, text=True, timeout=20)
     return done.returncode == 0 and done.stdout.split()[:1] in (["idle"], ["mix"], ["alloc"])
 
