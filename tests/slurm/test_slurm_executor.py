@@ -4,9 +4,9 @@ A single-node SLURM (Debian ``slurm-wlm`` + ``munge``, no accounting daemon) is 
 ``start_local_slurm.sh``. A small dataset (nine exports of the bundled agar set: amplitude sweeps, flow
 curves, creep) goes through ingest, average, LVE and two fit scopes twice, in two copies of the workflow:
 ``snakemake --cores 2`` and ``snakemake --workflow-profile workflow/profiles/slurm`` (``executor: slurm``).
-The runs overlap in time (the SLURM one spends most of its time waiting for the queue to be polled).
-Skipped where SLURM cannot be started: not root, no apt-get, packages not installable, a real cluster's
-slurm.conf on the machine.
+The runs overlap in time (the SLURM one spends much of its time in job start-up and status polling).
+Skipped where SLURM cannot be started (not root, no apt-get, packages not installable, a real cluster's
+slurm.conf on the machine) and where another cluster than the local test cluster answers.
 """
 from __future__ import annotations
 
