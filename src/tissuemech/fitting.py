@@ -73,6 +73,9 @@ TEST_RESPONSE: dict[str, str] = {
     "uniaxial": "uniaxial",
 }
 
+#: relative chi-square difference under which two starts count as the same optimum (see :func:`fit`)
+EQUIVALENT_CHISQR_RTOL = 1e-7
+
 #: responses fitted with log residuals (the data span decades)
 LOG_RESPONSES: frozenset[str] = frozenset({"oscillation", "flow"})
 
@@ -885,7 +888,7 @@ def fit(problem: FitProblem, starts: Iterable[Mapping[str, float]] = (), n_rando
     start_list = [dict(s) for s in starts] + [problem.model.default_params()]
     start_list += [_random_start(problem, rng) for _ in range(n_random)]
 
-    best, chis, nfev = None, [], 0
+    results, chis, nfev = [], [], 0
     for s in start_list:
         pars = problem.make_params(s)
         kws = {"max_nfev": max_nfev} if max_nfev else {}
@@ -900,10 +903,14 @@ def fit(problem: FitProblem, starts: Iterable[Mapping[str, float]] = (), n_rando
             continue
         nfev += int(res.nfev)
         chis.append(float(res.chisqr))
-        if best is None or res.chisqr < best.chisqr:
-            best = res
-    if best is None:
+        results.append(res)
+    if not results:
         raise RuntimeError(f"every start of {problem.model_key!r} failed: {last_error}")
+    # Starts that reach the same optimum within solver tolerance can differ by a relabelling (e.g. two Prony
+    # modes swapped); taking the first such start, not the strictly smallest chi-square, keeps the reported
+    # labels the same on every machine.
+    lowest = min(float(r.chisqr) for r in results)
+    best = next(r for r in results if float(r.chisqr) <= lowest * (1.0 + EQUIVALENT_CHISQR_RTOL) + 1e-300)
     return _record(problem, best, nfev, chis)
 
 
