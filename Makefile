@@ -23,6 +23,7 @@ $(STAMP): pyproject.toml constraints.txt
 
 run: install
 	$(VENV)/bin/snakemake --cores $(CORES)
+	$(VENV)/bin/snakemake --report results/report.html
 
 test: install
 	$(PY) -m pytest -q -n 2 --dist loadgroup
