@@ -484,9 +484,9 @@ def plot_ranking(table: pd.DataFrame, path=None):
     fig.suptitle(f"model ranking {scope} (red: flagged fit)")
     fig.tight_layout()
     if path is not None:
-        from .canonical import atomic_write
+        from .plots import save_figure
 
-        atomic_write(path, lambda tmp: fig.savefig(tmp, format=str(path).rsplit(".", 1)[-1], dpi=120))
+        save_figure(fig, path, dpi=120)  # PNG and SVG side by side
     return fig
 
 
