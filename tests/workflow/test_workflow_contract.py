@@ -42,7 +42,8 @@ def _env(copy: Path) -> dict[str, str]:
     env["PYTHONPATH"] = os.pathsep.join([str(copy / "src"), *filter(None, [env.get("PYTHONPATH")])])
     env.setdefault("MPLBACKEND", "Agg")
     env.setdefault("HDF5_USE_FILE_LOCKING", "FALSE")
-    env.setdefault("NUMBA_CACHE_DIR", str(ROOT / ".numba_cache"))
+    # numba keys its cache by source path, so a copy never reuses the checkout's cache: keep the copy's own
+    env["NUMBA_CACHE_DIR"] = str(copy / ".numba_cache")
     return env
 
 
@@ -90,6 +91,11 @@ def copy_workflow(dest: Path, with_raw: bool = True) -> Path:
     skip = shutil.ignore_patterns("__pycache__", "*.egg-info")
     for folder in ("workflow", "config", "src") + (("raw",) if with_raw else ()):
         shutil.copytree(ROOT / folder, dest / folder, ignore=skip)
+    # Snakemake finds the default workflow profile through profiles/ next to the Snakefile (a link into workflow/)
+    if (ROOT / "profiles").is_symlink():
+        (dest / "profiles").symlink_to(os.readlink(ROOT / "profiles"), target_is_directory=True)
+    elif (ROOT / "profiles").is_dir():
+        shutil.copytree(ROOT / "profiles", dest / "profiles")
     # the FEM timing rule runs this script; dry runs only need it to exist in a full copy
     (dest / "benchmarks").mkdir(exist_ok=True)
     shutil.copy(ROOT / "benchmarks" / "fem_timing.py", dest / "benchmarks")
@@ -109,7 +115,7 @@ def tiny_config(name: str, tests: tuple[str, ...] = ("amplitude_sweep", "stress_
 
 
 def test_dry_run_of_the_repository_is_clean(tmp_path):
-    """`snakemake -n` on the repository's own config: exit 0, every bundled dataset's stages and the FEM/summary jobs."""
+    """`snakemake -n` with the repository's config: exit 0, every dataset's stages, the FEM and summary jobs."""
     copy = copy_workflow(tmp_path / "wf")
     config = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
     shared = ROOT.parent / "shared" / "data" / "real"
@@ -118,6 +124,7 @@ def test_dry_run_of_the_repository_is_clean(tmp_path):
         (tmp_path / "shared" / "data").mkdir(parents=True)
         (tmp_path / "shared" / "data" / "real").symlink_to(shared, target_is_directory=True)
     output = _snakemake(copy, "-n")
+    assert "Using workflow specific profile profiles/default" in output
     by_dataset = jobs_by_dataset(output)
     bundled = sorted(p.parent.name for p in (ROOT / "raw").glob("*/samples.csv"))
     assert bundled, "no bundled dataset under raw/"
@@ -254,14 +261,16 @@ print(json.dumps(out))
 
 @pytest.fixture(scope="module")
 def imported_by_script():
-    """script -> package files loaded by importing what the script imports (import time, one interpreter)."""
+    """script -> package files loaded by importing what the script imports.
+
+    Import time only, in one interpreter that forgets the package between scripts: imports inside functions are
+    not seen, so this is a lower bound of what a rule depends on."""
     modules = {}
     for script, _ in _rules_with_scripts().values():
         tree = ast.parse(script.read_text())
-        modules[str(script)] = sorted(
-            {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and (n.module or "").startswith("tissuemech")}
-            | {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names
-               if a.name.startswith("tissuemech")})
+        names = {n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+        names |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+        modules[str(script)] = sorted(n for n in names if n == "tissuemech" or n.startswith("tissuemech."))
     env = {**os.environ, "PYTHONPATH": str(ROOT / "src"), "MPLBACKEND": "Agg"}
     done = subprocess.run([sys.executable, "-c", _IMPORTS_OF_SCRIPTS, str(ROOT / "src" / "tissuemech"),
                            json.dumps(modules)], env=env, capture_output=True, text=True, timeout=300)
@@ -269,7 +278,8 @@ def imported_by_script():
     return json.loads(done.stdout)
 
 
-#: rules whose hash misses modules their script imports (found by this test; see the issue-2 report)
+#: rules whose hash misses modules their script imports (found by this test). Strict: once a rule's hash is fixed
+#: its case passes unexpectedly and fails, so take the rule out of this set then.
 HASH_GAPS = {"average", "lve", "ingest", "fit_scope", "rank", "diagnose", "fem_torsion", "fem_indentation",
              "fit_figures", "card_figures", "mesh_figures", "timing_figures", "summary"}
 
