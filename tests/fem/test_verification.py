@@ -214,3 +214,28 @@ def test_torsion_thrust_converges_to_closed_form_when_incompressible():
     assert (ratios[0] - 1) / (ratios[1] - 1) > 0.8 * h_ratio**2  # about second order
     extrapolated = ratios[1] + (ratios[1] - ratios[0]) / (h_ratio**2 - 1)
     assert extrapolated == pytest.approx(1.0, abs=0.12)
+
+
+def test_flat_punch_contact_equals_prescribed_punch_on_a_flat_surface():
+    """The rigid flat cylindrical punch by projection (for curved surfaces such as the brain) gives the same
+    equilibrium as prescribing u_z on the face nodes (frictionless) where the surface is flat."""
+    from tissuemech.fem.mesh import graded_layers, graded_ring_radii
+    from tissuemech.fem.tled import RigidContact
+
+    a, size, depth = 2e-3, 8e-3, 0.3e-3
+    mesh = cylinder_mesh(size, size, ring_radii_m=graded_ring_radii(size, a, 2, 1.6), z_m=graded_layers(size, 1e-3, 1.6))
+    x = mesh.nodes
+    mat = make_material("neo_hookean", {"mu": 1000.0}, poisson_ratio=0.45)
+    base = fixed_group("base", np.flatnonzero(np.isclose(x[:, 2], 0)))
+    face = np.flatnonzero(np.isclose(x[:, 2], size) & (np.hypot(x[:, 0], x[:, 1]) <= a * (1 + 1e-9)))
+    prescribed = solve_quasistatic(build_model(mesh, mat, [translation_group(
+        "punch", face, (0, 0, -1), [0, 1], [0, depth], dofs=(False, False, True)), base]), [0.5, 1.0], tol_m=1e-12)
+    # the nodes of the punch-edge ring slide outwards (frictionless); a face radius between that ring and
+    # the next keeps them on the face, as the prescribed group does
+    punch = RigidContact("flat_punch", (0.0, 0.0, size), 1.2 * a, (0, 0, -1), np.array([0, 1.0]),
+                         np.array([0, depth]))
+    contact = solve_quasistatic(build_model(mesh, mat, [base], punch), [0.5, 1.0], tol_m=1e-12)
+    np.testing.assert_allclose(contact.contact_force_n[:, 2], prescribed.reaction_force_n["punch"][:, 2], rtol=1e-6)
+    np.testing.assert_allclose(contact.displacement_m, prescribed.displacement_m, atol=1e-6 * depth)
+    with pytest.raises(ValueError, match="unknown rigid contact shape 'cone'"):
+        build_model(mesh, mat, [base], RigidContact("cone", (0, 0, size), a))

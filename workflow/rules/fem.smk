@@ -1,5 +1,16 @@
 # TLED experiments driven by the material cards: rheometer torsion, flat-punch indentation, timing.
 
+# the MNI brain geometry (nilearn wheel data, fTetWild): flat-punch indentation with the best card of the
+# first indentation dataset; its outputs feed the timing rule (which is always a target)
+BRAIN_MESH = bool(config["fem"].get("brain_mesh", False))
+BRAIN_DATASET = (config["fem"].get("indentation_datasets") or ["porcine_brain_thesis"])[
+    0
+]
+BRAIN_FILES = {
+    "brain_mesh": "results/fem/brain_mesh.vtu",
+    "brain_indentation": "results/fem/brain_indentation.nc",
+}
+
 
 rule fem_torsion:
     input:
@@ -59,7 +70,41 @@ rule fem_indentation:
         "../scripts/fem_indentation.py"
 
 
+rule fem_brain_mesh:
+    output:
+        mesh=BRAIN_FILES["brain_mesh"],
+        quality="results/fem/brain_mesh_quality.json",
+    log:
+        "logs/fem_brain_mesh.log",
+    benchmark:
+        "benchmarks/runs/fem_brain_mesh.tsv"
+    params:
+        pkg=package_hash("fem/mesh.py"),
+    script:
+        "../scripts/fem_brain_mesh.py"
+
+
+rule fem_brain_indentation:
+    input:
+        ranking=f"results/{BRAIN_DATASET}/ranking.csv",
+        brain_mesh=BRAIN_FILES["brain_mesh"],
+    output:
+        data=BRAIN_FILES["brain_indentation"],
+        vtu=directory("results/fem/brain_indentation_vtu"),
+    log:
+        "logs/fem_brain_indentation.log",
+    benchmark:
+        "benchmarks/runs/fem_brain_indentation.tsv"
+    params:
+        cards_root=f"results/{BRAIN_DATASET}/cards",
+        pkg=package_hash("fem", "stages.py"),
+    script:
+        "../scripts/fem_brain_indentation.py"
+
+
 rule fem_timing:
+    input:
+        unpack(lambda wildcards: BRAIN_FILES if BRAIN_MESH else {}),
     output:
         table=report(
             "results/fem/timing.csv",
@@ -74,5 +119,7 @@ rule fem_timing:
     params:
         python=sys.executable,
         pkg=package_hash("fem"),
+        brain=f"--brain-mesh {BRAIN_FILES['brain_mesh']}" if BRAIN_MESH else "",
     shell:
-        "{params.python} benchmarks/fem_timing.py --threads 1 --max-elements 20000 --out {output.table} > {log} 2>&1"
+        "{params.python} benchmarks/fem_timing.py --threads 1 --max-elements 20000 {params.brain}"
+        " --out {output.table} > {log} 2>&1"

@@ -22,8 +22,9 @@ import xarray as xr
 
 from ..canonical import make_run_dataset
 from .materials import Material, material_from_card
-from .mesh import TetMesh, cylinder_mesh, graded_layers, graded_ring_radii, mesh_quality, write_mesh
-from .tled import build_model, fixed_group, rotation_group, solve_quasistatic, translation_group
+from .mesh import (TetMesh, boundary_nodes, brain_mesh, cylinder_mesh, graded_layers, graded_ring_radii, mesh_quality,
+                   write_mesh)
+from .tled import RigidContact, build_model, fixed_group, rotation_group, solve_quasistatic, translation_group
 
 RHEOMETER_RADIUS_M = 12.5e-3
 RHEOMETER_GAP_M = 2.0e-3
@@ -154,6 +155,57 @@ def flat_punch_indentation(card: Mapping, punch_diameter_m: float = 8e-3, max_de
         {"test": "indentation", "punch_diameter_m": punch_diameter_m, "speed_m_s": speed_m_s,
          "sample_radius_m": sample_radius_m, "sample_height_m": sample_height_m, "bonded_punch": bonded_punch,
          "source": "tissuemech.fem TLED (dynamic relaxation)", **_provenance(card, material, mesh, res.iterations)})
+
+
+def brain_indentation(card: Mapping, punch_diameter_m: float = 8e-3, max_depth_m: float = 2e-3,
+                      speed_m_s: float = 1e-4, *, mesh: TetMesh | None = None, cache_dir: str | Path | None = None,
+                      support_height_m: float = 25e-3, n_increments: int = 10, default_poisson_ratio: float = 0.49,
+                      anp: bool = True, vtu_path: str | Path | None = None,
+                      n_threads: int | None = None) -> xr.Dataset:
+    """Rigid flat cylindrical punch pressed vertically into the top of the MNI brain geometry.
+
+    The punch (axis -z, frictionless, contact by projection) starts touching the highest surface node and
+    advances at constant speed; the brain rests on a rigid support that holds every node less than
+    ``support_height_m`` above its lowest point (brain stem and cerebellum, as the skull base would).
+
+    Parameters
+    ----------
+    card : material card dict (see module docstring)
+    punch_diameter_m, max_depth_m, speed_m_s : punch and loading (m, m/s)
+    mesh : brain mesh in m (default :func:`tissuemech.fem.mesh.brain_mesh`, cached in ``cache_dir``)
+    support_height_m : height of the supported base region (m)
+    vtu_path, n_threads : as in :func:`rheometer_torsion`
+
+    Returns
+    -------
+    canonical dataset with ``time``, ``displacement`` (punch depth, m), ``force`` (N, compressive on the
+    punch positive) and ``contact_nodes`` (number of surface nodes under the punch at each output).
+    """
+    mesh = brain_mesh(cache_dir=cache_dir) if mesh is None else mesh
+    x = mesh.nodes
+    surface = boundary_nodes(mesh.elements)
+    top = surface[np.argmax(x[surface, 2])]
+    a = 0.5 * punch_diameter_m
+    base = np.flatnonzero(x[:, 2] < x[:, 2].min() + support_height_m)
+    under = np.hypot(x[surface, 0] - x[top, 0], x[surface, 1] - x[top, 1]) <= a + max_depth_m
+    t_end = max_depth_m / speed_m_s
+    t = np.linspace(0.0, t_end, n_increments + 1)[1:]
+    punch = RigidContact("flat_punch", tuple(x[top]), a, (0.0, 0.0, -1.0), np.array([0.0, t_end]),
+                         np.array([0.0, max_depth_m]), nodes=surface[under])
+    material = card_material(card, default_poisson_ratio)
+    model = build_model(mesh, material, [fixed_group("support", base)], punch, anp=anp)
+    res = solve_quasistatic(model, t, n_threads=n_threads)
+    u = np.asarray(res.displacement_m, float)
+    on_face = np.isclose(x[surface[under], 2] + u[surface[under], 2], x[top, 2] - max_depth_m, atol=1e-9) & (
+        np.hypot(x[surface[under], 0] - x[top, 0], x[surface[under], 1] - x[top, 1]) <= a)
+    if vtu_path is not None:
+        write_mesh(vtu_path, mesh, {"displacement": u})
+    return make_run_dataset(
+        {"time": t, "displacement": speed_m_s * t, "force": -res.contact_force_n[:, 2]},
+        {"test": "indentation", "geometry": "MNI ICBM152-2009 brain (nilearn wheel)", "punch_diameter_m": punch_diameter_m,
+         "speed_m_s": speed_m_s, "support_height_m": support_height_m, "punch_nodes_at_max_depth": int(on_face.sum()),
+         "source": "tissuemech.fem TLED (dynamic relaxation, flat-punch contact)",
+         **_provenance(card, material, mesh, res.iterations)})
 
 
 def _provenance(card: Mapping, material: Material, mesh: TetMesh, iterations: np.ndarray) -> dict:

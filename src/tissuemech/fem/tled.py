@@ -409,10 +409,14 @@ def _reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_out, torque_out
 
 @njit(cache=True)
 def _contact_project(u, X, contact_nodes, in_contact, contact_kind, cparams, s_contact):
-    """Project nodes inside a rigid sphere (kind 1) or infinite cylinder (kind 2) onto its surface.
+    """Project nodes inside a rigid sphere (kind 1), infinite cylinder (kind 2) or flat cylindrical punch
+    (kind 3) onto its surface.
 
     ``cparams = [c0x, c0y, c0z, dx, dy, dz, radius, ax, ay, az]``: centre at ``c0 + s d``; cylinder axis ``a``.
-    Frictionless: the projection is along the surface normal. Returns the number of nodes in contact.
+    The flat punch is the half-infinite cylinder of radius ``radius`` behind its face centre ``c0 + s d``
+    (it advances along ``d``): a node within the radius that has fallen behind the face is moved back onto
+    the face along ``d``. Frictionless: the projection is along the surface normal. Returns the number of
+    nodes in contact.
     """
     cx = cparams[0] + s_contact * cparams[3]
     cy = cparams[1] + s_contact * cparams[4]
@@ -425,6 +429,19 @@ def _contact_project(u, X, contact_nodes, in_contact, contact_kind, cparams, s_c
         px = X[n, 0] + u[n, 0] - cx
         py = X[n, 1] + u[n, 1] - cy
         pz = X[n, 2] + u[n, 2] - cz
+        if contact_kind == 3:
+            dx, dy, dz = cparams[3], cparams[4], cparams[5]
+            ahead = px * dx + py * dy + pz * dz
+            qx, qy, qz = px - ahead * dx, py - ahead * dy, pz - ahead * dz
+            if ahead < 0.0 and qx * qx + qy * qy + qz * qz <= r * r * (1.0 + 1e-9):
+                u[n, 0] -= ahead * dx
+                u[n, 1] -= ahead * dy
+                u[n, 2] -= ahead * dz
+                in_contact[k] = 1
+                count += 1
+            else:
+                in_contact[k] = 0
+            continue
         if contact_kind == 2:
             along = px * ax + py * ay + pz * az
             px -= along * ax
@@ -766,12 +783,14 @@ def rotation_group(name: str, nodes, time_s, angle_rad, center_xy_m=(0.0, 0.0)) 
 
 @dataclass(frozen=True)
 class RigidContact:
-    """Frictionless rigid sphere or infinite cylinder moving along ``direction`` by ``displacement_m(time_s)``.
+    """Frictionless rigid sphere, infinite cylinder or flat cylindrical punch moving along ``direction`` by
+    ``displacement_m(time_s)``.
 
     Attributes
     ----------
-    shape : ``"sphere"`` or ``"cylinder"``
-    center_m : initial centre (m); for a cylinder a point on its axis
+    shape : ``"sphere"``, ``"cylinder"`` or ``"flat_punch"`` (axis = ``direction``; for a punch on a flat
+        surface a prescribed node group is equivalent and cheaper, this is for curved surfaces)
+    center_m : initial centre (m); for a cylinder a point on its axis; for a flat punch its face centre
     radius_m : radius (m)
     direction : motion direction (normalised)
     time_s, displacement_m : motion history
@@ -922,7 +941,10 @@ def build_model(mesh: TetMesh, material: Material, groups: list[BoundaryGroup] |
     free[bc_nodes_a[:, None], np.arange(3)[None, :]] = 1 - bc_mask_a
 
     if contact is not None:
-        kind = {"sphere": 1, "cylinder": 2}[contact.shape]
+        kinds = {"sphere": 1, "cylinder": 2, "flat_punch": 3}
+        if contact.shape not in kinds:
+            raise ValueError(f"unknown rigid contact shape {contact.shape!r}; known: {', '.join(kinds)}")
+        kind = kinds[contact.shape]
         d = np.asarray(contact.direction, float)
         a = np.asarray(contact.axis, float)
         cparams = np.concatenate([contact.center_m, d / np.linalg.norm(d), [contact.radius_m], a / np.linalg.norm(a)])
