@@ -140,6 +140,16 @@ def test_dry_run_of_the_repository_is_clean(tmp_path):
             assert f"external dataset {name!r}" in output and "skipped" in output
 
 
+@pytest.mark.xfail(strict=True, reason="fem.smk (4697076) makes the brain indentation read porcine_brain_thesis's "
+                   "ranking even when that dataset is not selected: MissingInputException")
+def test_dry_run_of_one_selected_dataset_is_clean(tmp_path):
+    """The documented override `--config datasets=[...]` with the repository's config: only that dataset's jobs."""
+    copy = copy_workflow(tmp_path / "wf")
+    by_dataset = jobs_by_dataset(_snakemake(copy, "-n", "--config", "datasets=['agar_3pct_thesis']"))
+    assert set(by_dataset) == {"agar_3pct_thesis", ""}
+    assert by_dataset["agar_3pct_thesis"]["ingest"] == 1 and by_dataset[""]["all"] == 1
+
+
 def test_rules_are_snakefmt_clean():
     snakefmt = Path(sys.executable).with_name("snakefmt")
     cmd = [str(snakefmt) if snakefmt.exists() else shutil.which("snakefmt") or "snakefmt",
@@ -159,7 +169,9 @@ def tiny_run(tmp_path_factory):
     config["external_datasets"] = {}
     config["fit"].update(multistart=1, joint_models=[],
                          models={"amplitude_sweep": ["linear_elastic"], "stress_relaxation": ["maxwell"]})
-    config["fem"]["indentation_datasets"] = []
+    # FEM off: no indentation experiment, no brain mesh (the runs stop at ranking anyway, but the DAG of the
+    # default target must resolve)
+    config["fem"].update(indentation_datasets=[], brain_mesh=False)
     (copy / "config" / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
     output = _snakemake(copy, "--cores", "2", "--until", *UNTIL, timeout=600)
     assert jobs_by_dataset(output) == {TINY: FULL_CHAIN}
@@ -197,6 +209,14 @@ def test_editing_a_module_reruns_only_its_dependants(tiny_run, module, expected)
         # same bytes, same hash: the next test sees the tree as the run left it
         source.write_bytes(original)
     assert by_dataset == {TINY: Counter(expected)}
+
+
+def test_changing_a_fit_setting_reruns_only_the_fits(tmp_path, tiny_run):
+    # a config file, not --config: Snakemake reads nested --config values as strings, which the schema refuses
+    override = tmp_path / "more_starts.yaml"
+    override.write_text(yaml.safe_dump({"fit": {"multistart": 2}}))
+    output = _snakemake(tiny_run, "-n", "--configfile", str(override), "--until", *UNTIL)
+    assert jobs_by_dataset(output) == {TINY: Counter({"fit_scope": 2, "rank": 1})}
 
 
 def test_dropping_a_dataset_folder_schedules_only_its_jobs(tiny_run):
@@ -280,7 +300,8 @@ def imported_by_script():
 
 #: rules whose hash misses modules their script imports (found by this test). Strict: once a rule's hash is fixed
 #: its case passes unexpectedly and fails, so take the rule out of this set then.
-HASH_GAPS = {"average", "lve", "ingest", "fit_scope", "rank", "diagnose", "fem_torsion", "fem_indentation"}
+HASH_GAPS = {"average", "lve", "ingest", "fit_scope", "rank", "diagnose", "fem_torsion", "fem_indentation",
+             "fem_brain_mesh", "fem_brain_indentation"}
 
 
 @pytest.mark.parametrize("rule", [
