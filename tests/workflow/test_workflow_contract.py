@@ -118,7 +118,7 @@ def test_dry_run_of_the_repository_is_clean(tmp_path):
     """`snakemake -n` with the repository's config: exit 0, every dataset's stages, the FEM and summary jobs."""
     copy = copy_workflow(tmp_path / "wf")
     config = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
-    shared = ROOT.parent / "shared" / "data" / "real"
+    shared = Path(os.environ.get("TISSUEMECH_SHARED_REAL", ROOT.parent / "shared" / "data" / "real"))  # as conftest
     if shared.is_dir():
         # external descriptors name their source relative to the checkout (../shared/...); give the copy the same view
         (tmp_path / "shared" / "data").mkdir(parents=True)
