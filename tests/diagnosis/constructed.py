@@ -77,7 +77,7 @@ def make_design(effect: str | None = None, magnitude: float = 1.0, seed: int = 0
     runs, preds = [], []
     fit_info = {"target": "torque", "relaxation": "ramp"}
     if effect == "rim_stress_nonlinearity":
-        fit_info["target"] = "apparent_stress"
+        fit_info["target"] = "thesis"  # homogeneous law vs reported 2M/(pi R^3): biased for this truth
     if effect == "finite_rise_time":
         fit_info["relaxation"] = "step"
     spec_scale = np.exp(rng.normal(0, specimen_sd, n_specimens))

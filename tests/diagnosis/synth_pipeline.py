@@ -25,9 +25,18 @@ TESTS = ([{"test": "amplitude_sweep", "settings": {"n_points": 12, "strain_max":
          + [{"test": "stress_relaxation", "settings": {"strain": s, "n_points": 16, "hold_s": 100.0}}
             for s in (0.01, 0.1, 0.2, 0.4)])
 
+#: 6 specimens x 2 samples, test order shuffled per sample after the leading amplitude sweep
+DESIGN = {"specimens": 6, "samples": 2, "order": "shuffled"}
+#: how the baseline is fitted for an effect (default: linear QLV through the torque, measured strain history)
+ANALYSIS = {
+    "finite_rise_time": {"relaxation": "step"},   # data with a 0.5 s ramp, analysed as a step
+    # a stiffening law fitted the thesis way: homogeneous law at the rim strain vs the reported 2M/(pi R^3)
+    "rim_stress_nonlinearity": {"baseline": "qlv_rp2_prony4", "target": "thesis"},
+}
+
 
 def config(effect: str | None, magnitude: float = 1.0, specimens: int = 4, samples: int = 2,
-           specimen_log_sd: float = 0.25, pause_s: float = 120.0) -> dict:
+           specimen_log_sd: float = 0.25, pause_s: float = 120.0, order: str = "fixed") -> dict:
     from tissuemech.synth.effects import DEFAULTS
 
     effects = {}
@@ -46,7 +55,7 @@ def config(effect: str | None, magnitude: float = 1.0, specimens: int = 4, sampl
                       "params": {"G0": 200.0, "beta_1": 0.3, "beta_2": 0.5, "beta_3": 0.4, "beta_4": 0.2}},
             "variability": {"specimen_log_sd": specimen_log_sd, "sample_log_sd": 0.1},
             "effects": effects, "session": {"pause_between_tests_s": pause_s, "loading_time_s": 300.0},
-            "sequence": {"specimens": specimens, "samples_per_specimen": samples, "tests": TESTS}}
+            "sequence": {"specimens": specimens, "samples_per_specimen": samples, "tests": TESTS, "order": order}}
 
 
 def synth_runs(cfg: dict, seed: int, out_dir) -> list:

@@ -1,48 +1,64 @@
 """Hidden-effect suite on the virtual rheometer (tissuemech.synth): one effect injected at its realistic
-default magnitude (science.md section 3) into a small thesis-like design (4 specimens x 2 samples, each
-sample running AS, FS, three CSR rates and four relaxations in that order, gaps 2-4 mm), a linear QLV
+default magnitude (science.md section 3) into a small thesis-like design (6 specimens x 2 samples; each sample
+runs the amplitude sweep first -- the LVE check -- then FS, three CSR rates and four relaxations in an order
+shuffled per sample, so that elapsed time and test condition are not confounded; gaps 2-4 mm), a linear QLV
 baseline fitted with lmfit to the ramps and relaxations, then the diagnose stage. The top finding must name
 the injected effect and its fix must improve the held-out metric; the null design raises nothing.
 
-Not in this suite (covered on constructed designs in test_catalogue.py, see the report for why):
-``rim_stress_nonlinearity`` needs a strain-stiffening baseline (no hyperelastic QLV in the registry yet),
-``elapsed_time_drift`` is confounded with the fixed test order of this design (the fitted baseline turns
-a drift over ascending rates into rate dependence), and ``outlier_specimen`` needs more than 4 specimens.
+Not in this suite (covered on constructed designs in test_catalogue.py):
+``rim_stress_nonlinearity``: with a stiffening baseline (qlv_rp2_prony4) fitted the thesis way the rim detector
+reads n = 1.27 from the relaxation isochrones (truth 1.29) and a -6 % rim bias (C20 fitted at 2/3 of the truth,
+as science.md 2.1 predicts), but its Holm p is 0.03 against the practical null |n - 1| <= 0.2, and a wall-slip
+signature (t = -6.6, also with a torque-fitted rp2 baseline) outranks it: not yet understood.
+``outlier_specimen``: a x2.5 specimen among specimens with log-SD 0.25 is a 3.5 sigma deviation; with 6
+specimens the deletion t-test (df = 4, Bonferroni over specimens, then Holm over the catalogue) cannot
+reach alpha = 0.01 (measured Holm p 0.3-1 on seeds 0, 1).
 """
 from __future__ import annotations
 
 import pytest
 
-from synth_pipeline import diagnose_synthetic
+from synth_pipeline import ANALYSIS, DESIGN, diagnose_synthetic
 from tissuemech.diagnosis.report import top_finding
 
 pytestmark = pytest.mark.slow
 
+#: catalogue id -> what the realistic magnitude is (synth.effects.DEFAULTS, science.md section 3); how the
+#: baseline is fitted per effect is synth_pipeline.ANALYSIS, the design synth_pipeline.DESIGN
 SUITE = {
-    "nonseparable_relaxation": {},
-    "wall_slip": {},
-    "preconditioning": {},
-    "instrument_inertia": {},
-    "torque_offset": {},
-    "amplitude_softening": {},
-    "finite_rise_time": {"relaxation": "step"},   # data with a 0.5 s ramp, analysed as a step
-    "unidentified_i2_dependence": {},             # C01/C10 = 0.4, visible in the normal force only
+    "nonseparable_relaxation": "PR weights growing with strain, kappa = 0.6, gamma_s = 0.2",
+    "wall_slip": "sigma_c = 30 Pa, beta_s = 2e-6 m/Pa",
+    "preconditioning": "first load 20 % stiffer",
+    "instrument_inertia": "1 % motor-inertia calibration error",
+    "torque_offset": "0.2 uN m offset + 1e-3 uN m/s drift",
+    "amplitude_softening": "Kraus gamma_c = 3 %, m = 1, G'inf/G'0 = 0.7",
+    "finite_rise_time": "0.5 s ramp analysed as a step",
+    "unidentified_i2_dependence": "C01/C10 = 0.4, visible in the normal force only",
+    "elapsed_time_drift": "stiffening of 10 % per hour of session time",
 }
 
 
 def test_null_synthetic_dataset_raises_nothing(tmp_path):
-    _, _, res, _ = diagnose_synthetic(None, 0, tmp_path)
+    _, _, res, _ = diagnose_synthetic(None, 0, tmp_path, **DESIGN)
     assert top_finding(res) is None
     assert res["unexplained"] == []
 
 
 @pytest.mark.parametrize("effect", list(SUITE))
 def test_injected_effect_is_named_and_fixed(effect, tmp_path):
-    _, _, res, _ = diagnose_synthetic(effect, 0, tmp_path, **SUITE[effect])
+    _, _, res, _ = diagnose_synthetic(effect, 0, tmp_path, **DESIGN, **ANALYSIS.get(effect, {}))
     assert top_finding(res) == effect, [(f["effect"], f["log10_p"], f["detected"]) for f in res["findings"][:3]]
     top = res["findings"][0]
     if top["fix"] is not None:
         assert top["fix"]["gain"] > 0, top["fix"]
+
+
+def test_elapsed_time_drift_rate_is_recovered(tmp_path):
+    """The injected stiffening of 10 % per hour of session time is recovered by the drift detector."""
+    _, _, res, _ = diagnose_synthetic("elapsed_time_drift", 1, tmp_path, **DESIGN)
+    drift = next(f for f in res["findings"] if f["effect"] == "elapsed_time_drift")
+    assert drift["detected"] and drift["effect_size_unit"] == "1/h"
+    assert drift["effect_size"] == pytest.approx(0.10, abs=0.03)
 
 
 def test_nonseparable_fix_is_the_pipkin_rogers_extension(tmp_path):
@@ -55,3 +71,22 @@ def test_nonseparable_fix_is_the_pipkin_rogers_extension(tmp_path):
     assert fix["model"] == "pr_linear_prony4"
     assert fix["gain"] > 0 and fix["parameters"]["delta_aicc"] < -10, fix
     assert fix["extension_params"]["kappa"] > 0  # the injected weights grow with strain (kappa = 0.6)
+
+
+def test_shuffled_design_decorrelates_test_order_from_condition():
+    """Every sample starts with the amplitude sweep; the other tests take sample-specific positions."""
+    import numpy as np
+
+    from synth_pipeline import config
+    from tissuemech.synth.generator import plan_runs
+
+    planned = plan_runs(config(None, **DESIGN), np.random.default_rng(0))
+    by_sample = {}
+    for r in planned:
+        by_sample.setdefault((r.specimen, r.sample), []).append(r)
+    assert len(by_sample) == 12
+    assert all(runs[0].test == "amplitude_sweep" and runs[0].order == 1 for runs in by_sample.values())
+    orders = {tuple(f"{r.test}{r.settings}" for r in runs) for runs in by_sample.values()}
+    assert len(orders) == 12
+    with pytest.raises(ValueError, match="sequence.order must be 'fixed' or 'shuffled'"):
+        plan_runs(config(None, order="random"), np.random.default_rng(0))

@@ -30,8 +30,8 @@ Homogeneous multi-mode data (simple shear + uniaxial compression/tension) are di
 
 Inputs (:class:`DiagnosisContext`): the canonical runs, the residual table of the baseline model
 (:func:`tissuemech.diagnosis.evidence.residual_table`) and ``fit_info`` -- how the baseline was fitted:
-``target`` (``"apparent_stress"``: reported 2M/(pi R^3) taken as rim stress, the thesis method;
-``"corrected_stress"``; ``"torque"``: plate forward model), ``relaxation`` (``"step"`` or ``"ramp"``) and
+``target`` (the plate targets of :mod:`tissuemech.fitting`: ``"thesis"``: reported 2M/(pi R^3) taken as rim
+stress; ``"apparent_stress"``/``"torque"``: plate forward model; ``"corrected_stress"``: Rabinowitsch), ``relaxation`` (``"step"`` or ``"ramp"``) and
 optionally ``correlations`` ({"p1|p2": rho}) of the fitted parameters.
 """
 from __future__ import annotations
@@ -854,22 +854,87 @@ def detect_nonseparable_relaxation(ctx: DiagnosisContext) -> dict:
                     "relative shape change", abs(effect) >= 0.03, evidence, fix)
 
 
-def detect_rim_stress_nonlinearity(ctx: DiagnosisContext) -> dict:
-    """n = dlnM/dln(gamma_R) of the ramps; a fit to apparent stress is biased by 4/(n+3) - 1."""
-    eff = "rim_stress_nonlinearity"
-    target = ctx.fit_info.get("target", "apparent_stress")
-    csr = [r for r in ctx.runs_of("constant_shear_rate") if "shear_stress" in r and "shear_strain" in r]
+#: plate targets that compare the homogeneous law at the rim strain with the reported 2M/(pi R^3) (the thesis
+#: method, :mod:`tissuemech.fitting`): the only ones a nonlinear material biases
+RIM_BIASED_TARGETS = ("thesis",)
+
+
+def _isochrone_exponents(ctx: DiagnosisContext, rim_strain: float) -> np.ndarray:
+    """n = d ln M / d ln gamma_R at ``rim_strain`` from the relaxation isochrones of every sample.
+
+    A relaxation hold is a scaled step at every radius, so the Rabinowitsch exponent is the slope of the
+    reported stress against the step strain *at a fixed time* (science.md 2.1): per sample with >= 3 strain
+    levels, ln sigma is read at times 2-10x the longest ramp, sigma = a g + b g^3 fitted over the levels
+    (relative least squares) and n = (a + 3 b g^2) / (a + b g^2) evaluated at ``rim_strain``. Early in the
+    hold the reduced relaxation is still close to 1, so strain-dependent relaxation weights barely move it;
+    a ramp's log slope would mix the relaxation of the material (n < 1 for any linear viscoelastic ramp)
+    into the exponent."""
+    by_sample: dict[tuple, list] = {}
+    for r in ctx.runs_of("stress_relaxation"):
+        if "shear_stress" in r and "shear_strain" in r and "time" in r:
+            by_sample.setdefault((str(r.attrs.get("specimen")), str(r.attrs.get("sample"))), []).append(r)
+    out = []
+    for runs in by_sample.values():
+        if len(runs) < 3:
+            continue
+        levels, ramp_end = [], 0.0
+        for r in runs:
+            g = np.abs(r["shear_strain"].values)
+            t = r["time"].values - r["time"].values[0]
+            g0 = float(np.nanmax(g))
+            levels.append((g0, t, np.abs(r["shear_stress"].values)))
+            ramp_end = max(ramp_end, float(t[np.argmax(g >= 0.98 * g0)]))
+        t_read = np.geomspace(max(2.0 * ramp_end, 0.05), max(10.0 * ramp_end, 1.0), 5)
+        g0s, sig = [], []
+        for g0, t, s in levels:
+            ok = (t > 0) & (s > 0)
+            if ok.sum() < 4 or t[ok].max() < t_read[-1]:
+                continue
+            g0s.append(g0)
+            sig.append(float(np.exp(np.mean(np.interp(np.log(t_read), np.log(t[ok]), np.log(s[ok]))))))
+        if len(g0s) < 3:
+            continue
+        g0s, sig = np.asarray(g0s), np.asarray(sig)
+        X = np.column_stack([g0s, g0s ** 3]) / sig[:, None]
+        a, b = np.linalg.lstsq(X, np.ones_like(sig), rcond=None)[0]
+        if a <= 0:
+            continue
+        out.append((a + 3 * b * rim_strain ** 2) / (a + b * rim_strain ** 2))
+    return np.asarray(out, float)
+
+
+def _ramp_exponents(ctx: DiagnosisContext) -> np.ndarray:
+    """n = d ln M / d ln gamma_R over the top 70 % of each constant-shear-rate ramp (exact for rate-independent
+    ramps; in a relaxing material the log slope also carries the relaxation, see :func:`_isochrone_exponents`)."""
     ns = []
-    for r in csr:
+    for r in ctx.runs_of("constant_shear_rate"):
+        if "shear_stress" not in r or "shear_strain" not in r:
+            continue
         g = np.abs(r["shear_strain"].values)
         s = np.abs(r["shear_stress"].values)
-        gmax = np.nanmax(g)
-        m = (g >= 0.3 * gmax) & (s > 0)
+        m = (g >= 0.3 * np.nanmax(g)) & (s > 0)
         if m.sum() >= 4:
             ns.append(np.polyfit(np.log(g[m]), np.log(s[m]), 1)[0])
-    if len(ns) < 3:
-        return _untested(eff, "fewer than 3 constant-shear-rate ramps to estimate n = dlnM/dln(gamma_R)")
-    ns = np.asarray(ns)
+    return np.asarray(ns, float)
+
+
+def detect_rim_stress_nonlinearity(ctx: DiagnosisContext) -> dict:
+    """Rabinowitsch exponent n = dlnM/dln(gamma_R) at the largest ramp strain; a baseline fitted the thesis way
+    (homogeneous law vs the reported 2M/(pi R^3)) is biased there by 4/(n+3) - 1."""
+    eff = "rim_stress_nonlinearity"
+    target = ctx.fit_info.get("target", "thesis")
+    csr = [r for r in ctx.runs_of("constant_shear_rate") if "shear_strain" in r]
+    strains = [float(np.nanmax(np.abs(r["shear_strain"].values))) for r in csr + ctx.runs_of("stress_relaxation")
+               if "shear_strain" in r]
+    gmax = max(strains) if strains else np.nan
+    ns = _isochrone_exponents(ctx, gmax) if np.isfinite(gmax) else np.asarray([])
+    source = f"relaxation isochrones of {ns.size} samples (stress at 2-10x the ramp time vs step strain)"
+    if ns.size < 3:
+        ns = _ramp_exponents(ctx)
+        source = f"log slope over the top 70 % of strain of {ns.size} constant-shear-rate ramps"
+    if ns.size < 3:
+        return _untested(eff, "fewer than 3 samples with relaxation at >= 3 strains and fewer than 3 "
+                              "constant-shear-rate ramps to estimate n = dlnM/dln(gamma_R)")
     n_mean = float(ns.mean())
     se = float(ns.std(ddof=1) / np.sqrt(ns.size))
     bias = 4.0 / (n_mean + 3.0) - 1.0
@@ -877,16 +942,15 @@ def detect_rim_stress_nonlinearity(ctx: DiagnosisContext) -> dict:
     tval = (abs(n_mean - 1.0) - 0.2) / se if se > 0 else np.inf
     lp = float(np.log10(max(st.sps.t.sf(tval, ns.size - 1), 1e-300)))
     t = st._pack(tval, lp)
-    gmax = max(float(np.nanmax(np.abs(r["shear_strain"].values))) for r in csr)
-    if target != "apparent_stress":
-        evidence = (f"n = dlnM/dln(gamma_R) = {n_mean:.2f} at large strain (+-{se:.2f}), but the baseline was "
-                    f"fitted through {target}, which already accounts for the radial strain field.")
+    if target not in RIM_BIASED_TARGETS:
+        evidence = (f"n = dlnM/dln(gamma_R) = {n_mean:.2f} +- {se:.2f} at {100 * gmax:.0f} % ({source}), but the "
+                    f"baseline was fitted through {target}, which already accounts for the radial strain field.")
         return _finding(eff, st._pack(tval, 0.0), "t", 0.0, "relative stress bias", False, evidence, None)
-    evidence = (f"The ramps stiffen (n = dlnM/dln(gamma_R) = {n_mean:.2f} +- {se:.2f} over the top 70 % of strain, "
-                f"{ns.size} ramps) while {ctx.model} was fitted to the reported 2M/(pi R^3) as if it were the rim "
-                f"stress: the reported stress is {100 * bias:+.0f} % off the rim stress at "
-                f"{100 * gmax:.0f} %, rate-independent and growing with strain; the stiffening parameters "
-                f"are biased (C20 -> 2/3, C30 -> 1/2 of the truth for a reduced polynomial).")
+    evidence = (f"The material {'stiffens' if n_mean > 1 else 'softens'} (n = dlnM/dln(gamma_R) = {n_mean:.2f} +- "
+                f"{se:.2f} at {100 * gmax:.0f} %, {source}) while {ctx.model} was fitted to the reported "
+                f"2M/(pi R^3) as if it were the rim stress: the reported stress is {100 * bias:+.0f} % off the rim "
+                f"stress at {100 * gmax:.0f} %, rate-independent and growing with strain; the stiffening "
+                f"parameters are biased (C20 -> 2/3, C30 -> 1/2 of the truth for a reduced polynomial).")
     # the correction is exact for the power-law segment; its residual bias is the n uncertainty
     after = abs(4.0 / (n_mean + 3.0) - 4.0 / (n_mean + se + 3.0))
     fix = _fix("torque forward model (radial Gauss-Legendre integral) or Rabinowitsch-corrected rim stress "

@@ -594,6 +594,8 @@ def write_figures(by_mode, table: pd.DataFrame, result: dict, fig_dir) -> list:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from ..plots import save_figure
+
     fig_dir = Path(fig_dir)
     fig_dir.mkdir(parents=True, exist_ok=True)
     base, ext = result["fit_info"]["baseline"], result["fit_info"]["extension"]
@@ -618,7 +620,7 @@ def write_figures(by_mode, table: pd.DataFrame, result: dict, fig_dir) -> list:
     fig.suptitle("before (shear-calibrated I1 law) and after (I2 term, all modes / held-out mode)")
     fig.tight_layout()
     p = fig_dir / "predictions_before_after.png"
-    fig.savefig(p, dpi=120)
+    save_figure(fig, p, dpi=120)  # PNG (report pattern) + SVG
     plt.close(fig)
     paths.append(p)
 
@@ -642,7 +644,7 @@ def write_figures(by_mode, table: pd.DataFrame, result: dict, fig_dir) -> list:
     fig.suptitle("residual map per mode (points above the noise floor)")
     fig.tight_layout()
     p = fig_dir / "residual_map_modes.png"
-    fig.savefig(p, dpi=120)
+    save_figure(fig, p, dpi=120)  # PNG (report pattern) + SVG
     plt.close(fig)
     paths.append(p)
 
@@ -658,7 +660,7 @@ def write_figures(by_mode, table: pd.DataFrame, result: dict, fig_dir) -> list:
     ax.set_title("profile of the I2 coefficient")
     fig.tight_layout()
     p = fig_dir / "c01_profile.png"
-    fig.savefig(p, dpi=120)
+    save_figure(fig, p, dpi=120)  # PNG (report pattern) + SVG
     plt.close(fig)
     paths.append(p)
 
@@ -681,7 +683,7 @@ def write_figures(by_mode, table: pd.DataFrame, result: dict, fig_dir) -> list:
     ax.set_title("cross-mode prediction (leave one mode out)")
     fig.tight_layout()
     p = fig_dir / "cross_mode_gains.png"
-    fig.savefig(p, dpi=120)
+    save_figure(fig, p, dpi=120)  # PNG (report pattern) + SVG
     plt.close(fig)
     paths.append(p)
     return paths

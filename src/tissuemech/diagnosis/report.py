@@ -170,6 +170,8 @@ def write_figures(table: pd.DataFrame, result: dict, fig_dir: str | Path) -> lis
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from ..plots import save_figure
+
     from .catalogue import curve_levels
 
     fig_dir = Path(fig_dir)
@@ -190,7 +192,7 @@ def write_figures(table: pd.DataFrame, result: dict, fig_dir: str | Path) -> lis
     ax.set_title(f"residual map of {result['model']} (red: data above model)")
     p = fig_dir / "residual_map_strain_rate.png"
     fig.tight_layout()
-    fig.savefig(p, dpi=120)
+    save_figure(fig, p, dpi=120)  # PNG (report pattern) + SVG
     plt.close(fig)
     paths.append(p)
 
@@ -208,7 +210,7 @@ def write_figures(table: pd.DataFrame, result: dict, fig_dir: str | Path) -> lis
     ax.axhline(0, color="k", lw=0.5)
     p = fig_dir / "curve_levels_vs_elapsed.png"
     fig.tight_layout()
-    fig.savefig(p, dpi=120)
+    save_figure(fig, p, dpi=120)  # PNG (report pattern) + SVG
     plt.close(fig)
     paths.append(p)
 
@@ -226,7 +228,7 @@ def write_figures(table: pd.DataFrame, result: dict, fig_dir: str | Path) -> lis
     ax.legend() if len(fs) else ax.text(0.5, 0.5, "no frequency sweep", ha="center", transform=ax.transAxes)
     p = fig_dir / "frequency_sweep_residuals.png"
     fig.tight_layout()
-    fig.savefig(p, dpi=120)
+    save_figure(fig, p, dpi=120)  # PNG (report pattern) + SVG
     plt.close(fig)
     paths.append(p)
 
@@ -244,7 +246,7 @@ def write_figures(table: pd.DataFrame, result: dict, fig_dir: str | Path) -> lis
         ax.text(0.5, 0.5, "no cause detected", ha="center", transform=ax.transAxes)
     p = fig_dir / "fix_gains.png"
     fig.tight_layout()
-    fig.savefig(p, dpi=120)
+    save_figure(fig, p, dpi=120)  # PNG (report pattern) + SVG
     plt.close(fig)
     paths.append(p)
     return paths

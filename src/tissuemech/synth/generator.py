@@ -23,7 +23,10 @@ Config keys (see ``config/synth/*.yaml`` for complete examples):
 ``groups``
     list of ``{test, samples, specimens, settings}``: independent samples (one test each) spread over the
     first ``specimens`` specimens of the pool; and/or ``sequence``:
-    ``{specimens, samples_per_specimen, tests: [{test, settings}, ...]}``: every sample runs the list in order
+    ``{specimens, samples_per_specimen, tests: [{test, settings}, ...], order}``: every sample runs the list in
+    order (``order: fixed``, the default) or, with ``order: shuffled``, runs the first test first (the LVE
+    amplitude check) and the others in a random order of its own, so that elapsed time and test condition
+    are not confounded
 ``provenance``
     ``truth_choice`` and ``departures`` texts copied to dataset.yaml
 """
@@ -127,7 +130,12 @@ def plan_runs(config: Mapping, rng: np.random.Generator) -> list[PlannedRun]:
         for si in range(int(seq["specimens"])):
             for _ in range(int(seq["samples_per_specimen"])):
                 name = new_sample(si)
-                for order, t in enumerate(seq["tests"], start=1):
+                tests = list(seq["tests"])
+                if seq.get("order", "fixed") == "shuffled":
+                    tests = tests[:1] + [tests[i + 1] for i in rng.permutation(len(tests) - 1)]
+                elif seq.get("order", "fixed") != "fixed":
+                    raise ValueError(f"sequence.order must be 'fixed' or 'shuffled', not {seq['order']!r}")
+                for order, t in enumerate(tests, start=1):
                     planned.append(PlannedRun(t["test"], dict(t.get("settings", {})), si, spec_names[si], name, order))
     # gaps per sample and session timing: each specimen is tested in one session, sample after sample
     gap = config.get("geometry", {}).get("gap_mm", 3.0)
