@@ -9,9 +9,22 @@ rule diagnose:
         fits=diagnosis_fits,
         ranking="results/{dataset}/ranking.csv",
     output:
-        json="results/{dataset}/diagnosis.json",
+        json=report(
+            "results/{dataset}/diagnosis.json",
+            caption="../report/diagnosis_json.rst",
+            category="{dataset}",
+            subcategory="5 diagnosis",
+            labels={"figure": "diagnosis record"},
+        ),
         residuals="results/{dataset}/residuals.nc",
-        figures=directory("results/{dataset}/figures/diagnosis"),
+        figures=report(
+            directory("results/{dataset}/figures/diagnosis"),
+            patterns=["{figure}.png"],
+            caption="../report/diagnosis.rst",
+            category="{dataset}",
+            subcategory="5 diagnosis",
+            labels={"figure": "{figure}"},
+        ),
     log:
         "logs/{dataset}/diagnose.log",
     benchmark:
