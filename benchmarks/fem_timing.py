@@ -4,7 +4,13 @@ Each case runs undamped explicit steps of a cube (bottom fixed, initial shear-ve
 
 * ``Mupd/s``: element updates per wall second (n_elements x steps / s), the hardware-independent figure;
 * ``steps/s`` and ``RT factor``: simulated seconds per wall second with the critical step of a brain-like
-  material (mu = 1 kPa, nu = 0.49, rho = 1040 kg/m^3) on that mesh (>1 = faster than real time).
+  material (mu = 1 kPa, nu = 0.49, rho = 1040 kg/m^3) on that mesh (>1 = faster than real time);
+* ``Mupd/cpu-s``: element updates per CPU second of the process (all threads): on a shared machine this
+  is what the kernel does while it actually runs; ``wall/cpu`` shows how much the run was descheduled.
+
+``--brain-mesh mesh.vtu`` adds the MNI brain mesh (real-time factor with its own critical step);
+``--felupe`` times the same quasi-static square-punch indentation with FElupe (Newton, sparse direct) and
+with TLED dynamic relaxation. The CPU model, core count and load average are printed with the table.
 
 The machine this runs on may be shared: compare rows measured in the same run (ratios), not absolute
 figures between runs. On an oversubscribed machine use ``--threads 1``: every parallel region (3-5 per
@@ -49,21 +55,72 @@ def setup(mesh, law: str, precision: str, anp: bool):
     key, params, g, tau = LAWS[law]
     mat = make_material(key, params, poisson_ratio=0.49, density_kg_m3=1040.0, prony_g=g, prony_tau_s=tau)
     x = mesh.nodes
-    model = build_model(mesh, mat, [fixed_group("bottom", np.flatnonzero(np.isclose(x[:, 2], 0.0)))],
-                        anp=anp, precision=precision)
+    height = (x[:, 2] - x[:, 2].min()) / np.ptp(x[:, 2])
+    # cube: the bottom face; brain: the lowest 5 % (the support of the indentation experiment)
+    model = build_model(mesh, mat, [fixed_group("bottom", np.flatnonzero(height < 0.05))], anp=anp, precision=precision)
     v0 = np.zeros_like(x)
-    v0[:, 0] = 1e-3 * x[:, 2] / x[:, 2].max()
+    v0[:, 0] = 1e-3 * height
     return model, v0
 
 
-def time_cpu(model, v0, n_steps: int, threads: int | None) -> float:
-    """Wall seconds of ``n_steps`` explicit steps (after a warm-up run that also compiles)."""
+def time_cpu(model, v0, n_steps: int, threads: int | None) -> tuple[float, float]:
+    """Wall and process-CPU seconds of ``n_steps`` explicit steps (after a warm-up run that also compiles)."""
     dt = critical_time_step(model, 0.7)
     with numba_threads(threads):
-        run_explicit(model, 3 * dt, dt_s=dt, v0_m_s=v0, n_outputs=1)
+        run_explicit(model, 3 * dt, dt_s=dt, v0_m_s=v0, n_outputs=1, track_energy=False)
+        c0, t0 = time.process_time(), time.perf_counter()
+        run_explicit(model, n_steps * dt, dt_s=dt, v0_m_s=v0, n_outputs=1, track_energy=False)
+        return time.perf_counter() - t0, time.process_time() - c0
+
+
+def machine() -> dict:
+    """CPU model (lscpu), logical CPUs, load averages and date: the context of the figures."""
+    import datetime
+    import subprocess
+
+    try:
+        out = subprocess.run(["lscpu"], capture_output=True, text=True, timeout=10).stdout
+        model = next((ln.split(":", 1)[1].strip() for ln in out.splitlines() if ln.startswith("Model name")), "?")
+    except (OSError, subprocess.SubprocessError):
+        model = "?"
+    return {"cpu": model, "logical_cpus": os.cpu_count(), "load_avg_1_5_15": os.getloadavg(),
+            "date_utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M")}
+
+
+def felupe_comparison(threads: int | None, cells=(8, 8, 4)) -> list[dict]:
+    """Wall time of the quasi-static square-punch indentation (10 % depth, neo-Hookean, nu = 0.45, plain
+    linear tets, 4 load steps) with FElupe and with TLED dynamic relaxation on the same mesh."""
+    import felupe as fem
+
+    from tissuemech.fem.tled import solve_quasistatic, translation_group
+
+    lx, lz, mu, nu, depth = 10e-3, 5e-3, 1000.0, 0.45, 0.5e-3
+    mesh = block_mesh((lx, lx, lz), cells)
+    x = mesh.nodes
+    punch = np.isclose(x[:, 2], lz) & (x[:, 0] <= 2.5e-3 + 1e-12) & (x[:, 1] <= 2.5e-3 + 1e-12)
+    bottom = np.isclose(x[:, 2], 0)
+    mat = make_material("neo_hookean", {"mu": mu}, poisson_ratio=nu)
+    t0 = time.perf_counter()
+    region = fem.RegionTetra(fem.Mesh(x.copy(), mesh.elements.astype(np.int64), "tetra"))
+    field = fem.FieldContainer([fem.Field(region, dim=3)])
+    bcs = {"bottom": fem.Boundary(field[0], mask=bottom), "punch": fem.Boundary(field[0], mask=punch, skip=(1, 1, 0))}
+    solid = fem.SolidBody(fem.NeoHooke(mu=mu, bulk=mat.bulk_modulus_pa), field)
+    step = fem.Step(items=[solid], ramp={bcs["punch"]: fem.math.linsteps([0, 1], num=4) * (-depth)}, boundaries=bcs)
+    fem.Job(steps=[step]).evaluate(verbose=0)
+    wall_fe = time.perf_counter() - t0
+    f_fe = solid.assemble.vector().toarray().reshape(-1, 3)[punch, 2].sum()
+    groups = [translation_group("punch", np.flatnonzero(punch), (0, 0, -1), [0, 1], [0, depth], dofs=(False, False, True)),
+              fixed_group("bottom", np.flatnonzero(bottom))]
+    model = build_model(mesh, mat, groups, anp=False)
+    with numba_threads(threads):
+        solve_quasistatic(model, [1.0])  # compile
         t0 = time.perf_counter()
-        run_explicit(model, n_steps * dt, dt_s=dt, v0_m_s=v0, n_outputs=1)
-        return time.perf_counter() - t0
+        res = solve_quasistatic(model, [0.25, 0.5, 0.75, 1.0])
+        wall_tled = time.perf_counter() - t0
+    f_tled = res.reaction_force_n["punch"][-1, 2]
+    return [{"solver": "FElupe 4 Newton load steps", "n_elements": mesh.n_elements, "wall_s": wall_fe, "force_n": f_fe},
+            {"solver": "TLED dynamic relaxation, 4 increments", "n_elements": mesh.n_elements, "wall_s": wall_tled,
+             "force_n": f_tled, "dr_iterations": int(res.iterations.sum())}]
 
 
 def main(argv=None) -> None:
@@ -78,36 +135,53 @@ def main(argv=None) -> None:
     ap.add_argument("--gpu", action="store_true", help="also time tissuemech.fem.cuda on the GPU")
     ap.add_argument("--gpu-batch", type=int, default=200, help="steps per persistent-kernel launch")
     ap.add_argument("--out", default=None, help="also write the table as CSV to this path")
+    ap.add_argument("--brain-mesh", default=None, help="also time this (MNI brain) mesh (VTU)")
+    ap.add_argument("--felupe", action="store_true", help="also compare a quasi-static indentation with FElupe")
     args = ap.parse_args(argv)
+    info = machine()
+    print(f"# {info['date_utc']} UTC, CPU {info['cpu']}, {info['logical_cpus']} logical CPUs, "
+          f"load average {info['load_avg_1_5_15']}")
 
     sizes = [s for s in (1e3, 1e4, 1e5, 1e6, 1e7) if args.min_elements <= s <= args.max_elements]
     anp = not args.no_anp
     print(f"# TLED explicit step throughput ({'ANP' if anp else 'plain'} linear tets); threads = "
           f"{args.threads or 'numba default'}")
-    print(f"{'tets':>9} {'law':>8} {'prec':>8} {'device':>6} {'steps':>7} {'wall s':>8} {'Mupd/s':>8} "
-          f"{'steps/s':>9} {'dt_cr s':>9} {'RT factor':>9}")
+    print(f"{'mesh':>6} {'tets':>7} {'law':>8} {'prec':>8} {'device':>6} {'steps':>7} {'wall s':>8} {'Mupd/s':>8} "
+          f"{'Mupd/cpu-s':>10} {'steps/s':>9} {'dt_cr s':>9} {'RT factor':>9}")
     table = []
-    for size in sizes:
-        mesh = cube_with_n_elements(size)
+    meshes = [("cube", cube_with_n_elements(size)) for size in sizes]
+    if args.brain_mesh:
+        from tissuemech.fem.mesh import read_mesh
+
+        meshes.append(("brain", read_mesh(args.brain_mesh)[0]))
+    for mesh_name, mesh in meshes:
         ne = mesh.n_elements
         for law in args.laws.split(","):
             for precision in args.precisions.split(","):
                 model, v0 = setup(mesh, law, precision, anp)
                 dt_cr = critical_time_step(model, 0.7)
                 n_steps = max(20, int(args.updates / ne))
-                rows = [("cpu", time_cpu(model, v0, n_steps, args.threads))]
+                rows = [("cpu", *time_cpu(model, v0, n_steps, args.threads))]
                 if args.gpu:
                     from tissuemech.fem import cuda as fem_cuda
 
-                    rows.append(("gpu", fem_cuda.time_steps(model, v0, n_steps, dt_cr, batch=args.gpu_batch)))
-                for device, wall in rows:
+                    rows.append(("gpu", fem_cuda.time_steps(model, v0, n_steps, dt_cr, batch=args.gpu_batch),
+                                 float("nan")))
+                for device, wall, cpu in rows:
                     sps = n_steps / wall
-                    table.append({"n_elements": ne, "law": law, "precision": precision, "device": device,
-                                  "anp": anp, "steps": n_steps, "wall_s": wall,
-                                  "element_updates_per_s": ne * sps, "steps_per_s": sps,
-                                  "critical_dt_s": dt_cr, "real_time_factor": sps * dt_cr})
-                    print(f"{ne:>9d} {law:>8} {precision:>8} {device:>6} {n_steps:>7d} {wall:>8.3f} "
-                          f"{ne * sps / 1e6:>8.2f} {sps:>9.0f} {dt_cr:>9.2e} {sps * dt_cr:>9.3f}", flush=True)
+                    table.append({"mesh": mesh_name, "n_elements": ne, "law": law, "precision": precision,
+                                  "device": device, "anp": anp, "steps": n_steps, "wall_s": wall, "cpu_s": cpu,
+                                  "element_updates_per_s": ne * sps, "element_updates_per_cpu_s": ne * n_steps / cpu,
+                                  "steps_per_s": sps, "critical_dt_s": dt_cr, "real_time_factor": sps * dt_cr,
+                                  "threads": args.threads or 0, **{k: str(v) for k, v in info.items()}})
+                    print(f"{mesh_name:>6} {ne:>7d} {law:>8} {precision:>8} {device:>6} {n_steps:>7d} {wall:>8.3f} "
+                          f"{ne * sps / 1e6:>8.2f} {ne * n_steps / cpu / 1e6:>10.2f} {sps:>9.0f} {dt_cr:>9.2e} "
+                          f"{sps * dt_cr:>9.3f}", flush=True)
+    if args.felupe:
+        print("# quasi-static square-punch indentation, same mesh and law")
+        for row in felupe_comparison(args.threads):
+            print("  " + ", ".join(f"{k} = {v:.4g}" if isinstance(v, float) else f"{k} = {v}" for k, v in row.items()))
+    print(f"# load average after: {os.getloadavg()}")
 
 
     if args.out:

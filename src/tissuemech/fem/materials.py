@@ -411,6 +411,23 @@ def _iso_from_bbar(kind, w1fn, w2fn, wlfn, p, b11, b22, b33, b12, b23, b13):
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
+def j_minus_two_thirds(J):
+    """``J^(-2/3)`` to machine precision without a libm ``cbrt`` call (about 22 ns, a quarter of a
+    neo-Hookean element update) in the nearly incompressible range: three Newton steps on ``y^-3 = J`` for
+    ``y = J^(-1/3)`` from the first-order guess; the relative error squares each step (2e-3, 1e-5, 2e-10,
+    1e-19 at ``|J - 1| = 0.1``). Outside ``|J - 1| < 0.1`` it falls back to ``cbrt``."""
+    d = J - 1.0
+    if d > -0.1 and d < 0.1:
+        y = 1.0 - d / 3.0
+        y = y * (4.0 - J * y * y * y) * (1.0 / 3.0)
+        y = y * (4.0 - J * y * y * y) * (1.0 / 3.0)
+        y = y * (4.0 - J * y * y * y) * (1.0 / 3.0)
+        return y * y
+    cr = np.cbrt(J)
+    return 1.0 / (cr * cr)
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
 def kirchhoff_deviatoric(kind, w1fn, w2fn, wlfn, p, kappa, f11, f12, f13, f21, f22, f23, f31, f32, f33, J):
     """Kirchhoff stress without the volumetric pressure term (6 comps).
 
@@ -437,8 +454,7 @@ def kirchhoff_deviatoric(kind, w1fn, w2fn, wlfn, p, kappa, f11, f12, f13, f21, f
         a = lam * tre - mu
         return (a * b11 + mu * q11, a * b22 + mu * q22, a * b33 + mu * q33,
                 a * b12 + mu * q12, a * b23 + mu * q23, a * b13 + mu * q13)
-    cr = np.cbrt(J)
-    jm23 = 1.0 / (cr * cr)
+    jm23 = j_minus_two_thirds(J)
     return _iso_from_bbar(kind, w1fn, w2fn, wlfn, p, jm23 * b11, jm23 * b22, jm23 * b33,
                           jm23 * b12, jm23 * b23, jm23 * b13)
 

@@ -18,7 +18,9 @@ altitude sets the critical time step, non-positive volumes are fatal.
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -377,8 +379,10 @@ def brain_mesh(edge_length_fac: float = 0.21, smoothing_voxels: float = 4.0, dec
         surf = surf.decimate(decimate)
     faces = np.asarray(surf.faces).reshape(-1, 4)[:, 1:]
     verts_mm = np.asarray(surf.points) @ gm.affine[:3, :3].T + gm.affine[:3, 3]
-    v_tet, t_tet = pytetwild.tetrahedralize(verts_mm, faces.astype(np.int32), edge_length_fac=edge_length_fac,
-                                            epsilon=epsilon, stop_energy=stop_energy, num_threads=num_threads)
+    # fTetWild writes a scratch surface file into the working directory: keep it out of the caller's tree
+    with tempfile.TemporaryDirectory() as scratch, contextlib.chdir(scratch):
+        v_tet, t_tet = pytetwild.tetrahedralize(verts_mm, faces.astype(np.int32), edge_length_fac=edge_length_fac,
+                                                epsilon=epsilon, stop_energy=stop_energy, num_threads=num_threads)
     nodes = np.asarray(v_tet, float) * 1e-3
     elements = np.asarray(t_tet, np.int64)
     used = np.unique(elements)

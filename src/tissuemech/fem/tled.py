@@ -34,7 +34,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..models.recursion import relaxation_factors
-from .materials import FASTMATH, KIND_SVK, Material, kirchhoff_deviatoric
+from .materials import FASTMATH, KIND_SVK, Material, j_minus_two_thirds, kirchhoff_deviatoric
 from .mesh import TetMesh, element_min_altitudes, element_volumes
 
 STATUS_OK = 0
@@ -182,8 +182,7 @@ def _element_force_pass(u, elements, dndx, vol0, chunk_lo, fbuf, kind, w1fn, w2f
                     bb12 = f11 * f21 + f12 * f22 + f13 * f23
                     bb23 = f21 * f31 + f22 * f32 + f23 * f33
                     bb13 = f11 * f31 + f12 * f32 + f13 * f33
-                    crj = np.cbrt(J)
-                    jm23 = 1.0 / (crj * crj)
+                    jm23 = j_minus_two_thirds(J)
                     bb11 *= jm23
                     bb22 *= jm23
                     bb33 *= jm23
