@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from .materials import KIND_INVARIANT, KIND_SVK
+from .materials import KIND_INVARIANT, KIND_INVARIANT_I1, KIND_SVK
 from .tled import TLEDModel, critical_time_step
 
 try:  # the GPU path is optional
@@ -197,7 +197,7 @@ class DeviceRun:
     def __init__(self, model: TLEDModel, dt_s: float, n_steps_max: int, u0_m=None, v0_m_s=None,
                  damping_1_s: float = 0.0, threads_per_block: int = 256):
         m = model.material
-        if m.kind not in (KIND_INVARIANT, KIND_SVK):
+        if m.kind not in (KIND_INVARIANT, KIND_INVARIANT_I1, KIND_SVK):
             raise NotImplementedError("the CUDA kernel supports invariant laws and SVK only (Ogden: use the CPU)")
         if m.prony_g.size or model.contact_kind:
             raise NotImplementedError("the CUDA kernel has no viscoelastic states or contact (use the CPU)")

@@ -19,7 +19,9 @@ Method (Miller, Joldes, Lance & Wittek 2007; Taylor, Cheng & Ourselin 2008; Nift
 * element inversion (``J <= 0``) or a non-finite state stops the run and raises
   :class:`ElementInversionError` with the element id, step and time.
 
-The whole time loop runs inside one compiled function (no Python per step). Reaction forces are sums of
+The whole time loop runs inside one compiled function (no Python per step). The element stress of
+:mod:`.materials` is inlined into the kernels: numba's cache does not see changes of inlined code in
+another file, so after editing ``materials.py`` touch this module (or clear ``NUMBA_CACHE_DIR``). Reaction forces are sums of
 internal nodal forces over a constrained group; torques are about the z axis through the group's centre.
 Storage precision is float64 or float32; in float32 the arithmetic of an element is done in registers at
 double precision and stored in single precision (halves the memory traffic, which bounds the CPU rate).
