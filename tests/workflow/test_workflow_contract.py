@@ -3,7 +3,7 @@
 Snakemake runs in a copy of the workflow tree under ``tmp_path`` (never in the checkout, whose results and lock
 belong to the developer). ``PYTHONPATH`` points at the copy's ``src/`` so the jobs import the copy's package (the
 editable install points at the checkout, which would run unedited code), and the rule hashes
-(``package_hash`` in ``workflow/rules/common.smk``) read the same copy.
+(``script_hash`` in ``workflow/rules/common.smk``) read the same copy.
 
 The tiny dataset is written by the virtual rheometer: two amplitude sweeps and two stress relaxations of a linear
 QLV gel, fitted with one model per scope, so a full ingest -> averages -> LVE -> fits -> ranking run stays short.
@@ -25,6 +25,7 @@ import pytest
 import yaml
 
 from tissuemech.synth.generator import generate_dataset
+from tissuemech.sourcehash import package_sources
 
 ROOT = Path(__file__).resolve().parents[2]
 TINY = "tiny_gel"
@@ -195,7 +196,8 @@ def test_second_dry_run_has_nothing_to_do(tiny_run):
 
 
 @pytest.mark.parametrize(("module", "expected"), [
-    ("lve.py", {"lve": 1}),
+    # the fit stage reaches lve.py too (LVE range of the amplitude-sweep scope); ingest and average do not
+    ("lve.py", {"lve": 1, "fit_scope": 2, "rank": 1}),
     ("io/rheocompass.py", dict(FULL_CHAIN)),  # ingest reruns, so does everything downstream of it
     ("models/base.py", {"fit_scope": 2, "rank": 1}),
 ], ids=["lve", "io-reader", "models"])
@@ -233,8 +235,8 @@ def test_dropping_a_dataset_folder_schedules_only_its_jobs(tiny_run):
 # --- every package module a stage script imports is part of that rule's rerun hash ------------------------------
 
 
-def _rules_with_scripts() -> dict[str, tuple[Path, tuple[str, ...] | None]]:
-    """rule -> (script, package_hash arguments or None) from workflow/rules/*.smk (snakefmt layout)."""
+def _rules_with_scripts() -> dict[str, tuple[Path, Path | None]]:
+    """rule -> (script, script named in its pkg=script_hash(...) param or None) from workflow/rules/*.smk."""
     rules = {}
     for smk in sorted((ROOT / "workflow" / "rules").glob("*.smk")):
         for block in re.split(r"\n(?=rule \w+:)", smk.read_text()):
@@ -242,24 +244,15 @@ def _rules_with_scripts() -> dict[str, tuple[Path, tuple[str, ...] | None]]:
             script = re.search(r"^\s+script:\s*\n\s+\"([^\"]+)\"", block, re.M)
             if not (name and script):
                 continue
-            pkg = re.search(r"\bpkg=package_hash\((.*?)\),\n", block, re.S)
-            text = pkg.group(1).strip().rstrip(",") if pkg else None
-            args = (ast.literal_eval(f"({text},)") if text else ()) if pkg else None
-            rules[name.group(1)] = ((smk.parent / script.group(1)).resolve(), args)
+            pkg = re.search(r"\bpkg=script_hash\(\"([^\"]+)\"\),\n", block)
+            rules[name.group(1)] = ((smk.parent / script.group(1)).resolve(), ROOT / pkg.group(1) if pkg else None)
     return rules
 
 
-def _hashed_files(args: tuple[str, ...]) -> set[str]:
-    """Package files ``package_hash(*args)`` reads, relative to src/tissuemech (same walk as common.smk)."""
+def _hashed_files(hashed_script: Path) -> set[str]:
+    """Package files ``script_hash(hashed_script)`` reads, relative to src/tissuemech (common.smk's call)."""
     package = ROOT / "src" / "tissuemech"
-    files = set()
-    for part in args or ("",):
-        target = package / part
-        if target.is_dir():
-            files |= {p.relative_to(package).as_posix() for p in target.rglob("*") if p.suffix in (".py", ".json")}
-        elif target.is_file():
-            files.add(target.relative_to(package).as_posix())
-    return files
+    return {p.relative_to(package).as_posix() for p in package_sources(hashed_script, ROOT / "src")}
 
 
 _IMPORTS_OF_SCRIPTS = r"""
@@ -298,20 +291,10 @@ def imported_by_script():
     return json.loads(done.stdout)
 
 
-#: rules whose hash misses modules their script imports (found by this test). Strict: once a rule's hash is fixed
-#: its case passes unexpectedly and fails, so take the rule out of this set then.
-HASH_GAPS = {"average", "lve", "ingest", "fit_scope", "rank", "diagnose", "fem_torsion", "fem_indentation",
-             "fem_brain_mesh", "fem_brain_indentation"}
-
-
-@pytest.mark.parametrize("rule", [
-    pytest.param(rule, marks=pytest.mark.xfail(
-        rule in HASH_GAPS, strict=True, reason="package_hash misses imported modules (XPASS: drop it from HASH_GAPS)"))
-    for rule in sorted(_rules_with_scripts())])
+@pytest.mark.parametrize("rule", sorted(_rules_with_scripts()))
 def test_rule_hash_covers_the_modules_its_script_imports(rule, imported_by_script):
-    script, args = _rules_with_scripts()[rule]
-    assert args is not None, f"rule {rule} has no pkg=package_hash(...) param: edits to the package never rerun it"
-    # the top-level __init__ holds only the version string, which does not change results
-    needed = set(imported_by_script[str(script)]) - {"__init__.py"}
-    missing = sorted(needed - _hashed_files(args))
-    assert not missing, f"rule {rule}: {script.name} imports {missing}, not in package_hash{args}"
+    script, hashed = _rules_with_scripts()[rule]
+    assert hashed is not None, f"rule {rule} has no pkg=script_hash(...) param: edits to the package never rerun it"
+    assert hashed.resolve() == script, f"rule {rule} hashes the imports of {hashed}, but runs {script}"
+    missing = sorted(set(imported_by_script[str(script)]) - _hashed_files(hashed))
+    assert not missing, f"rule {rule}: {script.name} imports {missing}, not in its script_hash"

@@ -1,29 +1,18 @@
 # Shared helpers: dataset discovery, package source hashes (rerun triggers), target lists.
-import hashlib
 import sys
 from pathlib import Path
 
 import pandas as pd
 
-PACKAGE_DIR = Path(workflow.basedir) / "src" / "tissuemech"
 
+def script_hash(script):
+    """Rerun trigger: hash of every package source file the script reaches by imports.
 
-def package_hash(*parts):
-    """SHA-256 over the package sources a rule depends on (Snakemake does not track imported code)."""
-    h = hashlib.sha256()
-    paths = []
-    for part in parts or ("",):
-        target = PACKAGE_DIR / part
-        if target.is_dir():
-            paths += sorted(
-                p for p in target.rglob("*") if p.suffix in (".py", ".json")
-            )
-        elif target.is_file():
-            paths.append(target)
-    for path in sorted(set(paths)):
-        h.update(str(path.relative_to(PACKAGE_DIR)).encode())
-        h.update(path.read_bytes())
-    return h.hexdigest()[:16]
+    Snakemake does not track imported code; tissuemech.sourcehash finds the modules statically and transitively.
+    """
+    from tissuemech.sourcehash import source_hash
+
+    return source_hash(Path(workflow.basedir) / script, Path(workflow.basedir) / "src")
 
 
 def external_source_available(folder):

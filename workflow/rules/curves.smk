@@ -23,7 +23,7 @@ rule average:
     benchmark:
         "benchmarks/runs/{dataset}/average.tsv"
     params:
-        pkg=package_hash("curves.py", "plots.py", "canonical.py"),
+        pkg=script_hash("workflow/scripts/average.py"),
     script:
         "../scripts/average.py"
 
@@ -54,6 +54,6 @@ rule lve:
     benchmark:
         "benchmarks/runs/{dataset}/lve.tsv"
     params:
-        pkg=package_hash("lve.py", "curves.py", "plots.py", "canonical.py"),
+        pkg=script_hash("workflow/scripts/lve.py"),
     script:
         "../scripts/lve.py"

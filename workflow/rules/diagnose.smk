@@ -30,6 +30,6 @@ rule diagnose:
     benchmark:
         "benchmarks/runs/{dataset}/diagnose.tsv"
     params:
-        pkg=package_hash("diagnosis", "models", "fitting.py", "canonical.py"),
+        pkg=script_hash("workflow/scripts/diagnose.py"),
     script:
         "../scripts/diagnose.py"

@@ -40,7 +40,7 @@ rule fem_torsion:
     params:
         cards_root="results/{dataset}/cards",
         element_size_m=config["fem"]["cylinder_element_size_m"],
-        pkg=package_hash("fem", "stages.py", "plots.py"),
+        pkg=script_hash("workflow/scripts/fem_torsion.py"),
     script:
         "../scripts/fem_torsion.py"
 
@@ -65,7 +65,7 @@ rule fem_indentation:
     params:
         cards_root="results/{dataset}/cards",
         element_size_m=config["fem"]["block_element_size_m"],
-        pkg=package_hash("fem", "stages.py", "plots.py"),
+        pkg=script_hash("workflow/scripts/fem_indentation.py"),
     script:
         "../scripts/fem_indentation.py"
 
@@ -79,7 +79,7 @@ rule fem_brain_mesh:
     benchmark:
         "benchmarks/runs/fem_brain_mesh.tsv"
     params:
-        pkg=package_hash("fem/mesh.py"),
+        pkg=script_hash("workflow/scripts/fem_brain_mesh.py"),
     script:
         "../scripts/fem_brain_mesh.py"
 
@@ -97,7 +97,7 @@ rule fem_brain_indentation:
         "benchmarks/runs/fem_brain_indentation.tsv"
     params:
         cards_root=f"results/{BRAIN_DATASET}/cards",
-        pkg=package_hash("fem", "stages.py"),
+        pkg=script_hash("workflow/scripts/fem_brain_indentation.py"),
     script:
         "../scripts/fem_brain_indentation.py"
 
@@ -118,7 +118,7 @@ rule fem_timing:
         "benchmarks/runs/fem_timing.tsv"
     params:
         python=sys.executable,
-        pkg=package_hash("fem"),
+        pkg=script_hash("benchmarks/fem_timing.py"),
         brain=f"--brain-mesh {BRAIN_FILES['brain_mesh']}" if BRAIN_MESH else "",
     shell:
         "{params.python} benchmarks/fem_timing.py --threads 1 --max-elements 20000 {params.brain}"

@@ -20,14 +20,7 @@ rule fit_scope:
         seed=config["fit"]["seed"],
         multistart=config["fit"]["multistart"],
         poisson_ratio=config["fem"]["poisson_ratio"],
-        pkg=package_hash(
-            "models",
-            "fitting.py",
-            "ranking.py",
-            "cards.py",
-            "stages.py",
-            "canonical.py",
-        ),
+        pkg=script_hash("workflow/scripts/fit_scope.py"),
     script:
         "../scripts/fit_scope.py"
 
@@ -57,6 +50,6 @@ rule rank:
     benchmark:
         "benchmarks/runs/{dataset}/rank.tsv"
     params:
-        pkg=package_hash("stages.py", "ranking.py", "plots.py"),
+        pkg=script_hash("workflow/scripts/rank.py"),
     script:
         "../scripts/rank.py"

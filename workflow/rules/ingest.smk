@@ -19,6 +19,6 @@ rule ingest:
         "benchmarks/runs/{dataset}/ingest.tsv"
     params:
         folder=dataset_dir,
-        pkg=package_hash("io", "units.py", "canonical.py"),
+        pkg=script_hash("workflow/scripts/ingest.py"),
     script:
         "../scripts/ingest.py"

@@ -52,15 +52,7 @@ rule fit_figures:
         "benchmarks/runs/{dataset}/fit_figures_{scope}.tsv"
     params:
         tests=lambda wildcards: scope_spec(wildcards)["tests"],
-        pkg=package_hash(
-            "summary.py",
-            "plots.py",
-            "canonical.py",
-            "pipeline.py",
-            "stages.py",
-            "fitting.py",
-            "models",
-        ),
+        pkg=script_hash("workflow/scripts/fit_figures.py"),
     script:
         "../scripts/fit_figures.py"
 
@@ -91,7 +83,7 @@ rule card_figures:
         "benchmarks/runs/{dataset}/card_figures.tsv"
     params:
         cards_root="results/{dataset}/cards",
-        pkg=package_hash("summary.py", "plots.py", "canonical.py", "pipeline.py"),
+        pkg=script_hash("workflow/scripts/card_figures.py"),
     script:
         "../scripts/card_figures.py"
 
@@ -114,9 +106,7 @@ rule mesh_figures:
         "benchmarks/runs/{dataset}/mesh_figures.tsv"
     params:
         vtu_dirs=lambda wildcards: fem_vtu_dirs_of(wildcards.dataset),
-        pkg=package_hash(
-            "summary.py", "plots.py", "canonical.py", "pipeline.py", "fem/mesh.py"
-        ),
+        pkg=script_hash("workflow/scripts/mesh_figures.py"),
     script:
         "../scripts/mesh_figures.py"
 
@@ -144,7 +134,7 @@ rule timing_figures:
     benchmark:
         "benchmarks/runs/timing_figures.tsv"
     params:
-        pkg=package_hash("summary.py", "plots.py", "canonical.py", "pipeline.py"),
+        pkg=script_hash("workflow/scripts/timing_figures.py"),
     script:
         "../scripts/timing_figures.py"
 
@@ -162,6 +152,6 @@ rule summary:
     params:
         datasets=list(DATASETS),
         captions=f"{workflow.basedir}/workflow/report",
-        pkg=package_hash("summary.py", "plots.py", "canonical.py", "pipeline.py"),
+        pkg=script_hash("workflow/scripts/summary.py"),
     script:
         "../scripts/summary.py"

@@ -24,7 +24,6 @@ scale; their order is not enforced, so branches may swap labels between fits).
 """
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
@@ -470,12 +469,8 @@ def instantaneous_law(tag: str) -> ConstitutiveModel:
 def available_instantaneous_tags() -> tuple[str, ...]:
     """Tags whose instantaneous law exists now (``linear`` always; hyperelastic ones once that family
     registers them), so no key is registered for a law that cannot be built."""
-    try:
-        hyperelastic = importlib.import_module(f"{__package__}.hyperelastic")
-    except ModuleNotFoundError as exc:
-        if exc.name != f"{__package__}.hyperelastic":
-            raise
-        return ("linear",)
+    from . import hyperelastic
+
     known = getattr(hyperelastic, "MODELS", {})
     return ("linear", *(tag for tag, key in INSTANTANEOUS_KEYS.items() if key in known))
 

@@ -6,26 +6,20 @@ Each family module exposes ``MODELS: dict[str, Callable[[], ConstitutiveModel]]`
 """
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable
 
+from . import beyond_qlv, fractional, hyperelastic, linear, qlv, viscous
 from .base import ConstitutiveModel
 
-FAMILY_MODULES = ("viscous", "linear", "fractional", "hyperelastic", "qlv", "beyond_qlv")
+FAMILY_MODULES = (viscous, linear, fractional, hyperelastic, qlv, beyond_qlv)
 
 
 def _collect() -> dict[str, Callable[[], ConstitutiveModel]]:
     merged: dict[str, Callable[[], ConstitutiveModel]] = {}
-    for mod_name in FAMILY_MODULES:
-        try:
-            mod = importlib.import_module(f"{__package__}.{mod_name}")
-        except ModuleNotFoundError as exc:  # family not built yet
-            if exc.name == f"{__package__}.{mod_name}":
-                continue
-            raise
-        for key, factory in getattr(mod, "MODELS", {}).items():
+    for mod in FAMILY_MODULES:
+        for key, factory in mod.MODELS.items():
             if key in merged:
-                raise ValueError(f"duplicate model key {key!r} in {mod_name}")
+                raise ValueError(f"duplicate model key {key!r} in {mod.__name__}")
             merged[key] = factory
     return merged
 
