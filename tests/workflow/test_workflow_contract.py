@@ -141,8 +141,6 @@ def test_dry_run_of_the_repository_is_clean(tmp_path):
             assert f"external dataset {name!r}" in output and "skipped" in output
 
 
-@pytest.mark.xfail(strict=True, reason="fem.smk (4697076) makes the brain indentation read porcine_brain_thesis's "
-                   "ranking even when that dataset is not selected: MissingInputException")
 def test_dry_run_of_one_selected_dataset_is_clean(tmp_path):
     """The documented override `--config datasets=[...]` with the repository's config: only that dataset's jobs."""
     copy = copy_workflow(tmp_path / "wf")

@@ -161,5 +161,7 @@ def all_targets():
         if name in config["fem"].get("indentation_datasets", []):
             targets.append(f"results/{name}/fem/indentation.nc")
     targets.append("results/fem/timing.csv")
+    if BRAIN_INDENTATION:  # defined in fem.smk, read when the target list is built
+        targets.append(BRAIN_FILES["brain_indentation"])
     targets.append("results/summary.html")
     return targets

@@ -1,11 +1,12 @@
 # TLED experiments driven by the material cards: rheometer torsion, flat-punch indentation, timing.
 
-# the MNI brain geometry (nilearn wheel data, fTetWild): flat-punch indentation with the best card of the
-# first indentation dataset; its outputs feed the timing rule (which is always a target)
+# the MNI brain geometry (nilearn wheel data, fTetWild): the timing rule always uses the mesh; flat-punch
+# indentation of it runs with the best card of the first selected indentation dataset, when one is selected
 BRAIN_MESH = bool(config["fem"].get("brain_mesh", False))
-BRAIN_DATASET = (config["fem"].get("indentation_datasets") or ["porcine_brain_thesis"])[
-    0
-]
+BRAIN_DATASET = next(
+    (d for d in config["fem"].get("indentation_datasets", []) if d in DATASETS), None
+)
+BRAIN_INDENTATION = BRAIN_MESH and BRAIN_DATASET is not None
 BRAIN_FILES = {
     "brain_mesh": "results/fem/brain_mesh.vtu",
     "brain_indentation": "results/fem/brain_indentation.nc",
@@ -104,7 +105,11 @@ rule fem_brain_indentation:
 
 rule fem_timing:
     input:
-        unpack(lambda wildcards: BRAIN_FILES if BRAIN_MESH else {}),
+        unpack(
+            lambda wildcards: (
+                {"brain_mesh": BRAIN_FILES["brain_mesh"]} if BRAIN_MESH else {}
+            )
+        ),
     output:
         table=report(
             "results/fem/timing.csv",
