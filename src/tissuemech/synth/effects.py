@@ -91,27 +91,38 @@ class AugmentedElasticLaw(ConstitutiveModel):
     (stiffening) and ``gamma`` times that to N1; the ``C01x`` term moves stiffness from I1 to I2 at constant
     W1 + W2, so the shear stress and N1 are unchanged and only ``N2 = -2 gamma^2 W2`` changes by
     ``-2 C01x gamma^2`` -- invisible in torque, visible in the normal force (science.md sections 2.2, 2.3).
+
+    ``c20_extra_pa``/``c01_extra_pa`` are the extras at the population parameters (initial shear modulus
+    ``g0_ref_pa``); a specimen or sample whose moduli are scaled (:func:`scale_moduli`) carries extras scaled by
+    the same factor, so the hidden term keeps its share of the stiffness in every sample.
     """
 
-    def __init__(self, base: ConstitutiveModel, c20_extra_pa: float = 0.0, c01_extra_pa: float = 0.0):
+    def __init__(self, base: ConstitutiveModel, c20_extra_pa: float = 0.0, c01_extra_pa: float = 0.0,
+                 g0_ref_pa: float | None = None):
         super().__init__(name=f"{base.name}+hidden", family=base.family, param_specs=base.param_specs,
                          responses=base.responses | {"normal_stress"},
                          structure={**base.structure, "c20_extra_pa": c20_extra_pa, "c01_extra_pa": c01_extra_pa})
         self.base = base
         self.c20 = float(c20_extra_pa)
         self.c01 = float(c01_extra_pa)
+        self.g0_ref = None if g0_ref_pa is None else float(g0_ref_pa)
+
+    def _share(self, p: Params) -> float:
+        return 1.0 if not self.g0_ref else initial_shear_modulus(self.base, p) / self.g0_ref
 
     def elastic_shear_stress(self, p: Params, strain: np.ndarray) -> np.ndarray:
         g = np.asarray(strain, float)
-        return np.asarray(self.base.elastic_shear_stress(p, g), float) + 4.0 * self.c20 * g ** 3
+        return np.asarray(self.base.elastic_shear_stress(p, g), float) + 4.0 * self.c20 * self._share(p) * g ** 3
 
     def normal_stress_differences(self, p: Params, strain: np.ndarray):
         g = np.asarray(strain, float)
+        k = self._share(p)
         if self.base.supports("normal_stress"):
             n1, n2 = self.base.normal_stress_differences(p, g)
         else:                                    # a law without normal stresses: universal N1 of the shear law
             n1, n2 = g * np.asarray(self.base.elastic_shear_stress(p, g), float), np.zeros_like(g)
-        return np.asarray(n1, float) + g * 4.0 * self.c20 * g ** 3, np.asarray(n2, float) - 2.0 * self.c01 * g ** 2
+        return (np.asarray(n1, float) + g * 4.0 * self.c20 * k * g ** 3,
+                np.asarray(n2, float) - 2.0 * self.c01 * k * g ** 2)
 
 
 def _rebuild_with_law(model: ConstitutiveModel, law: ConstitutiveModel, kappa: float | None = None,
@@ -149,7 +160,7 @@ def modify_truth(model: ConstitutiveModel, params: Params, effects: Mapping[str,
         ratio = effects["unidentified_i2_dependence"]["c01_ratio"]
         c01 = ratio / (1.0 + ratio) * g0 / 2.0         # C10 + C01 = G0/2 kept; C01/C10 = ratio
         record["unidentified_i2_dependence"] = {"c01_pa": c01, "c10_pa": g0 / 2.0 - c01}
-    new_law = AugmentedElasticLaw(law, c20, c01) if (c20 or c01) else law
+    new_law = AugmentedElasticLaw(law, c20, c01, g0_ref_pa=g0) if (c20 or c01) else law
     nonsep = effects.get("nonseparable_relaxation")
     model = _rebuild_with_law(model, new_law, kappa=nonsep["kappa"] if nonsep else None) if (
         new_law is not law or (nonsep and not isinstance(model, PipkinRogersModel))) else model
