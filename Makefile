@@ -6,7 +6,10 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.tissuemech-installed
 CORES ?= all
-export NUMBA_CACHE_DIR ?= $(CURDIR)/.numba_cache
+# numba keys its cache on the source file of each jitted function only; the TLED kernels inline material laws
+# from other modules, so the cache folder is named after the numba-compiled sources (a stale kernel is never reused)
+NUMBA_SOURCES_HASH := $(shell cat src/tissuemech/fem/*.py src/tissuemech/models/*.py 2>/dev/null | cksum | cut -d' ' -f1)
+export NUMBA_CACHE_DIR ?= $(CURDIR)/.numba_cache/$(NUMBA_SOURCES_HASH)
 export MPLBACKEND ?= Agg
 export HDF5_USE_FILE_LOCKING ?= FALSE
 
@@ -44,4 +47,4 @@ lock: install
 	$(PY) -m pip freeze --exclude-editable | grep -v '^tissuemech' > constraints.txt
 
 clean:
-	rm -rf results logs benchmarks/runs .snakemake
+	rm -rf results logs benchmarks/runs .snakemake .numba_cache
