@@ -61,6 +61,7 @@ def test_i2_truth_is_found_and_c01_recovered_by_the_joint_fit(tmp_path, monkeypa
     held = (nc["calibration"].values == "shear+tension") & (nc["mode"].values == "compression")
     assert nc["held_out"].values[held].all()
     assert len(res["figures"]) == 4 and all(Path(p).stat().st_size > 5000 for p in res["figures"])
+    assert all(Path(p).suffix == ".png" and Path(p).with_suffix(".svg").is_file() for p in res["figures"])
 
 
 def test_strong_i2_truth_names_the_asymmetry_and_the_null_names_nothing():

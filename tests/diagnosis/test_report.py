@@ -32,6 +32,8 @@ def test_json_and_figures_follow_the_output_contract(diagnosed, tmp_path):
         (out["findings"][0]["fix"]["before"] - out["findings"][0]["fix"]["after"]) / out["findings"][0]["fix"]["before"])
     figs = write_figures(table, res, tmp_path / "figs")
     assert len(figs) == 4 and all(p.stat().st_size > 5000 for p in figs)
+    # PNG for the Snakemake report pattern {figure}.png, SVG beside it (plots.save_figure)
+    assert all(p.suffix == ".png" and p.with_suffix(".svg").stat().st_size > 5000 for p in figs)
 
 
 def test_run_diagnosis_on_fitted_runs(tmp_path):
