@@ -426,6 +426,11 @@ def _img(path: Path, label: str) -> str:
             f"<figcaption>{name}</figcaption></figure>")
 
 
+def _g(value) -> str:
+    """A number with 3 significant digits (text and None as they are)."""
+    return f"{value:.3g}" if isinstance(value, (int, float)) and not isinstance(value, bool) else str(value)
+
+
 def _diagnosis(path: Path) -> str:
     if not path.is_file():
         return "<p><i>no diagnosis</i></p>"
@@ -436,15 +441,20 @@ def _diagnosis(path: Path) -> str:
             continue
         fix = f.get("fix") or {}
         gain = fix.get("gain")
-        out.append(f'<div class="finding"><b>{html.escape(f["effect"])}</b> (p = {f.get("p_value")}, effect size '
-                   f'{f.get("effect_size")}): {html.escape(str(f.get("evidence", "")))}'
+        out.append(f'<div class="finding"><b>{html.escape(f["effect"])}</b> (p = {_g(f.get("p_value"))}, '
+                   f'effect size {_g(f.get("effect_size"))}): {html.escape(str(f.get("evidence", "")))}'
                    + (f"<br>fix: {html.escape(str(fix.get('model')))} — {html.escape(str(fix.get('metric')))} "
-                      f"{fix.get('before')} → {fix.get('after')} (gain {gain})" if fix else "") + "</div>")
+                      f"{_g(fix.get('before'))} → {_g(fix.get('after'))} (gain {_g(gain)})" if fix else "")
+                   + "</div>")
     for s in d.get("not_identifiable", []):
-        out.append(f'<div class="finding">{html.escape(str(s))}</div>')
+        if isinstance(s, dict):
+            text = f"<b>{html.escape(str(s.get('effect', '')))}</b>: {html.escape(str(s.get('evidence', '')))}"
+        else:
+            text = html.escape(str(s))
+        out.append(f'<div class="finding">not identifiable from these data — {text}</div>')
     for u in d.get("unexplained", [])[:10]:
         out.append(f"<div>unexplained structure vs <b>{html.escape(str(u.get('covariate')))}</b> "
-                   f"(p = {u.get('p_value')}, effect {u.get('effect_size')})</div>")
+                   f"(p = {_g(u.get('p_value'))}, effect {_g(u.get('effect_size'))})</div>")
     return "".join(out) or "<p>no named cause and no unexplained structure at the family-wise α</p>"
 
 
