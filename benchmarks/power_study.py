@@ -14,10 +14,17 @@ C01/(C10 + C01) = 0.4 x magnitude, diagnosed by :func:`tissuemech.diagnosis.homo
 Both ``unidentified_i2_dependence`` (the cause) and ``tension_compression_asymmetry`` (its symptom) may be
 named for the same truth, so a detection there is "named", not "top"; the null truth is C01 = 0.
 
+Virtual-rheometer designs (``--synth-seeds``): the issue-5 suite design of ``tests/diagnosis/synth_pipeline.py``
+(:mod:`tissuemech.synth`, 6 specimens x 2 samples, AS first then FS, three CSR rates and four relaxations in
+an order shuffled per sample; baseline fitted with lmfit as in ``synth_pipeline.ANALYSIS``), each effect's
+first magnitude parameter scaled by 0.5/1/2 (the outlier factor as 1 + (2.5 - 1) x magnitude); diagnosed over
+``--jobs`` processes.
+
 Usage::
 
     NUMBA_CACHE_DIR=.numba_cache .venv/bin/python benchmarks/power_study.py --seeds 5
     .venv/bin/python benchmarks/power_study.py --small --seeds 3 --multimode-seeds 10 --markdown docs/power_study.md
+    .venv/bin/python benchmarks/power_study.py --seeds 0 --synth-seeds 2 --jobs 2 --markdown docs/power_study_synth.md
 """
 from __future__ import annotations
 
@@ -57,12 +64,30 @@ def one_multimode(magnitude, seed):
     return named, bool(res["unexplained"])
 
 
+def one_synth(job):
+    """(effect, magnitude, seed) on the virtual rheometer -> (top finding, anything raised, fix gain)."""
+    import tempfile
+
+    from synth_pipeline import ANALYSIS, DESIGN, diagnose_synthetic
+
+    effect, magnitude, seed = job
+    warnings.simplefilter("ignore")
+    with tempfile.TemporaryDirectory() as tmp:
+        _, _, res, _ = diagnose_synthetic(effect, seed, tmp, magnitude=magnitude, **DESIGN,
+                                          **ANALYSIS.get(effect, {}))
+    gain = next(((f["fix"] or {}).get("gain") for f in res["findings"] if f["effect"] == effect), None)
+    return top_finding(res), any(f["detected"] for f in res["findings"]) or bool(res["unexplained"]), gain
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=3, help="seeds per rheometer cell (0 skips the rheometer part)")
     ap.add_argument("--multimode-seeds", type=int, default=0, help="seeds per multi-mode cell (0 skips it)")
     ap.add_argument("--magnitudes", type=float, nargs="+", default=[0.5, 1.0, 2.0])
     ap.add_argument("--effects", nargs="+", default=list(CATALOGUE_IDS))
+    ap.add_argument("--synth-seeds", type=int, default=0,
+                    help="seeds per virtual-rheometer cell (0 skips it; synth_pipeline.DESIGN)")
+    ap.add_argument("--jobs", type=int, default=1, help="processes for the virtual-rheometer cells")
     ap.add_argument("--small", action="store_true", help="the CI test design (4 specimens x 2 samples, 16 points)")
     ap.add_argument("--markdown", type=Path, help="also write the tables as Markdown to this file")
     args = ap.parse_args(argv)
@@ -121,6 +146,34 @@ def main(argv=None):
             print(eff.ljust(28) + "".join(cells), flush=True)
             md.append(f"| {eff} | " + " | ".join(md_cells) + " |")
             flush(md)
+        md.append("")
+    if args.synth_seeds:
+        from concurrent.futures import ProcessPoolExecutor
+
+        from synth_pipeline import DESIGN
+
+        n = args.synth_seeds
+        jobs = [(None, 1.0, 1000 + s) for s in range(n)] + [(e, m, s) for e in args.effects for m in mags
+                                                           for s in range(n)]
+        with ProcessPoolExecutor(args.jobs) as pool:
+            out = dict(zip(jobs, pool.map(one_synth, jobs)))
+        alarms = sum(out[(None, 1.0, 1000 + s)][1] for s in range(n))
+        head = (f"Virtual-rheometer designs {DESIGN}, seeds 0..{n - 1} (null design seeds 1000..{999 + n}): "
+                f"null design {alarms}/{n} runs with any finding")
+        print(head)
+        md += [head + ".", "", "Cell: runs where the effect is the top finding / seeds (of those, fix gain > 0); "
+               "misses: magnitude, seed and what was on top instead (none: nothing named).", "",
+               "| effect | " + " | ".join(f"{m:g}x" for m in mags) + " | misses |", "|---|" + "---|" * (len(mags) + 1)]
+        for eff in args.effects:
+            md_cells, misses = [], []
+            for m in mags:
+                cell = [out[(eff, m, s)] for s in range(n)]
+                hits = sum(top == eff for top, _, _ in cell)
+                gains = sum(top == eff and (g is None or g > 0) for top, _, g in cell)
+                md_cells.append(f"{hits}/{n} ({gains})")
+                misses += [f"{m:g}x s{s}: {top or 'none'}" for s, (top, _, _) in enumerate(cell) if top != eff]
+            print(eff.ljust(28) + "  ".join(md_cells) + "  " + "; ".join(misses), flush=True)
+            md.append(f"| {eff} | " + " | ".join(md_cells) + f" | {'; '.join(misses)} |")
         md.append("")
     total = f"total {time.perf_counter() - t0:.0f} s wall"
     print(total)
