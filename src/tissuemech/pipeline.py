@@ -38,15 +38,20 @@ def job_log(log_path: str | Path):
             echo.setFormatter(logging.Formatter(f"[{log_path.with_suffix('').as_posix()}] %(message)s"))
             root.addHandler(echo)
         root.setLevel(logging.INFO)
+        package = logging.getLogger("tissuemech")
+        # a job's records must reach its log whatever an earlier caller in the process set (e.g. a quiet CLI)
+        old_level = package.level
+        package.setLevel(logging.NOTSET)
         logging.captureWarnings(True)
         old_stderr = sys.stderr
         sys.stderr = fh
         try:
-            yield logging.getLogger("tissuemech")
+            yield package
         except BaseException:
-            logging.getLogger("tissuemech").exception("job failed")
+            package.exception("job failed")
             raise
         finally:
+            package.setLevel(old_level)
             sys.stderr = old_stderr
             root.removeHandler(handler)
             if echo is not None:
