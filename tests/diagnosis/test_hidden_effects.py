@@ -10,8 +10,8 @@ the injected effect and its fix must improve the held-out metric; the null desig
 
 Not in this suite (covered on constructed designs in test_catalogue.py): ``outlier_specimen``. A x2.5 specimen
 among specimens with log-SD 0.25 is a 3.5 sigma deviation; with 6 specimens the deletion t-test (df = 4,
-Bonferroni over specimens, then Holm over the catalogue) cannot reach alpha = 0.01 (Holm p 0.3-1 measured on
-seeds 0, 1; docs/power_study.md).
+Bonferroni over specimens, then Holm over the catalogue) cannot reach alpha = 0.01 (uncorrected p 0.5 and
+0.025 measured on seeds 0, 1; power computed in docs/power_study.md).
 """
 from __future__ import annotations
 
