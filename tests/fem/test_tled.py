@@ -1,7 +1,7 @@
 """Verification of the TLED solver against closed forms (fem.md section 4)."""
 import numpy as np
 import pytest
-from conftest import neo_hookean_energy_j, polar_moment_m4
+from fem_reference import neo_hookean_energy_j, polar_moment_m4
 from scipy.optimize import brentq
 
 from tissuemech.fem.materials import cauchy_stress, make_material

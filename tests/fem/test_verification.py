@@ -7,7 +7,7 @@ loaded dynamic run balances its energy; inversion is reported in explicit runs t
 """
 import numpy as np
 import pytest
-from conftest import neo_hookean_energy_j, polar_moment_m4
+from fem_reference import neo_hookean_energy_j, polar_moment_m4
 
 from tissuemech.fem.materials import make_material
 from tissuemech.fem.mesh import block_mesh, cylinder_mesh

@@ -12,7 +12,7 @@ nodal pressure of the ANP element). Saint Venant-Kirchhoff is the compressible `
 
 The scalar laws are the *same* numba functions the 1-D fitting code uses (``models.hyperelastic
 .HYPERELASTIC_LAWS``: ``dW/dI1(params, I1, I2)``, ``dW/dI2(params, I1, I2)`` or Ogden stretch
-derivatives); until that module exists the equivalent laws below are used. They reach the compiled TLED
+derivatives); no law is written twice. They reach the compiled TLED
 kernels as first-class function pointers (numba ``cfunc``), so one cached kernel serves every law.
 
 Viscoelasticity (QLV / Prony) acts on the isochoric 2nd Piola-Kirchhoff stress as in NiftySim's
@@ -30,6 +30,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import cfunc, njit, types
 
+from ..models.hyperelastic import (lopez_pamies_dw_di1, mooney_rivlin_dw_di1, mooney_rivlin_dw_di2,
+                                  neo_hookean_dw_di1, ogden_dw_dlambda, reduced_polynomial_dw_di1)
+
 KIND_INVARIANT = 0
 KIND_STRETCH = 1
 KIND_SVK = 2
@@ -45,7 +48,7 @@ FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
 
 # --------------------------------------------------------------------------------------------------
-# scalar laws (fallback until models/hyperelastic.py provides HYPERELASTIC_LAWS)
+# the zero derivative of laws without an I2 (or stretch) part; the laws themselves are the fitting code's
 # --------------------------------------------------------------------------------------------------
 @njit(cache=True)
 def _zero_w(p, i1, i2):
@@ -55,55 +58,6 @@ def _zero_w(p, i1, i2):
 @njit(cache=True)
 def _zero_wl(p, lam):
     return 0.0
-
-
-@njit(cache=True)
-def neo_hookean_dw_di1(p, i1, i2):
-    """W = mu/2 (I1 - 3); p = [mu (Pa)]."""
-    return 0.5 * p[0]
-
-
-@njit(cache=True)
-def mooney_rivlin_dw_di1(p, i1, i2):
-    """W = C10 (I1 - 3) + C01 (I2 - 3); p = [C10, C01] (Pa)."""
-    return p[0]
-
-
-@njit(cache=True)
-def mooney_rivlin_dw_di2(p, i1, i2):
-    return p[1]
-
-
-@njit(cache=True)
-def reduced_polynomial_dw_di1(p, i1, i2):
-    """W = sum_i C_i0 (I1 - 3)^i; p = [C10, C20, ...] (Pa)."""
-    x = i1 - 3.0
-    s = 0.0
-    xp = 1.0
-    for i in range(p.size):
-        s += (i + 1) * p[i] * xp
-        xp *= x
-    return s
-
-
-@njit(cache=True)
-def lopez_pamies_dw_di1(p, i1, i2):
-    """W = sum_r 3^(1-a_r)/(2 a_r) mu_r (I1^a_r - 3^a_r); p = [mu_1, a_1, mu_2, a_2, ...]."""
-    s = 0.0
-    for r in range(p.size // 2):
-        mu, a = p[2 * r], p[2 * r + 1]
-        s += 0.5 * 3.0 ** (1.0 - a) * mu * i1 ** (a - 1.0)
-    return s
-
-
-@njit(cache=True)
-def ogden_dw_dlambda(p, lam):
-    """W = sum_p 2 mu_p/a_p^2 (l1^a_p + l2^a_p + l3^a_p - 3); per-stretch derivative; p = [mu_1, a_1, ...]."""
-    s = 0.0
-    for r in range(p.size // 2):
-        mu, a = p[2 * r], p[2 * r + 1]
-        s += 2.0 * mu / a * lam ** (a - 1.0)
-    return s
 
 
 @dataclass(frozen=True)
@@ -126,6 +80,7 @@ class LawSpec:
 
 
 def _fallback_laws() -> dict[str, LawSpec]:
+    """Keys the fitting code's table does not list (SVK, RP1, LP3), built from the same law functions."""
     laws = {
         "neo_hookean": LawSpec("invariant", ("mu",), neo_hookean_dw_di1),
         "mooney_rivlin": LawSpec("invariant", ("C10", "C01"), mooney_rivlin_dw_di1, mooney_rivlin_dw_di2),
@@ -145,12 +100,10 @@ def available_laws() -> dict[str, LawSpec]:
     """Law table: ``models.hyperelastic.HYPERELASTIC_LAWS`` when present (entries whose functions compile
     with the kernel signatures ``(params, I1bar, I2bar)`` / ``(params, lambda_bar)``), completed by the
     fallbacks of this module. Cached: call ``available_laws.cache_clear()`` after changing the table."""
+    from ..models import hyperelastic
+
     laws = _fallback_laws()
-    try:
-        from ..models import hyperelastic
-    except ImportError:
-        return laws
-    table = getattr(hyperelastic, "HYPERELASTIC_LAWS", {})
+    table = hyperelastic.HYPERELASTIC_LAWS
     for key, entry in table.items():
         spec = _law_from_table_entry(entry)
         if spec is not None and _compiles(spec):
