@@ -53,9 +53,11 @@ def test_run_diagnosis_on_fitted_runs(tmp_path):
         fit = fit_runs("qlv_linear_prony4", shear, "torque", n_points=16)
         fitting.write_fit_netcdf(fit, tmp_path / "fits" / "qlv_linear_prony4.nc")
         res = run_diagnosis(tmp_path / "runs", tmp_path / "fits", tmp_path / "out" / "diagnosis.json",
-                            tmp_path / "out" / "residuals.nc", tmp_path / "out" / "figs", extensions=False)
+                            tmp_path / "out" / "residuals.nc", tmp_path / "out" / "figs", extensions=False,
+                            alpha=0.02)
     out = json.loads((tmp_path / "out" / "diagnosis.json").read_text())
     assert out["model"] == "qlv_linear_prony4" and out["fit_info"]["target"] == "torque"
+    assert out["alpha"] == 0.02  # config diagnosis.alpha reaches the Holm control
     strain_hits = [u for u in out["unexplained"] if u["test"] == "constant_shear_rate" and u["covariate"] == "strain"]
     assert strain_hits and strain_hits[0]["effect_size"] > 0.1  # data stiffen above the linear model
     assert all(UNEXPLAINED_KEYS <= set(u) for u in out["unexplained"])

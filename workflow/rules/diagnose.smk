@@ -30,6 +30,7 @@ rule diagnose:
     benchmark:
         "benchmarks/runs/{dataset}/diagnose.tsv"
     params:
+        alpha=config["diagnosis"]["alpha"],
         pkg=script_hash("workflow/scripts/diagnose.py"),
     script:
         "../scripts/diagnose.py"

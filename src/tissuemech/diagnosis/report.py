@@ -290,8 +290,11 @@ def _nonseparable_fix(runs, baseline_key: str, target: str) -> dict | None:
 
 def run_diagnosis(runs_dir: str | Path, fits_dir: str | Path, out_json: str | Path, out_nc: str | Path,
                   fig_dir: str | Path, baseline: str | None = None, extensions: bool = True,
-                  dataset: str | None = None) -> dict:
-    """Diagnose a dataset from its canonical runs and fit records (module docstring); writes the outputs."""
+                  dataset: str | None = None, alpha: float = st.ALPHA) -> dict:
+    """Diagnose a dataset from its canonical runs and fit records (module docstring); writes the outputs.
+
+    ``alpha`` is the family-wise false-alarm level (Holm) of every test of the dataset (config ``diagnosis.alpha``).
+    """
     from ..models.registry import get_model
     from .baseline import predict_runs, read_fit_record
 
@@ -302,7 +305,7 @@ def run_diagnosis(runs_dir: str | Path, fits_dir: str | Path, out_json: str | Pa
         # homogeneous specimens (simple shear + uniaxial): the multi-mode diagnosis refits its own I1/I2
         # laws per mode combination (closed forms, seconds), so the scope's fit records are not needed
         name = dataset or str(runs[0].attrs.get("dataset", ""))
-        return run_homogeneous_diagnosis(runs, out_json, out_nc, fig_dir, dataset=name)
+        return run_homogeneous_diagnosis(runs, out_json, out_nc, fig_dir, dataset=name, alpha=alpha)
     records = [read_fit_record(p) for p in sorted(Path(fits_dir).glob("*.nc"))]
     if not records:
         raise FileNotFoundError(f"no fit records (*.nc) under {fits_dir}")
@@ -324,7 +327,7 @@ def run_diagnosis(runs_dir: str | Path, fits_dir: str | Path, out_json: str | Pa
     fit_info = {"target": chosen["target"] or "apparent_stress", "relaxation": chosen.get("relaxation", "measured"),
                 "fitted_tests": chosen["tests"],
                 "correlations": chosen["correlations"], "fixes": {}}
-    result = diagnose(runs, base_table, chosen["model_key"], fit_info)
+    result = diagnose(runs, base_table, chosen["model_key"], fit_info, alpha=alpha)
     if extensions:
         # model-level fixes cost fits: score them only for causes that pass Holm and practical relevance,
         # then diagnose again so that a fix without held-out gain withdraws the name
@@ -333,7 +336,7 @@ def run_diagnosis(runs_dir: str | Path, fits_dir: str | Path, out_json: str | Pa
             fix = _nonseparable_fix(runs, chosen["model_key"], fit_info["target"])
             if fix is not None:
                 fit_info["fixes"]["nonseparable_relaxation"] = fix
-                result = diagnose(runs, base_table, chosen["model_key"], fit_info)
+                result = diagnose(runs, base_table, chosen["model_key"], fit_info, alpha=alpha)
     name = dataset or (runs[0].attrs.get("dataset") if runs else "")
     write_diagnosis_json(result, out_json, dataset=str(name))
     if len(table):
