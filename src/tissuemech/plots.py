@@ -77,6 +77,16 @@ def save_figure(fig: Figure, path: str | Path, dpi: int = 150) -> list[Path]:
     return written
 
 
+def save_pyplot_figure(fig, path: str | Path, dpi: int = 120) -> Path:
+    """Lay out a pyplot figure, write it as PNG + SVG (:func:`save_figure`) and close it; returns the PNG path."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    save_figure(fig, path, dpi=dpi)
+    plt.close(fig)
+    return Path(path)
+
+
 def _new_figure(ncols: int = 1, nrows: int = 1, width: float = 5.0, height: float = 3.8) -> tuple[Figure, np.ndarray]:
     fig = Figure(figsize=(width * ncols, height * nrows), layout="constrained")
     axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False)).ravel()

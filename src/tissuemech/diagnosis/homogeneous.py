@@ -594,7 +594,7 @@ def write_figures(by_mode, table: pd.DataFrame, result: dict, fig_dir) -> list:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..plots import save_figure
+    from ..plots import save_pyplot_figure
 
     fig_dir = Path(fig_dir)
     fig_dir.mkdir(parents=True, exist_ok=True)
@@ -618,11 +618,7 @@ def write_figures(by_mode, table: pd.DataFrame, result: dict, fig_dir) -> list:
         ax.axhline(0, color="k", lw=0.4)
     axes[0].legend(fontsize=7)
     fig.suptitle("before (shear-calibrated I1 law) and after (I2 term, all modes / held-out mode)")
-    fig.tight_layout()
-    p = fig_dir / "predictions_before_after.png"
-    save_figure(fig, p, dpi=120)  # PNG (report pattern) + SVG
-    plt.close(fig)
-    paths.append(p)
+    paths.append(save_pyplot_figure(fig, fig_dir / "predictions_before_after.png"))  # PNG (report pattern) + SVG
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
     for ax, (model, calib, title) in zip(axes, ((base, "simple_shear", "shear-calibrated baseline"),
@@ -642,11 +638,7 @@ def write_figures(by_mode, table: pd.DataFrame, result: dict, fig_dir) -> list:
     axes[0].set_ylabel("ln(observed / predicted) [%]")
     axes[0].legend(fontsize=8)
     fig.suptitle("residual map per mode (points above the noise floor)")
-    fig.tight_layout()
-    p = fig_dir / "residual_map_modes.png"
-    save_figure(fig, p, dpi=120)  # PNG (report pattern) + SVG
-    plt.close(fig)
-    paths.append(p)
+    paths.append(save_pyplot_figure(fig, fig_dir / "residual_map_modes.png"))  # PNG (report pattern) + SVG
 
     prof = result["profiles"]
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -658,11 +650,7 @@ def write_figures(by_mode, table: pd.DataFrame, result: dict, fig_dir) -> list:
     ax.set_ylabel("Delta chi2 / s^2")
     ax.legend(fontsize=8)
     ax.set_title("profile of the I2 coefficient")
-    fig.tight_layout()
-    p = fig_dir / "c01_profile.png"
-    save_figure(fig, p, dpi=120)  # PNG (report pattern) + SVG
-    plt.close(fig)
-    paths.append(p)
+    paths.append(save_pyplot_figure(fig, fig_dir / "c01_profile.png"))  # PNG (report pattern) + SVG
 
     rot = result["cross_mode"]["rotations"]
     fig, ax = plt.subplots(figsize=(7, 4))
@@ -681,11 +669,7 @@ def write_figures(by_mode, table: pd.DataFrame, result: dict, fig_dir) -> list:
     ax.set_xlabel("held-out NRMSE")
     ax.legend(fontsize=8)
     ax.set_title("cross-mode prediction (leave one mode out)")
-    fig.tight_layout()
-    p = fig_dir / "cross_mode_gains.png"
-    save_figure(fig, p, dpi=120)  # PNG (report pattern) + SVG
-    plt.close(fig)
-    paths.append(p)
+    paths.append(save_pyplot_figure(fig, fig_dir / "cross_mode_gains.png"))  # PNG (report pattern) + SVG
     return paths
 
 

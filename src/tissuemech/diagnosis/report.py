@@ -170,7 +170,7 @@ def write_figures(table: pd.DataFrame, result: dict, fig_dir: str | Path) -> lis
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..plots import save_figure
+    from ..plots import save_pyplot_figure
 
     from .catalogue import curve_levels
 
@@ -190,11 +190,7 @@ def write_figures(table: pd.DataFrame, result: dict, fig_dir: str | Path) -> lis
     ax.set_xlabel("rim strain [%]")
     ax.set_ylabel("log10 shear rate [1/s]")
     ax.set_title(f"residual map of {result['model']} (red: data above model)")
-    p = fig_dir / "residual_map_strain_rate.png"
-    fig.tight_layout()
-    save_figure(fig, p, dpi=120)  # PNG (report pattern) + SVG
-    plt.close(fig)
-    paths.append(p)
+    paths.append(save_pyplot_figure(fig, fig_dir / "residual_map_strain_rate.png"))  # PNG (report pattern) + SVG
 
     fig, ax = plt.subplots(figsize=(6, 4))
     if len(t):
@@ -208,11 +204,7 @@ def write_figures(table: pd.DataFrame, result: dict, fig_dir: str | Path) -> lis
         ax.set_xlabel("elapsed time [h]" if lv["elapsed_h"].notna().all() else "test order")
     ax.set_ylabel("curve level ln(observed/predicted) [%]")
     ax.axhline(0, color="k", lw=0.5)
-    p = fig_dir / "curve_levels_vs_elapsed.png"
-    fig.tight_layout()
-    save_figure(fig, p, dpi=120)  # PNG (report pattern) + SVG
-    plt.close(fig)
-    paths.append(p)
+    paths.append(save_pyplot_figure(fig, fig_dir / "curve_levels_vs_elapsed.png"))  # PNG (report pattern) + SVG
 
     fs = t[t["test"] == "frequency_sweep"] if len(t) else t
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -226,11 +218,7 @@ def write_figures(table: pd.DataFrame, result: dict, fig_dir: str | Path) -> lis
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("(observed - predicted)/predicted [%]")
     ax.legend() if len(fs) else ax.text(0.5, 0.5, "no frequency sweep", ha="center", transform=ax.transAxes)
-    p = fig_dir / "frequency_sweep_residuals.png"
-    fig.tight_layout()
-    save_figure(fig, p, dpi=120)  # PNG (report pattern) + SVG
-    plt.close(fig)
-    paths.append(p)
+    paths.append(save_pyplot_figure(fig, fig_dir / "frequency_sweep_residuals.png"))  # PNG (report pattern) + SVG
 
     fixes = [f for f in result["findings"] if f["detected"] and f.get("fix")
              and np.isfinite(f["fix"].get("before", np.nan)) and np.isfinite(f["fix"].get("after", np.nan))]
@@ -244,11 +232,7 @@ def write_figures(table: pd.DataFrame, result: dict, fig_dir: str | Path) -> lis
         ax.set_xlabel("held-out error (metric of each fix)")
     else:
         ax.text(0.5, 0.5, "no cause detected", ha="center", transform=ax.transAxes)
-    p = fig_dir / "fix_gains.png"
-    fig.tight_layout()
-    save_figure(fig, p, dpi=120)  # PNG (report pattern) + SVG
-    plt.close(fig)
-    paths.append(p)
+    paths.append(save_pyplot_figure(fig, fig_dir / "fix_gains.png"))  # PNG (report pattern) + SVG
     return paths
 
 

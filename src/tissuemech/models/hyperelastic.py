@@ -161,10 +161,9 @@ def polynomial_dw_di2(p, i1, i2):
     return s
 
 
-@njit(cache=True)
-def nunes_dw_di1(p, i1, i2):
-    """Nunes (2011) ``W = C1 (I1bar - 3) + 4/3 C2 (I2bar - 3)^(3/4)``; ``p = [C1, C2]`` (Pa)."""
-    return p[0]
+#: Nunes (2011) ``W = C1 (I1bar - 3) + 4/3 C2 (I2bar - 3)^(3/4)``, ``p = [C1, C2]`` (Pa): its ``dW/dI1 = C1`` is the
+#: Mooney-Rivlin first derivative (the first parameter), so the same compiled function serves both laws
+nunes_dw_di1 = mooney_rivlin_dw_di1
 
 
 @njit(cache=True)
