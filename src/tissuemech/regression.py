@@ -455,9 +455,19 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help=f"only this dataset (repeatable; default: all of {sorted(REFERENCE_FITS)})")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    # the pipeline stages log every ingested run; only the regression's own records belong in a CI log
-    logging.getLogger("tissuemech").setLevel(logging.WARNING)
+    # the pipeline stages log every ingested run; only the regression's own records belong in a CI log.
+    # The levels are restored on return: main() is also called in-process (tests), where they must not leak.
+    package, levels = logging.getLogger("tissuemech"), (logging.getLogger("tissuemech").level, log.level)
+    package.setLevel(logging.WARNING)
     log.setLevel(logging.INFO)
+    try:
+        return _run(args)
+    finally:
+        package.setLevel(levels[0])
+        log.setLevel(levels[1])
+
+
+def _run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     try:
         if args.update:

@@ -1,6 +1,8 @@
 """Fitted-parameter regression: fresh fits of the bundled datasets against the committed tables in this folder."""
 from __future__ import annotations
 
+import logging
+
 import math
 import shutil
 from pathlib import Path
@@ -82,7 +84,10 @@ def test_a_shift_inside_the_tolerance_passes(reference_copy, fresh):
 def test_check_command_exits_1_with_the_table(reference_copy, fresh, monkeypatch, capsys):
     _perturb(reference_copy, "agar_3pct_thesis", "creep_recovery", "sls2", "eta1", 5.0)
     monkeypatch.setattr(REG, "fresh_table", lambda *a, **k: fresh)
+    package = logging.getLogger("tissuemech")
+    level = package.level
     assert REG.main(["--check", "--reference-dir", str(reference_copy)]) == 1
+    assert package.level == level  # the CLI's quiet logging does not leak into the calling process
     out = capsys.readouterr().out
     assert "1 of" in out and "creep_recovery" in out and "eta1" in out and "make regression-update" in out
 
