@@ -224,6 +224,34 @@ def _is_zero_law(fn) -> bool:
     return getattr(fn, "py_func", fn) in zeros
 
 
+def _invariant_independent_functions() -> set:
+    """The shared law derivatives whose value does not depend on the invariants (``W`` linear in ``I1``,
+    ``I2``: neo-Hookean, Mooney-Rivlin, and the zero ``dW/dI2`` of I1-only laws)."""
+    from ..models import hyperelastic
+
+    fns = {_zero_w, neo_hookean_dw_di1, mooney_rivlin_dw_di1, mooney_rivlin_dw_di2,
+           getattr(hyperelastic, "_zero", _zero_w)}
+    return {getattr(f, "py_func", f) for f in fns}
+
+
+def constant_invariant_derivatives(material: Material) -> tuple[float, float] | None:
+    """``(dW/dI1, dW/dI2)`` (Pa) when the material's law is linear in the invariants (both derivatives
+    constant: neo-Hookean, Mooney-Rivlin), evaluated once with the fitting code's law functions; None for
+    any other law, for stretch-based and SVK laws and with beyond-QLV branch energies.
+
+    Such laws run on the vectorised kernels (:mod:`.vectorised`), which take the derivatives as constants.
+    """
+    if material.kind not in (KIND_INVARIANT, KIND_INVARIANT_I1) or material.branch_params.shape[0] > 0:
+        return None
+    law = material.law
+    constant = _invariant_independent_functions()
+    if getattr(law.dw_di1, "py_func", law.dw_di1) not in constant or \
+            getattr(law.dw_di2, "py_func", law.dw_di2) not in constant:
+        return None
+    p = np.ascontiguousarray(material.params, dtype=np.float64)
+    return float(law.dw_di1(p, 3.0, 3.0)), float(law.dw_di2(p, 3.0, 3.0))
+
+
 def make_material(law_key: str, parameters: Mapping[str, float] | np.ndarray, *,
                   bulk_modulus_pa: float | None = None, poisson_ratio: float | None = None,
                   density_kg_m3: float = 1040.0, prony_g=(), prony_tau_s=(), branch_law: str | None = None,

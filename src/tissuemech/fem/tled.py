@@ -36,7 +36,9 @@ import numpy as np
 from numba import njit, prange
 
 from ..models.recursion import relaxation_factors
-from .materials import FASTMATH, KIND_SVK, Material, j_minus_two_thirds, kirchhoff_deviatoric
+from . import vectorised
+from .materials import (FASTMATH, KIND_SVK, Material, constant_invariant_derivatives, j_minus_two_thirds,
+                        kirchhoff_deviatoric)
 from .mesh import TetMesh, element_min_altitudes, element_volumes
 
 STATUS_OK = 0
@@ -344,12 +346,17 @@ def _first_bad(bad):
 @njit(cache=True)
 def _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind, w1fn, w2fn,
                      wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f, h_state, s_prev, bfn, branch_params, w_prev, commit, bad,
-                     reduce=True):
+                     vec, reduce=True):
     """One complete internal-force evaluation (optional ANP passes + element pass + optional reduction
     into ``fint``; without it the forces stay in ``fbuf`` for a fused node pass).
 
-    Returns the id of an inverted element or -1.
+    ``vec = (enabled, workspace, svk, dW/dI1, dW/dI2)``: when enabled the vectorised passes
+    (:func:`.vectorised.internal_forces`, QLV states in the workspace) compute ``fint`` instead and
+    ``fbuf`` is not used. Returns the id of an inverted element or -1.
     """
+    if vec[0]:
+        return vectorised.internal_forces(u, vec[1], vec[2], vec[3], vec[4], params[0], kappa, use_anp, prony_g,
+                                          prony_e, prony_f, commit, fint)
     bad[:] = -1
     if use_anp:
         _anp_element_pass(u, elements, dndx, vol0, chunk_lo, pbuf, kappa, bad)
@@ -474,16 +481,20 @@ def _contact_force(fint, contact_nodes, in_contact, out):
 
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _cd_node_pass(fbuf, fint, fext_ref, s_ext, u, u_old, u_new, coef_a, coef_b, coef_c, free):
-    """Reduce the chunk force buffers into ``fint`` (clearing them) and advance the free dofs."""
+    """Reduce the chunk force buffers into ``fint`` (clearing them; with no buffers ``fint`` is already
+    complete) and advance the free dofs."""
     nchunk = fbuf.shape[0]
     for n in prange(u.shape[0]):
         a, b, cc = coef_a[n], coef_b[n], coef_c[n]
         for i in range(3):
-            f = 0.0
-            for c in range(nchunk):
-                f += fbuf[c, n, i]
-                fbuf[c, n, i] = 0.0
-            fint[n, i] = f
+            if nchunk > 0:
+                f = 0.0
+                for c in range(nchunk):
+                    f += fbuf[c, n, i]
+                    fbuf[c, n, i] = 0.0
+                fint[n, i] = f
+            else:
+                f = fint[n, i]
             if free[n, i]:
                 u_new[n, i] = a * (s_ext * fext_ref[n, i] - f) + b * u[n, i] + cc * u_old[n, i]
             else:
@@ -522,7 +533,7 @@ def _energy_increments(u_new, u, u_old, fint, fext_ref, s_ext, mass, damping, dt
 def _run_explicit(X, elements, dndx, vol0, chunk_lo, vnode, mass, kind, w1fn, w2fn, wlfn, params, kappa,
                   use_anp, prony_g, prony_tau, h_state, s_prev, bfn, branch_params, w_prev, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate,
                   rot_center, n_groups, free, hist_time, hist_vals, fext_ref, contact_kind, cparams,
-                  contact_nodes, dt, n_steps, damping, out_every, u, u_old, fbuf, pbuf, track_energy):
+                  contact_nodes, dt, n_steps, damping, out_every, u, u_old, fbuf, pbuf, track_energy, vec):
     """Central-difference time loop. ``u``/``u_old`` hold the state at steps 0 and -1 on entry and the
     last two states on exit (``u`` newest)."""
     nn = X.shape[0]
@@ -562,7 +573,7 @@ def _run_explicit(X, elements, dndx, vol0, chunk_lo, vnode, mass, kind, w1fn, w2
         t = step * dt
         bad_e = _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind,
                                  w1fn, w2fn, wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f, h_state,
-                                 s_prev, bfn, branch_params, w_prev, True, bad, False)
+                                 s_prev, bfn, branch_params, w_prev, True, bad, vec, False)
         if bad_e >= 0:
             return STATUS_INVERTED, bad_e, step, u, u_old, out_t[:k_out], out_force[:k_out], \
                 out_torque[:k_out], out_contact[:k_out], out_ke[:k_out], out_energy[:k_out]
@@ -617,7 +628,7 @@ def _dr_node_pass(fint, fext_ref, s_ext, u, u_old, u_new, inv_mass, alpha, beta,
 def _run_dr(X, elements, dndx, vol0, chunk_lo, vnode, dr_mass, kind, w1fn, w2fn, wlfn, params, kappa, use_anp,
             prony_g, prony_tau, h_state, s_prev, bfn, branch_params, w_prev, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center,
             n_groups, free, hist_time, hist_vals, fext_ref, contact_kind, cparams, contact_nodes, times,
-            tol_m, min_iter, max_iter, u, fbuf, pbuf):
+            tol_m, min_iter, max_iter, u, fbuf, pbuf, vec):
     """Dynamic relaxation to static equilibrium at each time in ``times`` (quasi-static loading path).
 
     Unit fictitious time step; ``dr_mass`` makes every element's stable step ~2 (lambda_max ~ 1). The
@@ -670,7 +681,7 @@ def _run_dr(X, elements, dndx, vol0, chunk_lo, vnode, dr_mass, kind, w1fn, w2fn,
         while it < max_iter:
             bad_e = _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind,
                                      w1fn, w2fn, wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f,
-                                     h_state, s_prev, bfn, branch_params, w_prev, False, bad)
+                                     h_state, s_prev, bfn, branch_params, w_prev, False, bad, vec)
             if bad_e >= 0:
                 return STATUS_INVERTED, bad_e, k, u, iters, out_force, out_torque, out_contact
             if it > 0:
@@ -719,7 +730,8 @@ def _run_dr(X, elements, dndx, vol0, chunk_lo, vnode, dr_mass, kind, w1fn, w2fn,
             return STATUS_NOT_CONVERGED, -1, k, u, iters, out_force, out_torque, out_contact
         # commit viscoelastic states at the converged configuration and record reactions
         _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind, w1fn, w2fn,
-                         wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f, h_state, s_prev, bfn, branch_params, w_prev, True, bad)
+                         wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f, h_state, s_prev, bfn, branch_params, w_prev, True, bad,
+                         vec)
         _reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_g, torque_g)
         _contact_force(fint, contact_nodes, in_contact, cforce)
         out_force[k] = force_g
@@ -999,6 +1011,7 @@ class RunResult:
         ``external_work`` (applied loads), ``damping_work`` (mass-proportional damping) and
         ``constraint_work`` (prescribed dofs and contact); with ``kinetic_energy_j`` (half-step velocities)
         ``KE + internal + damping = KE(0) + external + constraint``
+    kernel : ``"vectorised"`` or ``"generic"``: which internal-force kernel ran
     """
 
     time_s: np.ndarray
@@ -1012,6 +1025,7 @@ class RunResult:
     iterations: np.ndarray
     state: tuple
     energy_j: dict = field(default_factory=dict)
+    kernel: str = "generic"
 
 
 def _state(model: TLEDModel, state: tuple | None):
@@ -1020,6 +1034,81 @@ def _state(model: TLEDModel, state: tuple | None):
     if state is None:
         return np.zeros((ne, nt, 6), model.dtype), np.zeros((ne, 6), model.dtype), np.zeros((ne, nt), model.dtype)
     return state[0].copy(), state[1].copy(), state[2].copy()
+
+
+KERNELS = ("auto", "vectorised", "generic")
+
+
+def vectorised_law(material: Material) -> tuple[bool, float, float] | None:
+    """``(svk, dW/dI1, dW/dI2)`` when the vectorised kernels (:mod:`.vectorised`) can run this material
+    (Saint Venant-Kirchhoff, or a law linear in the invariants, with or without QLV Prony terms); else None."""
+    if material.branch_params.shape[0] > 0:
+        return None
+    if material.kind == KIND_SVK:
+        return True, 0.0, 0.0
+    w = constant_invariant_derivatives(material)
+    return None if w is None else (False, w[0], w[1])
+
+
+def _vector_setup(model: TLEDModel, kernel: str, h_state, s_prev):
+    """The ``vec`` argument of the compiled loops and the force buffers of the generic kernel.
+
+    ``kernel``: ``"auto"`` (vectorised when :func:`vectorised_law` allows it), ``"vectorised"`` (required) or
+    ``"generic"``. The vectorised workspace holds the QLV states in structure-of-arrays form (copied from
+    ``h_state``/``s_prev``; :func:`_vector_state_back` copies them back). A disabled workspace has the same
+    types with zero sizes, so one compiled loop serves both kernels.
+    """
+    if kernel not in KERNELS:
+        raise ValueError(f"kernel must be one of {KERNELS}, not {kernel!r}")
+    law = vectorised_law(model.material) if kernel != "generic" else None
+    if kernel == "vectorised" and law is None:
+        raise ValueError(f"the vectorised kernel needs Saint Venant-Kirchhoff or a law linear in the invariants "
+                         f"without branch energies; {model.material.law_key!r} runs on the generic kernel")
+    enabled = law is not None
+    el = model.mesh.elements
+    ne, nn = (el.shape[0], model.mesh.n_nodes) if enabled else (0, 0)
+    nt = model.material.prony_g.size if enabled else 0
+    dt = model.dtype
+    nchunk = model.chunk_lo.size - 1
+    if enabled:
+        if 12 * ne >= 2**32:
+            raise ValueError("the vectorised kernel indexes element forces with uint32: at most 357M elements")
+        flat = el.ravel()
+        order = np.argsort(flat, kind="stable")
+        node_ptr = np.zeros(nn + 1, np.uint32)
+        node_ptr[1:] = np.cumsum(np.bincount(flat, minlength=nn))
+        inc_elem = (order // 4).astype(np.uint32)
+        inc_slot = (3 * (order % 4) * ne + order // 4).astype(np.uint32)
+        conn = np.ascontiguousarray(el.T, dtype=np.uint32)
+        d9 = np.ascontiguousarray(model.dndx[:, 3:].T)
+        inv_vnode = 1.0 / model.vnode
+        elo = model.chunk_lo.astype(np.uint64)
+        nlo = np.linspace(0, nn, nchunk + 1).round().astype(np.uint64)
+        sprev = np.ascontiguousarray(s_prev.T)
+        hstate = np.ascontiguousarray(h_state.transpose(1, 2, 0))
+    else:
+        node_ptr, inc_elem, inc_slot = np.zeros(1, np.uint32), np.zeros(0, np.uint32), np.zeros(0, np.uint32)
+        conn, d9, inv_vnode = np.zeros((4, 0), np.uint32), np.zeros((9, 0), dt), np.zeros(0)
+        elo, nlo = np.zeros(1, np.uint64), np.zeros(1, np.uint64)
+        sprev, hstate = np.zeros((6, 0), dt), np.zeros((0, 6, 0), dt)
+    ws = (conn, d9, model.vol0 if enabled else np.zeros(0, dt), node_ptr, inc_elem, inc_slot, inv_vnode, elo, nlo,
+          np.zeros((9, ne), dt), np.zeros(ne, dt), np.zeros(nn), np.zeros((12, ne), dt),
+          np.zeros(nchunk, np.int64), np.zeros(nchunk, np.int64), sprev, np.zeros((6, ne), dt),
+          np.zeros((6, ne), dt), hstate)
+    svk, w1, w2 = law if enabled else (False, 0.0, 0.0)
+    vec = (enabled, ws, svk, float(w1), float(w2))
+    nbuf = 0 if enabled else nchunk
+    fbuf = np.zeros((nbuf, model.mesh.n_nodes, 3), model.dtype)
+    pbuf = np.zeros((nbuf, model.mesh.n_nodes))
+    return vec, fbuf, pbuf
+
+
+def _vector_state_back(vec, h_state, s_prev):
+    """Copy the QLV states of a vectorised run back into the generic ``(n_el, n_terms, 6)``/``(n_el, 6)`` arrays."""
+    if vec[0] and h_state.shape[1] > 0:
+        ws = vec[1]
+        s_prev[:] = ws[15].T
+        h_state[:] = ws[18].transpose(2, 0, 1)
 
 
 @contextmanager
@@ -1052,7 +1141,7 @@ def _check_status(status, bad, where, time_s):
 def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None, safety: float = 0.7,
                  damping_1_s: float = 0.0, n_outputs: int = 100, u0_m: np.ndarray | None = None,
                  v0_m_s: np.ndarray | None = None, state: tuple | None = None,
-                 n_threads: int | None = None, track_energy: bool = True) -> RunResult:
+                 n_threads: int | None = None, track_energy: bool = True, kernel: str = "auto") -> RunResult:
     """Explicit dynamic run from ``t = 0`` to ``t_end_s``.
 
     Parameters
@@ -1065,6 +1154,8 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
     n_threads : numba threads for this run (None: numba's current setting)
     track_energy : accumulate the energy balance (``RunResult.energy_j``; a serial pass over the nodes per
         step, a few % of the step time)
+    kernel : ``"auto"`` (the vectorised kernels of :mod:`.vectorised` for SVK and laws linear in the
+        invariants, with or without QLV; the generic kernel otherwise), ``"vectorised"`` or ``"generic"``
     """
     m = model.material
     dt = critical_time_step(model, safety) if dt_s is None else float(dt_s)
@@ -1073,9 +1164,7 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
     u = np.zeros((model.mesh.n_nodes, 3), model.dtype) if u0_m is None else np.array(u0_m, dtype=model.dtype)
     u_old = u.copy() if v0_m_s is None else (u - dt * np.asarray(v0_m_s)).astype(model.dtype)
     h_state, s_prev, w_prev = _state(model, state)
-    nchunk = model.chunk_lo.size - 1
-    fbuf = np.zeros((nchunk, model.mesh.n_nodes, 3), model.dtype)
-    pbuf = np.zeros((nchunk, model.mesh.n_nodes))
+    vec, fbuf, pbuf = _vector_setup(model, kernel, h_state, s_prev)
     w1, w2, wl = m.functions()
     bfn = m.branch_function()
     ng = max(1, len(model.groups))
@@ -1085,18 +1174,20 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
                         m.prony_g, m.prony_tau_s, h_state, s_prev, bfn, m.branch_params, w_prev, model.bc_nodes, model.bc_group, model.bc_mask,
                         model.bc_dir, model.bc_rotate, model.rot_center, ng, model.free, model.hist_time,
                         model.hist_vals, model.fext_ref, model.contact_kind, model.cparams, model.contact_nodes,
-                        dt, n_steps, damping_1_s, out_every, u, u_old, fbuf, pbuf, bool(track_energy))
+                        dt, n_steps, damping_1_s, out_every, u, u_old, fbuf, pbuf, bool(track_energy), vec)
+    _vector_state_back(vec, h_state, s_prev)
     status, bad, step, u, u_old, t, force, torque, cforce, ke, energy = res
     _check_status(status, bad, f"step {step}", step * dt)
     names = model.group_names
     return RunResult(t, {n: force[:, i] for i, n in enumerate(names)}, {n: torque[:, i] for i, n in enumerate(names)},
                      cforce, ke, u, u_old, dt, np.zeros(0, np.int64), (h_state, s_prev, w_prev),
-                     {k: energy[:, i] for i, k in enumerate(ENERGY_TERMS)} if track_energy else {})
+                     {k: energy[:, i] for i, k in enumerate(ENERGY_TERMS)} if track_energy else {},
+                     "vectorised" if vec[0] else "generic")
 
 
 def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, min_iter: int = 20,
                       max_iter: int = 200_000, u0_m: np.ndarray | None = None, state: tuple | None = None,
-                      n_threads: int | None = None) -> RunResult:
+                      n_threads: int | None = None, kernel: str = "auto") -> RunResult:
     """Static equilibrium by dynamic relaxation at each time of ``times_s`` (loads from the histories).
 
     Parameters
@@ -1106,6 +1197,7 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
     tol_m : displacement error bound for the Joldes termination criterion (default 1e-6 of the smallest
         element altitude)
     n_threads : numba threads for this run (None: numba's current setting)
+    kernel : ``"auto"``, ``"vectorised"`` or ``"generic"`` (see :func:`run_explicit`)
     """
     m = model.material
     times = np.atleast_1d(np.asarray(times_s, float))
@@ -1114,9 +1206,7 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
     tol = 1e-6 * model.min_altitude_m if tol_m is None else float(tol_m)
     u = np.zeros((model.mesh.n_nodes, 3), model.dtype) if u0_m is None else np.array(u0_m, dtype=model.dtype)
     h_state, s_prev, w_prev = _state(model, state)
-    nchunk = model.chunk_lo.size - 1
-    fbuf = np.zeros((nchunk, model.mesh.n_nodes, 3), model.dtype)
-    pbuf = np.zeros((nchunk, model.mesh.n_nodes))
+    vec, fbuf, pbuf = _vector_setup(model, kernel, h_state, s_prev)
     w1, w2, wl = m.functions()
     bfn = m.branch_function()
     ng = max(1, len(model.groups))
@@ -1126,7 +1216,8 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
                   m.prony_tau_s, h_state, s_prev, bfn, m.branch_params, w_prev, model.bc_nodes, model.bc_group, model.bc_mask, model.bc_dir,
                   model.bc_rotate, model.rot_center, ng, model.free, model.hist_time, model.hist_vals,
                   model.fext_ref, model.contact_kind, model.cparams, model.contact_nodes, times, tol, min_iter,
-                  max_iter, u, fbuf, pbuf)
+                  max_iter, u, fbuf, pbuf, vec)
+    _vector_state_back(vec, h_state, s_prev)
     status, bad, k, u, iters, force, torque, cforce = res
     if status == STATUS_NOT_CONVERGED:
         raise DynamicRelaxationError(f"dynamic relaxation did not converge in {max_iter} iterations at "
@@ -1134,4 +1225,5 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
     _check_status(status, bad, f"increment {k}", float(times[min(k, times.size - 1)]))
     names = model.group_names
     return RunResult(times, {n: force[:, i] for i, n in enumerate(names)}, {n: torque[:, i] for i, n in enumerate(names)},
-                     cforce, np.full(times.size, np.nan), u, u.copy(), float("nan"), iters, (h_state, s_prev, w_prev), {})
+                     cforce, np.full(times.size, np.nan), u, u.copy(), float("nan"), iters, (h_state, s_prev, w_prev), {},
+                     "vectorised" if vec[0] else "generic")
