@@ -63,14 +63,15 @@ def setup(mesh, law: str, precision: str, anp: bool):
     return model, v0
 
 
-def time_cpu(model, v0, n_steps: int, threads: int | None) -> tuple[float, float]:
-    """Wall and process-CPU seconds of ``n_steps`` explicit steps (after a warm-up run that also compiles)."""
+def time_cpu(model, v0, n_steps: int, threads: int | None, kernel: str = "auto") -> tuple[float, float, str]:
+    """Wall and process-CPU seconds of ``n_steps`` explicit steps (after a warm-up run that also compiles)
+    and the internal-force kernel that ran (``"vectorised"`` or ``"generic"``)."""
     dt = critical_time_step(model, 0.7)
     with numba_threads(threads):
-        run_explicit(model, 3 * dt, dt_s=dt, v0_m_s=v0, n_outputs=1, track_energy=False)
+        run_explicit(model, 3 * dt, dt_s=dt, v0_m_s=v0, n_outputs=1, track_energy=False, kernel=kernel)
         c0, t0 = time.process_time(), time.perf_counter()
-        run_explicit(model, n_steps * dt, dt_s=dt, v0_m_s=v0, n_outputs=1, track_energy=False)
-        return time.perf_counter() - t0, time.process_time() - c0
+        res = run_explicit(model, n_steps * dt, dt_s=dt, v0_m_s=v0, n_outputs=1, track_energy=False, kernel=kernel)
+        return time.perf_counter() - t0, time.process_time() - c0, res.kernel
 
 
 def machine() -> dict:
@@ -130,6 +131,9 @@ def main(argv=None) -> None:
     ap.add_argument("--laws", default="SVK,NH,LP2,QLV4-NH")
     ap.add_argument("--precisions", default="float64,float32")
     ap.add_argument("--threads", type=int, default=None, help="numba threads (default: numba's setting)")
+    ap.add_argument("--kernels", default="auto",
+                    help="internal-force kernels to time side by side: auto (vectorised where the law allows), "
+                         "generic, vectorised; comma separated")
     ap.add_argument("--no-anp", action="store_true", help="plain linear tets (no average nodal pressure)")
     ap.add_argument("--updates", type=float, default=2e7, help="element updates per measurement")
     ap.add_argument("--gpu", action="store_true", help="also time tissuemech.fem.cuda on the GPU")
@@ -146,7 +150,7 @@ def main(argv=None) -> None:
     anp = not args.no_anp
     print(f"# TLED explicit step throughput ({'ANP' if anp else 'plain'} linear tets); threads = "
           f"{args.threads or 'numba default'}")
-    print(f"{'mesh':>6} {'tets':>7} {'law':>8} {'prec':>8} {'device':>6} {'steps':>7} {'wall s':>8} {'Mupd/s':>8} "
+    print(f"{'mesh':>6} {'tets':>7} {'law':>8} {'prec':>8} {'device':>6} {'kernel':>10} {'steps':>7} {'wall s':>8} {'Mupd/s':>8} "
           f"{'Mupd/cpu-s':>10} {'steps/s':>9} {'dt_cr s':>9} {'RT factor':>9}")
     table = []
     meshes = [("cube", cube_with_n_elements(size)) for size in sizes]
@@ -161,20 +165,26 @@ def main(argv=None) -> None:
                 model, v0 = setup(mesh, law, precision, anp)
                 dt_cr = critical_time_step(model, 0.7)
                 n_steps = max(20, int(args.updates / ne))
-                rows = [("cpu", *time_cpu(model, v0, n_steps, args.threads))]
+                rows = []
+                for kernel in dict.fromkeys(args.kernels.split(",")):
+                    if kernel != "auto" and any(r[1] == kernel for r in rows):
+                        continue  # "auto" already ran this kernel
+                    wall, cpu, ran = time_cpu(model, v0, n_steps, args.threads, kernel)
+                    if ran == kernel or kernel == "auto":
+                        rows.append(("cpu", ran, wall, cpu))
                 if args.gpu:
                     from tissuemech.fem import cuda as fem_cuda
 
-                    rows.append(("gpu", fem_cuda.time_steps(model, v0, n_steps, dt_cr, batch=args.gpu_batch),
+                    rows.append(("gpu", "cuda", fem_cuda.time_steps(model, v0, n_steps, dt_cr, batch=args.gpu_batch),
                                  float("nan")))
-                for device, wall, cpu in rows:
+                for device, kernel, wall, cpu in rows:
                     sps = n_steps / wall
                     table.append({"mesh": mesh_name, "n_elements": ne, "law": law, "precision": precision,
-                                  "device": device, "anp": anp, "steps": n_steps, "wall_s": wall, "cpu_s": cpu,
+                                  "device": device, "kernel": kernel, "anp": anp, "steps": n_steps, "wall_s": wall, "cpu_s": cpu,
                                   "element_updates_per_s": ne * sps, "element_updates_per_cpu_s": ne * n_steps / cpu,
                                   "steps_per_s": sps, "critical_dt_s": dt_cr, "real_time_factor": sps * dt_cr,
                                   "threads": args.threads or 0, **{k: str(v) for k, v in info.items()}})
-                    print(f"{mesh_name:>6} {ne:>7d} {law:>8} {precision:>8} {device:>6} {n_steps:>7d} {wall:>8.3f} "
+                    print(f"{mesh_name:>6} {ne:>7d} {law:>8} {precision:>8} {device:>6} {kernel:>10} {n_steps:>7d} {wall:>8.3f} "
                           f"{ne * sps / 1e6:>8.2f} {ne * n_steps / cpu / 1e6:>10.2f} {sps:>9.0f} {dt_cr:>9.2e} "
                           f"{sps * dt_cr:>9.3f}", flush=True)
     if args.felupe:

@@ -94,8 +94,9 @@ def test_large_volume_changes_outside_the_newton_range_take_the_cbrt_path(name):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-10 * max(1.0, np.abs(b).max(initial=0.0)))
 
 
-def test_inverted_element_is_reported_by_id():
-    model = _sheared_block(_material("neo_hookean"))
+@pytest.mark.parametrize("anp", [True, False])
+def test_inverted_element_is_reported_by_id(anp):
+    model = _sheared_block(_material("neo_hookean"), anp=anp)
     x = model.mesh.nodes
     centre = int(np.argmin(np.linalg.norm(x - 0.5 * L, axis=1)))
     u0 = np.zeros_like(x)

@@ -351,12 +351,13 @@ def _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_nod
     into ``fint``; without it the forces stay in ``fbuf`` for a fused node pass).
 
     ``vec = (enabled, workspace, svk, dW/dI1, dW/dI2)``: when enabled the vectorised passes
-    (:func:`.vectorised.internal_forces`, QLV states in the workspace) compute ``fint`` instead and
-    ``fbuf`` is not used. Returns the id of an inverted element or -1.
+    (:func:`.vectorised.internal_forces`, QLV states in the workspace) compute the forces instead and
+    ``fbuf`` is not used; without ``reduce`` they stay as element forces in the workspace for
+    :func:`_cd_node_pass`. Returns the id of an inverted element or -1.
     """
     if vec[0]:
         return vectorised.internal_forces(u, vec[1], vec[2], vec[3], vec[4], params[0], kappa, use_anp, prony_g,
-                                          prony_e, prony_f, commit, fint)
+                                          prony_e, prony_f, commit, fint, reduce)
     bad[:] = -1
     if use_anp:
         _anp_element_pass(u, elements, dndx, vol0, chunk_lo, pbuf, kappa, bad)
@@ -480,11 +481,27 @@ def _contact_force(fint, contact_nodes, in_contact, out):
 
 
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _cd_node_pass(fbuf, fint, fext_ref, s_ext, u, u_old, u_new, coef_a, coef_b, coef_c, free):
-    """Reduce the chunk force buffers into ``fint`` (clearing them; with no buffers ``fint`` is already
-    complete) and advance the free dofs."""
+def _cd_node_pass(fbuf, fint, fext_ref, s_ext, u, u_old, u_new, coef_a, coef_b, coef_c, free, vec):
+    """Collect the internal forces into ``fint`` (reduce the chunk force buffers and clear them, or with
+    the vectorised kernel gather the element forces of the workspace) and advance the free dofs."""
     nchunk = fbuf.shape[0]
+    gather = vec[0]
+    ws = vec[1]
+    node_ptr, inc_slot, fe_flat = ws[3], ws[5], ws[12].reshape(-1)
+    ne = np.uint64(ws[12].shape[1])
     for n in prange(u.shape[0]):
+        if gather:
+            fx = 0.0
+            fy = 0.0
+            fz = 0.0
+            for k in range(node_ptr[n], node_ptr[n + 1]):
+                s = np.uint64(inc_slot[k])
+                fx += fe_flat[s]
+                fy += fe_flat[s + ne]
+                fz += fe_flat[s + ne + ne]
+            fint[n, 0] = fx
+            fint[n, 1] = fy
+            fint[n, 2] = fz
         a, b, cc = coef_a[n], coef_b[n], coef_c[n]
         for i in range(3):
             if nchunk > 0:
@@ -582,7 +599,7 @@ def _run_explicit(X, elements, dndx, vol0, chunk_lo, vnode, mass, kind, w1fn, w2
         s_ext = hv[2 * n_groups + 1]
         _history_values(t + dt, hist_time, hist_vals, hv)
         # reduces fbuf into fint and computes u_new on the free dofs
-        _cd_node_pass(fbuf, fint, fext_ref, s_ext, u, u_old, u_new, coef_a, coef_b, coef_c, free)
+        _cd_node_pass(fbuf, fint, fext_ref, s_ext, u, u_old, u_new, coef_a, coef_b, coef_c, free, vec)
         if step % out_every == 0 or step == n_steps:
             _reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_g, torque_g)
             _contact_force(fint, contact_nodes, in_contact, cforce)
@@ -1041,8 +1058,9 @@ KERNELS = ("auto", "vectorised", "generic")
 
 def vectorised_law(material: Material) -> tuple[bool, float, float] | None:
     """``(svk, dW/dI1, dW/dI2)`` when the vectorised kernels (:mod:`.vectorised`) can run this material
-    (Saint Venant-Kirchhoff, or a law linear in the invariants, with or without QLV Prony terms); else None."""
-    if material.branch_params.shape[0] > 0:
+    (Saint Venant-Kirchhoff, or a law linear in the invariants, with or without up to four QLV Prony
+    terms); else None."""
+    if material.branch_params.shape[0] > 0 or material.prony_g.size > vectorised.MAX_PRONY_TERMS:
         return None
     if material.kind == KIND_SVK:
         return True, 0.0, 0.0
@@ -1063,11 +1081,13 @@ def _vector_setup(model: TLEDModel, kernel: str, h_state, s_prev):
     law = vectorised_law(model.material) if kernel != "generic" else None
     if kernel == "vectorised" and law is None:
         raise ValueError(f"the vectorised kernel needs Saint Venant-Kirchhoff or a law linear in the invariants "
-                         f"without branch energies; {model.material.law_key!r} runs on the generic kernel")
+                         f"with at most {vectorised.MAX_PRONY_TERMS} Prony terms and no branch energies; "
+                         f"{model.material.law_key!r} ({model.material.prony_g.size} terms) runs on the generic "
+                         f"kernel")
     enabled = law is not None
     el = model.mesh.elements
     ne, nn = (el.shape[0], model.mesh.n_nodes) if enabled else (0, 0)
-    nt = model.material.prony_g.size if enabled else 0
+    nt = vectorised.MAX_PRONY_TERMS if enabled and model.material.prony_g.size else 0
     dt = model.dtype
     nchunk = model.chunk_lo.size - 1
     if enabled:
@@ -1085,7 +1105,8 @@ def _vector_setup(model: TLEDModel, kernel: str, h_state, s_prev):
         elo = model.chunk_lo.astype(np.uint64)
         nlo = np.linspace(0, nn, nchunk + 1).round().astype(np.uint64)
         sprev = np.ascontiguousarray(s_prev.T)
-        hstate = np.ascontiguousarray(h_state.transpose(1, 2, 0))
+        hstate = np.zeros((nt, 6, ne), dt)
+        hstate[:h_state.shape[1]] = h_state.transpose(1, 2, 0)
     else:
         node_ptr, inc_elem, inc_slot = np.zeros(1, np.uint32), np.zeros(0, np.uint32), np.zeros(0, np.uint32)
         conn, d9, inv_vnode = np.zeros((4, 0), np.uint32), np.zeros((9, 0), dt), np.zeros(0)
@@ -1093,8 +1114,8 @@ def _vector_setup(model: TLEDModel, kernel: str, h_state, s_prev):
         sprev, hstate = np.zeros((6, 0), dt), np.zeros((0, 6, 0), dt)
     ws = (conn, d9, model.vol0 if enabled else np.zeros(0, dt), node_ptr, inc_elem, inc_slot, inv_vnode, elo, nlo,
           np.zeros((9, ne), dt), np.zeros(ne, dt), np.zeros(nn), np.zeros((12, ne), dt),
-          np.zeros(nchunk, np.int64), np.zeros(nchunk, np.int64), sprev, np.zeros((6, ne), dt),
-          np.zeros((6, ne), dt), hstate)
+          np.zeros(nchunk, np.int64), np.zeros(nchunk, np.int64), sprev, hstate, np.zeros(ne),
+          np.zeros((6, ne if nt else 0), dt))
     svk, w1, w2 = law if enabled else (False, 0.0, 0.0)
     vec = (enabled, ws, svk, float(w1), float(w2))
     nbuf = 0 if enabled else nchunk
@@ -1108,7 +1129,7 @@ def _vector_state_back(vec, h_state, s_prev):
     if vec[0] and h_state.shape[1] > 0:
         ws = vec[1]
         s_prev[:] = ws[15].T
-        h_state[:] = ws[18].transpose(2, 0, 1)
+        h_state[:] = ws[16][:h_state.shape[1]].transpose(2, 0, 1)
 
 
 @contextmanager

@@ -10,10 +10,14 @@ isochoric Kirchhoff stress, the recursive Prony update of the isochoric 2nd Piol
    pressure contribution ``kappa (J - 1) V0``; a count of inverted elements and of elements outside the
    range of the branch-free ``J^(-2/3)``;
 2. :func:`nodal_pressure_pass` (nodes): volume-weighted average of the element pressures (ANP);
-3. :func:`invariant_force_pass` / :func:`svk_force_pass` (elements): stress and the 12 element nodal forces,
-   or for QLV :func:`qlv_elastic_pass`, one :func:`prony_term_pass` per term and :func:`qlv_force_pass`;
+3. :func:`invariant_force_pass` (elements): stress and the 12 element nodal forces, or for QLV (up to four
+   Prony terms) :func:`qlv_stress_pass` (relaxed stress, advances the element states) and
+   :func:`pk2_force_pass`;
 4. :func:`gather_nodal_forces` (nodes): every node sums its incident element forces through a CSR incidence
    list (no scatter, no atomics, no per-thread force buffers).
+
+Without average nodal pressure and without viscoelastic states (and always for Saint Venant-Kirchhoff) a
+single fused :func:`element_force_pass` replaces steps 1-3.
 
 Why this shape (measured in ``docs/fem_timing.md``; the loop that is not vectorised runs at a third of the
 speed):
@@ -25,8 +29,9 @@ speed):
   rows passed as separate arguments of a parallel function are marked ``noalias`` by numba's parfor lowering;
 * no calls and no branches in the element loops: the law enters as the constants ``dW/dI1``, ``dW/dI2``
   (evaluated once from the fitting code's law functions), ``J^(-2/3)`` by four Newton steps (exact to
-  rounding for ``0.3 < J < 3.5``; elements outside are computed again with ``cbrt``), stores under a flag
-  written as selects, and the Prony terms run as separate passes instead of an inner loop.
+  rounding for ``0.3 < J < 3.5``; a serial pass corrects elements outside, or in the fused pass they are
+  computed again with ``cbrt``), stores under a flag written as selects, and the Prony terms unrolled (a fixed four, unused ones with zero weight) instead of
+  an inner loop.
 
 The arithmetic is double precision; the stored arrays follow the model's precision (float32 halves the
 traffic).
@@ -154,10 +159,11 @@ def _nodal_forces(t11, t22, t33, t12, t23, t13, c11, c12, c13, c21, c22, c23, c3
 # passes
 # --------------------------------------------------------------------------------------------------
 @njit(**_PASS)
-def kinematics_pass(u, conn, d9, vol0, kappa, pe, f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a,
+def kinematics_pass(u, conn, d9, vol0, kappa, pe, jm23a, f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a,
                     n_bad, n_far, lo):
-    """Displacement gradients ``F - I`` (stored), element pressure contributions ``pe = kappa (J-1) V0`` and, per chunk,
-    the number of elements with ``J <= 0`` (or NaN) and outside ``(JM23_NEWTON_MIN, JM23_NEWTON_MAX)``.
+    """Displacement gradients ``F - I`` (stored), element pressure contributions ``pe = kappa (J-1) V0``,
+    the branch-free ``J^(-2/3)`` (``jm23a``; :func:`exact_far_jm23` corrects the elements outside its range)
+    and, per chunk, the number of elements with ``J <= 0`` (or NaN) and outside that range.
 
     ``u`` (n_nodes, 3) displacements (m); ``conn`` (4, n_elements) uint32; ``d9`` (9, n_elements) ``dN_a/dX``
     of local nodes 1-3 (``dN_0 = -sum``, 1/m); ``lo`` uint64 chunk bounds.
@@ -185,6 +191,7 @@ def kinematics_pass(u, conn, d9, vol0, kappa, pe, f11a, f12a, f13a, f21a, f22a, 
             f33 = 1.0 + az * d1z + bz * d2z + cz * d3z
             J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
             pe[e] = kappa * (J - 1.0) * vol0[e]
+            jm23a[e] = jm23_newton(J)
             # the displacement gradient F - I is stored: in float32 storage F itself would lose the strain
             f11a[e] = f11 - 1.0
             f12a[e] = f12
@@ -199,6 +206,19 @@ def kinematics_pass(u, conn, d9, vol0, kappa, pe, f11a, f12a, f13a, f21a, f22a, 
             far += 0 if (J > JM23_NEWTON_MIN) & (J < JM23_NEWTON_MAX) else 1
         n_bad[c] = bad
         n_far[c] = far
+
+
+@njit(cache=True)
+def exact_far_jm23(grad_u, jm23a, n_elements):
+    """``J^(-2/3)`` with ``cbrt`` for the elements outside the range of the branch-free form (a serial pass,
+    run only in a step that has such elements)."""
+    for e in range(np.uint64(n_elements)):
+        f11, f12, f13 = 1.0 + grad_u[0, e], grad_u[1, e], grad_u[2, e]
+        f21, f22, f23 = grad_u[3, e], 1.0 + grad_u[4, e], grad_u[5, e]
+        f31, f32, f33 = grad_u[6, e], grad_u[7, e], 1.0 + grad_u[8, e]
+        J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
+        if not (J > JM23_NEWTON_MIN and J < JM23_NEWTON_MAX):
+            jm23a[e] = j_minus_two_thirds(J)
 
 
 @njit(**_PASS)
@@ -237,15 +257,11 @@ def _store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
 
 
 @njit(**_PASS)
-def invariant_force_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, conn, d9, vol0, p_node, w1, w2,
-                         kappa, anp_weight, newton, fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11, lo):
+def invariant_force_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a, conn, d9, vol0, p_node, w1, w2,
+                         kappa, anp_weight, fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11, lo):
     """Element nodal forces ``fe[3 a + i]`` (N) of a law with constant ``W1 = dW/dI1``, ``W2 = dW/dI2`` plus the
     volumetric pressure ``anp_weight p_ANP + (1 - anp_weight) kappa (J - 1)`` (weight 1: average nodal
-    pressure; 0: the element's own).
-
-    The loop uses the branch-free ``J^(-2/3)``; unless ``newton`` (every element within its range) the
-    elements outside are computed again with ``cbrt``.
-    """
+    pressure; 0: the element's own); ``J^(-2/3)`` from :func:`kinematics_pass`."""
     for c in prange(lo.size - 1):
         for e in range(lo[c], lo[c + 1]):
             f11, f12, f13 = 1.0 + f11a[e], f12a[e], f13a[e]
@@ -253,48 +269,11 @@ def invariant_force_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, c
             f31, f32, f33 = f31a[e], f32a[e], 1.0 + f33a[e]
             c11, c12, c13, c21, c22, c23, c31, c32, c33, J = _cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
             b11, b22, b33, b12, b23, b13 = _left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-            t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff_constant(w1, w2, jm23_newton(J), b11, b22, b33, b12,
-                                                                         b23, b13)
+            t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff_constant(w1, w2, jm23a[e], b11, b22, b33, b12, b23,
+                                                                         b13)
             jp = J * _element_pressure(anp_weight, kappa, J, p_node, conn[0, e], conn[1, e], conn[2, e], conn[3, e])
             r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = _nodal_forces(
                 t11 + jp, t22 + jp, t33 + jp, t12, t23, t13, c11, c12, c13, c21, c22, c23, c31, c32, c33,
-                vol0[e] / J, d9[0, e], d9[1, e], d9[2, e], d9[3, e], d9[4, e], d9[5, e], d9[6, e], d9[7, e], d9[8, e])
-            _store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
-                                fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11)
-        if newton:
-            continue
-        for e in range(lo[c], lo[c + 1]):
-            f11, f12, f13 = 1.0 + f11a[e], f12a[e], f13a[e]
-            f21, f22, f23 = f21a[e], 1.0 + f22a[e], f23a[e]
-            f31, f32, f33 = f31a[e], f32a[e], 1.0 + f33a[e]
-            c11, c12, c13, c21, c22, c23, c31, c32, c33, J = _cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-            if J > JM23_NEWTON_MIN and J < JM23_NEWTON_MAX:
-                continue
-            b11, b22, b33, b12, b23, b13 = _left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-            t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff_constant(w1, w2, j_minus_two_thirds(J), b11, b22,
-                                                                         b33, b12, b23, b13)
-            jp = J * _element_pressure(anp_weight, kappa, J, p_node, conn[0, e], conn[1, e], conn[2, e], conn[3, e])
-            r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = _nodal_forces(
-                t11 + jp, t22 + jp, t33 + jp, t12, t23, t13, c11, c12, c13, c21, c22, c23, c31, c32, c33,
-                vol0[e] / J, d9[0, e], d9[1, e], d9[2, e], d9[3, e], d9[4, e], d9[5, e], d9[6, e], d9[7, e], d9[8, e])
-            _store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
-                                fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11)
-
-
-@njit(**_PASS)
-def svk_force_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, d9, vol0, mu, lam,
-                   fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11, lo):
-    """Element nodal forces (N) of Saint Venant-Kirchhoff (``lam = kappa - 2 mu / 3``; no pressure split)."""
-    for c in prange(lo.size - 1):
-        for e in range(lo[c], lo[c + 1]):
-            f11, f12, f13 = 1.0 + f11a[e], f12a[e], f13a[e]
-            f21, f22, f23 = f21a[e], 1.0 + f22a[e], f23a[e]
-            f31, f32, f33 = f31a[e], f32a[e], 1.0 + f33a[e]
-            c11, c12, c13, c21, c22, c23, c31, c32, c33, J = _cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-            b11, b22, b33, b12, b23, b13 = _left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-            t11, t22, t33, t12, t23, t13 = _svk_kirchhoff(mu, lam, b11, b22, b33, b12, b23, b13)
-            r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = _nodal_forces(
-                t11, t22, t33, t12, t23, t13, c11, c12, c13, c21, c22, c23, c31, c32, c33,
                 vol0[e] / J, d9[0, e], d9[1, e], d9[2, e], d9[3, e], d9[4, e], d9[5, e], d9[6, e], d9[7, e], d9[8, e])
             _store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
                                 fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11)
@@ -323,136 +302,180 @@ def _isochoric_pk2(w1, w2, jm23, f11, f12, f13, f21, f22, f23, f31, f32, f33, c1
             m11 * a21 + m12 * a22 + m13 * a23, m21 * a31 + m22 * a32 + m23 * a33, m11 * a31 + m12 * a32 + m13 * a33)
 
 
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _prony_update(decay, gain, h0, h1, h2, h3, h4, h5, d0, d1, d2, d3, d4, d5):
+    """One term of the recursive QLV update (``models.recursion``): ``h+ = decay h + gain dS_e`` with
+    ``decay = exp(-dt/tau)`` and ``gain = g (1 - decay)/(dt/tau)``."""
+    return (decay * h0 + gain * d0, decay * h1 + gain * d1, decay * h2 + gain * d2,
+            decay * h3 + gain * d3, decay * h4 + gain * d4, decay * h5 + gain * d5)
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _push_forward(f11, f12, f13, f21, f22, f23, f31, f32, f33, s0, s1, s2, s3, s4, s5):
+    """Kirchhoff ``tau = F S F^T`` of a symmetric 2nd Piola-Kirchhoff ``S`` (11 22 33 12 23 13)."""
+    q11 = f11 * s0 + f12 * s3 + f13 * s5
+    q12 = f11 * s3 + f12 * s1 + f13 * s4
+    q13 = f11 * s5 + f12 * s4 + f13 * s2
+    q21 = f21 * s0 + f22 * s3 + f23 * s5
+    q22 = f21 * s3 + f22 * s1 + f23 * s4
+    q23 = f21 * s5 + f22 * s4 + f23 * s2
+    q31 = f31 * s0 + f32 * s3 + f33 * s5
+    q32 = f31 * s3 + f32 * s1 + f33 * s4
+    q33 = f31 * s5 + f32 * s4 + f33 * s2
+    return (q11 * f11 + q12 * f12 + q13 * f13, q21 * f21 + q22 * f22 + q23 * f23, q31 * f31 + q32 * f32 + q33 * f33,
+            q11 * f21 + q12 * f22 + q13 * f23, q21 * f31 + q22 * f32 + q23 * f33, q11 * f31 + q12 * f32 + q13 * f33)
+
+
+#: Prony terms of :func:`qlv_stress_pass` (materials with more run on the generic kernel)
+MAX_PRONY_TERMS = 4
+
+
 @njit(**_PASS)
-def qlv_elastic_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, w1, w2, g_inf, newton, commit,
-                     sp0, sp1, sp2, sp3, sp4, sp5, dd0, dd1, dd2, dd3, dd4, dd5, sa0, sa1, sa2, sa3, sa4, sa5, lo):
-    """QLV, first stage: instantaneous isochoric 2nd Piola-Kirchhoff stress ``S_e = F^-1 tau_iso F^-T``;
-    writes its increment ``dd = S_e - S_e(previous step)`` and ``sa = g_inf S_e`` (components 11 22 33 12
-    23 13); ``sp`` (the previous ``S_e``) is overwritten when ``commit``. Elements outside the range of the
-    branch-free ``J^(-2/3)`` (only when not ``newton``) are computed again with ``cbrt``."""
+def qlv_stress_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a, w1, w2, g_inf, commit,
+                    sp0, sp1, sp2, sp3, sp4, sp5, decay, gain, ha0, ha1, ha2, ha3, ha4, ha5, hb0, hb1, hb2, hb3, hb4, hb5,
+                    hc0, hc1, hc2, hc3, hc4, hc5, hd0, hd1, hd2, hd3, hd4, hd5, s0a, s1a, s2a, s3a, s4a, s5a, lo):
+    """QLV with up to four Prony terms (the generic kernel's formulas): the instantaneous isochoric 2nd
+    Piola-Kirchhoff stress ``S_e = F^-1 tau_iso F^-T`` of a constant-derivative law and the relaxed
+    ``S = g_inf S_e + sum_i h_i`` (into ``s0a``...``s5a``) with the recursive update of every term (states
+    ``h_i`` = rows ``ha``...``hd``, previous ``S_e`` = ``sp``; unused terms have ``decay = gain = 0``). The
+    states are written only when ``commit``. (Stress and forces in one pass would hold ~70 values per
+    element and spill the vector registers: two passes are faster.)
+    """
+    da, db, dc, dd = decay[0], decay[1], decay[2], decay[3]
+    ga, gb, gc, gd = gain[0], gain[1], gain[2], gain[3]
     for c in prange(lo.size - 1):
         for e in range(lo[c], lo[c + 1]):
             f11, f12, f13 = 1.0 + f11a[e], f12a[e], f13a[e]
             f21, f22, f23 = f21a[e], 1.0 + f22a[e], f23a[e]
             f31, f32, f33 = f31a[e], f32a[e], 1.0 + f33a[e]
             c11, c12, c13, c21, c22, c23, c31, c32, c33, J = _cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-            se0, se1, se2, se3, se4, se5 = _isochoric_pk2(w1, w2, jm23_newton(J), f11, f12, f13, f21, f22, f23,
-                                                          f31, f32, f33, c11, c12, c13, c21, c22, c23, c31, c32,
-                                                          c33, J)
-            dd0[e] = se0 - sp0[e]
-            dd1[e] = se1 - sp1[e]
-            dd2[e] = se2 - sp2[e]
-            dd3[e] = se3 - sp3[e]
-            dd4[e] = se4 - sp4[e]
-            dd5[e] = se5 - sp5[e]
-            sa0[e] = g_inf * se0
-            sa1[e] = g_inf * se1
-            sa2[e] = g_inf * se2
-            sa3[e] = g_inf * se3
-            sa4[e] = g_inf * se4
-            sa5[e] = g_inf * se5
-            # the previous S_e of an element left for the cbrt loop below must survive this loop
-            # (bitwise operators: short-circuit ones would put branches into the loop)
-            keep = (not commit) | (not (newton | ((J > JM23_NEWTON_MIN) & (J < JM23_NEWTON_MAX))))
-            sp0[e] = sp0[e] if keep else se0
-            sp1[e] = sp1[e] if keep else se1
-            sp2[e] = sp2[e] if keep else se2
-            sp3[e] = sp3[e] if keep else se3
-            sp4[e] = sp4[e] if keep else se4
-            sp5[e] = sp5[e] if keep else se5
-        if newton:
-            continue
-        for e in range(lo[c], lo[c + 1]):
-            f11, f12, f13 = 1.0 + f11a[e], f12a[e], f13a[e]
-            f21, f22, f23 = f21a[e], 1.0 + f22a[e], f23a[e]
-            f31, f32, f33 = f31a[e], f32a[e], 1.0 + f33a[e]
-            c11, c12, c13, c21, c22, c23, c31, c32, c33, J = _cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-            if J > JM23_NEWTON_MIN and J < JM23_NEWTON_MAX:
-                continue
-            se0, se1, se2, se3, se4, se5 = _isochoric_pk2(w1, w2, j_minus_two_thirds(J), f11, f12, f13, f21, f22,
-                                                          f23, f31, f32, f33, c11, c12, c13, c21, c22, c23, c31,
-                                                          c32, c33, J)
-            dd0[e] = se0 - sp0[e]
-            dd1[e] = se1 - sp1[e]
-            dd2[e] = se2 - sp2[e]
-            dd3[e] = se3 - sp3[e]
-            dd4[e] = se4 - sp4[e]
-            dd5[e] = se5 - sp5[e]
-            sa0[e] = g_inf * se0
-            sa1[e] = g_inf * se1
-            sa2[e] = g_inf * se2
-            sa3[e] = g_inf * se3
-            sa4[e] = g_inf * se4
-            sa5[e] = g_inf * se5
-            if commit:
-                sp0[e] = se0
-                sp1[e] = se1
-                sp2[e] = se2
-                sp3[e] = se3
-                sp4[e] = se4
-                sp5[e] = se5
+            se0, se1, se2, se3, se4, se5 = _isochoric_pk2(w1, w2, jm23a[e], f11, f12, f13, f21, f22, f23, f31, f32,
+                                                          f33, c11, c12, c13, c21, c22, c23, c31, c32, c33, J)
+            d0, d1, d2, d3, d4, d5 = se0 - sp0[e], se1 - sp1[e], se2 - sp2[e], se3 - sp3[e], se4 - sp4[e], se5 - sp5[e]
+            # selects, not branches, so that the loop stays vectorisable
+            sp0[e], sp1[e], sp2[e] = (se0 if commit else sp0[e]), (se1 if commit else sp1[e]), (se2 if commit else sp2[e])
+            sp3[e], sp4[e], sp5[e] = (se3 if commit else sp3[e]), (se4 if commit else sp4[e]), (se5 if commit else sp5[e])
+            s0, s1, s2, s3, s4, s5 = g_inf * se0, g_inf * se1, g_inf * se2, g_inf * se3, g_inf * se4, g_inf * se5
+            x0, x1, x2, x3, x4, x5 = _prony_update(da, ga, ha0[e], ha1[e], ha2[e], ha3[e], ha4[e], ha5[e],
+                                                   d0, d1, d2, d3, d4, d5)
+            ha0[e], ha1[e], ha2[e] = (x0 if commit else ha0[e]), (x1 if commit else ha1[e]), (x2 if commit else ha2[e])
+            ha3[e], ha4[e], ha5[e] = (x3 if commit else ha3[e]), (x4 if commit else ha4[e]), (x5 if commit else ha5[e])
+            s0, s1, s2, s3, s4, s5 = s0 + x0, s1 + x1, s2 + x2, s3 + x3, s4 + x4, s5 + x5
+            x0, x1, x2, x3, x4, x5 = _prony_update(db, gb, hb0[e], hb1[e], hb2[e], hb3[e], hb4[e], hb5[e],
+                                                   d0, d1, d2, d3, d4, d5)
+            hb0[e], hb1[e], hb2[e] = (x0 if commit else hb0[e]), (x1 if commit else hb1[e]), (x2 if commit else hb2[e])
+            hb3[e], hb4[e], hb5[e] = (x3 if commit else hb3[e]), (x4 if commit else hb4[e]), (x5 if commit else hb5[e])
+            s0, s1, s2, s3, s4, s5 = s0 + x0, s1 + x1, s2 + x2, s3 + x3, s4 + x4, s5 + x5
+            x0, x1, x2, x3, x4, x5 = _prony_update(dc, gc, hc0[e], hc1[e], hc2[e], hc3[e], hc4[e], hc5[e],
+                                                   d0, d1, d2, d3, d4, d5)
+            hc0[e], hc1[e], hc2[e] = (x0 if commit else hc0[e]), (x1 if commit else hc1[e]), (x2 if commit else hc2[e])
+            hc3[e], hc4[e], hc5[e] = (x3 if commit else hc3[e]), (x4 if commit else hc4[e]), (x5 if commit else hc5[e])
+            s0, s1, s2, s3, s4, s5 = s0 + x0, s1 + x1, s2 + x2, s3 + x3, s4 + x4, s5 + x5
+            x0, x1, x2, x3, x4, x5 = _prony_update(dd, gd, hd0[e], hd1[e], hd2[e], hd3[e], hd4[e], hd5[e],
+                                                   d0, d1, d2, d3, d4, d5)
+            hd0[e], hd1[e], hd2[e] = (x0 if commit else hd0[e]), (x1 if commit else hd1[e]), (x2 if commit else hd2[e])
+            hd3[e], hd4[e], hd5[e] = (x3 if commit else hd3[e]), (x4 if commit else hd4[e]), (x5 if commit else hd5[e])
+            s0a[e], s1a[e], s2a[e] = s0 + x0, s1 + x1, s2 + x2
+            s3a[e], s4a[e], s5a[e] = s3 + x3, s4 + x4, s5 + x5
 
 
 @njit(**_PASS)
-def prony_term_pass(decay, gain, commit, h0, h1, h2, h3, h4, h5, dd0, dd1, dd2, dd3, dd4, dd5,
-                    sa0, sa1, sa2, sa3, sa4, sa5, lo):
-    """One Prony term of the recursive QLV update (``models.recursion``): ``h+ = decay h + gain dd`` with
-    ``decay = exp(-dt/tau)``, ``gain = g (1 - decay)/(dt/tau)``; adds ``h+`` to ``sa``; stores ``h+`` when
-    ``commit``."""
-    for c in prange(lo.size - 1):
-        for e in range(lo[c], lo[c + 1]):
-            x0 = decay * h0[e] + gain * dd0[e]
-            x1 = decay * h1[e] + gain * dd1[e]
-            x2 = decay * h2[e] + gain * dd2[e]
-            x3 = decay * h3[e] + gain * dd3[e]
-            x4 = decay * h4[e] + gain * dd4[e]
-            x5 = decay * h5[e] + gain * dd5[e]
-            sa0[e] += x0
-            sa1[e] += x1
-            sa2[e] += x2
-            sa3[e] += x3
-            sa4[e] += x4
-            sa5[e] += x5
-            h0[e] = x0 if commit else h0[e]
-            h1[e] = x1 if commit else h1[e]
-            h2[e] = x2 if commit else h2[e]
-            h3[e] = x3 if commit else h3[e]
-            h4[e] = x4 if commit else h4[e]
-            h5[e] = x5 if commit else h5[e]
-
-
-@njit(**_PASS)
-def qlv_force_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, conn, d9, vol0, p_node, kappa, anp_weight,
-                   sa0, sa1, sa2, sa3, sa4, sa5, fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11, lo):
-    """QLV, last stage: ``tau = F S F^T + J p I`` from the relaxed isochoric ``S`` (``sa``) and the nodal forces."""
+def pk2_force_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, s0a, s1a, s2a, s3a, s4a, s5a, conn, d9, vol0,
+                   p_node, kappa, anp_weight, fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11, lo):
+    """Element nodal forces (N) from an isochoric 2nd Piola-Kirchhoff stress ``S`` (``s0a``...; e.g. of
+    :func:`qlv_stress_pass`): ``tau = F S F^T + J p I`` with the pressure as in :func:`invariant_force_pass`."""
     for c in prange(lo.size - 1):
         for e in range(lo[c], lo[c + 1]):
             f11, f12, f13 = 1.0 + f11a[e], f12a[e], f13a[e]
             f21, f22, f23 = f21a[e], 1.0 + f22a[e], f23a[e]
             f31, f32, f33 = f31a[e], f32a[e], 1.0 + f33a[e]
             c11, c12, c13, c21, c22, c23, c31, c32, c33, J = _cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-            s0, s1, s2, s3, s4, s5 = sa0[e], sa1[e], sa2[e], sa3[e], sa4[e], sa5[e]
-            q11 = f11 * s0 + f12 * s3 + f13 * s5
-            q12 = f11 * s3 + f12 * s1 + f13 * s4
-            q13 = f11 * s5 + f12 * s4 + f13 * s2
-            q21 = f21 * s0 + f22 * s3 + f23 * s5
-            q22 = f21 * s3 + f22 * s1 + f23 * s4
-            q23 = f21 * s5 + f22 * s4 + f23 * s2
-            q31 = f31 * s0 + f32 * s3 + f33 * s5
-            q32 = f31 * s3 + f32 * s1 + f33 * s4
-            q33 = f31 * s5 + f32 * s4 + f33 * s2
+            t11, t22, t33, t12, t23, t13 = _push_forward(f11, f12, f13, f21, f22, f23, f31, f32, f33,
+                                                         s0a[e], s1a[e], s2a[e], s3a[e], s4a[e], s5a[e])
             jp = J * _element_pressure(anp_weight, kappa, J, p_node, conn[0, e], conn[1, e], conn[2, e], conn[3, e])
-            t11 = q11 * f11 + q12 * f12 + q13 * f13 + jp
-            t22 = q21 * f21 + q22 * f22 + q23 * f23 + jp
-            t33 = q31 * f31 + q32 * f32 + q33 * f33 + jp
-            t12 = q11 * f21 + q12 * f22 + q13 * f23
-            t23 = q21 * f31 + q22 * f32 + q23 * f33
-            t13 = q11 * f31 + q12 * f32 + q13 * f33
+            r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = _nodal_forces(
+                t11 + jp, t22 + jp, t33 + jp, t12, t23, t13, c11, c12, c13, c21, c22, c23, c31, c32, c33,
+                vol0[e] / J, d9[0, e], d9[1, e], d9[2, e], d9[3, e], d9[4, e], d9[5, e], d9[6, e], d9[7, e], d9[8, e])
+            _store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
+                                fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11)
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _gathered_deformation_gradient(u, conn, d9, e):
+    """``F`` of element ``e`` from the displacements of its nodes (gathered through ``conn``)."""
+    n0, n1, n2, n3 = conn[0, e], conn[1, e], conn[2, e], conn[3, e]
+    x0, y0, z0 = u[n0, 0], u[n0, 1], u[n0, 2]
+    ax, ay, az = u[n1, 0] - x0, u[n1, 1] - y0, u[n1, 2] - z0
+    bx, by, bz = u[n2, 0] - x0, u[n2, 1] - y0, u[n2, 2] - z0
+    cx, cy, cz = u[n3, 0] - x0, u[n3, 1] - y0, u[n3, 2] - z0
+    d1x, d1y, d1z = d9[0, e], d9[1, e], d9[2, e]
+    d2x, d2y, d2z = d9[3, e], d9[4, e], d9[5, e]
+    d3x, d3y, d3z = d9[6, e], d9[7, e], d9[8, e]
+    return (1.0 + ax * d1x + bx * d2x + cx * d3x, ax * d1y + bx * d2y + cx * d3y, ax * d1z + bx * d2z + cx * d3z,
+            ay * d1x + by * d2x + cy * d3x, 1.0 + ay * d1y + by * d2y + cy * d3y, ay * d1z + by * d2z + cy * d3z,
+            az * d1x + bz * d2x + cz * d3x, az * d1y + bz * d2y + cz * d3y, 1.0 + az * d1z + bz * d2z + cz * d3z)
+
+
+@njit(**_PASS)
+def element_force_pass(u, conn, d9, vol0, svk, w1, w2, mu, kappa, n_bad,
+                       fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11, lo):
+    """One fused element pass without average nodal pressure and without viscoelastic states: ``F`` from the
+    gathered displacements, stress (Saint Venant-Kirchhoff when ``svk``, else the constant-derivative law
+    with the element pressure ``kappa (J - 1)``) and the 12 element nodal forces; ``n_bad`` counts the
+    elements with ``J <= 0`` per chunk. Elements outside the branch-free ``J^(-2/3)`` range are computed
+    again with ``cbrt`` after the vectorised loop."""
+    lam = kappa - 2.0 * mu / 3.0
+    for c in prange(lo.size - 1):
+        bad = 0
+        far = 0
+        for e in range(lo[c], lo[c + 1]):
+            f11, f12, f13, f21, f22, f23, f31, f32, f33 = _gathered_deformation_gradient(u, conn, d9, e)
+            c11, c12, c13, c21, c22, c23, c31, c32, c33, J = _cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
+            b11, b22, b33, b12, b23, b13 = _left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
+            if svk:
+                t11, t22, t33, t12, t23, t13 = _svk_kirchhoff(mu, lam, b11, b22, b33, b12, b23, b13)
+            else:
+                t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff_constant(w1, w2, jm23_newton(J), b11, b22, b33,
+                                                                             b12, b23, b13)
+                jp = J * kappa * (J - 1.0)
+                t11 += jp
+                t22 += jp
+                t33 += jp
             r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = _nodal_forces(
                 t11, t22, t33, t12, t23, t13, c11, c12, c13, c21, c22, c23, c31, c32, c33,
                 vol0[e] / J, d9[0, e], d9[1, e], d9[2, e], d9[3, e], d9[4, e], d9[5, e], d9[6, e], d9[7, e], d9[8, e])
             _store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
                                 fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11)
+            bad += 0 if J > 0.0 else 1
+            far += 0 if (J > JM23_NEWTON_MIN) & (J < JM23_NEWTON_MAX) else 1
+        n_bad[c] = bad
+        if svk or far == 0:
+            continue
+        for e in range(lo[c], lo[c + 1]):
+            f11, f12, f13, f21, f22, f23, f31, f32, f33 = _gathered_deformation_gradient(u, conn, d9, e)
+            c11, c12, c13, c21, c22, c23, c31, c32, c33, J = _cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
+            if J > JM23_NEWTON_MIN and J < JM23_NEWTON_MAX:
+                continue
+            b11, b22, b33, b12, b23, b13 = _left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
+            t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff_constant(w1, w2, j_minus_two_thirds(J), b11, b22,
+                                                                         b33, b12, b23, b13)
+            jp = J * kappa * (J - 1.0)
+            r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = _nodal_forces(
+                t11 + jp, t22 + jp, t33 + jp, t12, t23, t13, c11, c12, c13, c21, c22, c23, c31, c32, c33,
+                vol0[e] / J, d9[0, e], d9[1, e], d9[2, e], d9[3, e], d9[4, e], d9[5, e], d9[6, e], d9[7, e], d9[8, e])
+            _store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
+                                fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11)
+
+
+@njit(cache=True)
+def first_inverted_element_of(u, conn, d9, n_elements):
+    """Smallest element id with ``J <= 0`` (or NaN) of the displacement ``u``; -1 if none."""
+    for e in range(np.uint64(n_elements)):
+        f11, f12, f13, f21, f22, f23, f31, f32, f33 = _gathered_deformation_gradient(u, conn, d9, e)
+        J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
+        if not J > 0.0:
+            return np.int64(e)
+    return np.int64(-1)
 
 
 @njit(**_PASS)
@@ -492,44 +515,54 @@ def first_inverted_element(grad_u, lo):
 
 
 @njit(cache=True)
-def internal_forces(u, ws, svk, w1, w2, mu, kappa, use_anp, prony_g, prony_e, prony_f, commit, fint):
+def internal_forces(u, ws, svk, w1, w2, mu, kappa, use_anp, prony_g, prony_e, prony_f, commit, fint, gather):
     """Internal nodal forces ``fint`` (N) of the displacement ``u`` (m) through the passes above.
 
-    ``ws`` is the workspace tuple of :func:`tissuemech.fem.tled.vector_workspace`. QLV (``prony_g.size > 0``)
-    advances the states in ``ws`` (committed only when ``commit``). Returns the first inverted element or -1.
+    ``ws`` is the workspace tuple of ``tissuemech.fem.tled._vector_setup``. Without average nodal pressure
+    and viscoelastic states one fused element pass does the element work; otherwise kinematics, nodal
+    pressure and stress passes. QLV (``prony_g.size > 0``) advances the states in ``ws`` (committed only
+    when ``commit``). Without ``gather`` the element forces stay in ``ws`` (the caller's node pass gathers
+    them into ``fint``). Returns the first inverted element or -1.
     """
     (conn, d9, vol0, node_ptr, inc_elem, inc_slot, inv_vnode, elo, nlo, grad_u, pe, p_node, fe, n_bad, n_far,
-     sprev, dd, sacc, hstate) = ws
-    kinematics_pass(u, conn, d9, vol0, kappa, pe, grad_u[0], grad_u[1], grad_u[2], grad_u[3], grad_u[4], grad_u[5], grad_u[6], grad_u[7], grad_u[8],
-                    n_bad, n_far, elo)
+     sprev, hstate, jm23a, s_relaxed) = ws
+    if svk or (not use_anp and prony_g.size == 0):
+        element_force_pass(u, conn, d9, vol0, svk, w1, w2, mu, kappa, n_bad, fe[0], fe[1], fe[2], fe[3], fe[4],
+                           fe[5], fe[6], fe[7], fe[8], fe[9], fe[10], fe[11], elo)
+        if n_bad.sum() > 0:
+            return first_inverted_element_of(u, conn, d9, vol0.size)
+        if gather:
+            gather_nodal_forces(fe.reshape(-1), node_ptr, inc_slot, vol0.size, fint, nlo)
+        return np.int64(-1)
+    g0, g1, g2, g3, g4, g5, g6, g7, g8 = grad_u[0], grad_u[1], grad_u[2], grad_u[3], grad_u[4], grad_u[5], grad_u[6], \
+        grad_u[7], grad_u[8]
+    kinematics_pass(u, conn, d9, vol0, kappa, pe, jm23a, g0, g1, g2, g3, g4, g5, g6, g7, g8, n_bad, n_far, elo)
     if n_bad.sum() > 0:
         return first_inverted_element(grad_u, elo)
-    newton = n_far.sum() == 0
+    if n_far.sum() > 0:
+        exact_far_jm23(grad_u, jm23a, vol0.size)
     anp_weight = 1.0 if use_anp else 0.0
-    if svk:
-        svk_force_pass(grad_u[0], grad_u[1], grad_u[2], grad_u[3], grad_u[4], grad_u[5], grad_u[6], grad_u[7], grad_u[8], d9, vol0, mu,
-                       kappa - 2.0 * mu / 3.0, fe[0], fe[1], fe[2], fe[3], fe[4], fe[5], fe[6], fe[7], fe[8], fe[9],
-                       fe[10], fe[11], elo)
+    if use_anp:
+        nodal_pressure_pass(pe, node_ptr, inc_elem, inv_vnode, p_node, nlo)
+    nterm = prony_g.size
+    if nterm == 0:
+        invariant_force_pass(g0, g1, g2, g3, g4, g5, g6, g7, g8, jm23a, conn, d9, vol0, p_node,
+                             w1, w2, kappa, anp_weight, fe[0], fe[1], fe[2], fe[3], fe[4], fe[5], fe[6],
+                             fe[7], fe[8], fe[9], fe[10], fe[11], elo)
     else:
-        if use_anp:
-            nodal_pressure_pass(pe, node_ptr, inc_elem, inv_vnode, p_node, nlo)
-        nterm = prony_g.size
-        if nterm == 0:
-            invariant_force_pass(grad_u[0], grad_u[1], grad_u[2], grad_u[3], grad_u[4], grad_u[5], grad_u[6], grad_u[7], grad_u[8], conn, d9, vol0, p_node,
-                                 w1, w2, kappa, anp_weight, newton, fe[0], fe[1], fe[2], fe[3], fe[4], fe[5], fe[6],
-                                 fe[7], fe[8], fe[9], fe[10], fe[11], elo)
-        else:
-            g_inf = 1.0 - prony_g.sum()
-            qlv_elastic_pass(grad_u[0], grad_u[1], grad_u[2], grad_u[3], grad_u[4], grad_u[5], grad_u[6], grad_u[7], grad_u[8], w1, w2, g_inf, newton,
-                             commit, sprev[0], sprev[1], sprev[2], sprev[3], sprev[4], sprev[5], dd[0], dd[1], dd[2],
-                             dd[3], dd[4], dd[5], sacc[0], sacc[1], sacc[2], sacc[3], sacc[4], sacc[5], elo)
-            for i in range(nterm):
-                h = hstate[i]
-                prony_term_pass(prony_e[i], prony_g[i] * prony_f[i], commit, h[0], h[1], h[2], h[3], h[4], h[5],
-                                dd[0], dd[1], dd[2], dd[3], dd[4], dd[5], sacc[0], sacc[1], sacc[2], sacc[3],
-                                sacc[4], sacc[5], elo)
-            qlv_force_pass(grad_u[0], grad_u[1], grad_u[2], grad_u[3], grad_u[4], grad_u[5], grad_u[6], grad_u[7], grad_u[8], conn, d9, vol0, p_node, kappa,
-                           anp_weight, sacc[0], sacc[1], sacc[2], sacc[3], sacc[4], sacc[5], fe[0], fe[1], fe[2], fe[3],
-                           fe[4], fe[5], fe[6], fe[7], fe[8], fe[9], fe[10], fe[11], elo)
-    gather_nodal_forces(fe.reshape(-1), node_ptr, inc_slot, vol0.size, fint, nlo)
+        decay = np.zeros(MAX_PRONY_TERMS)
+        gain = np.zeros(MAX_PRONY_TERMS)
+        decay[:nterm] = prony_e
+        gain[:nterm] = prony_g * prony_f
+        ha, hb, hc, hd = hstate[0], hstate[1], hstate[2], hstate[3]
+        qlv_stress_pass(g0, g1, g2, g3, g4, g5, g6, g7, g8, jm23a, w1, w2, 1.0 - prony_g.sum(), commit,
+                        sprev[0], sprev[1], sprev[2], sprev[3], sprev[4], sprev[5], decay, gain,
+                        ha[0], ha[1], ha[2], ha[3], ha[4], ha[5], hb[0], hb[1], hb[2], hb[3], hb[4], hb[5],
+                        hc[0], hc[1], hc[2], hc[3], hc[4], hc[5], hd[0], hd[1], hd[2], hd[3], hd[4], hd[5],
+                        s_relaxed[0], s_relaxed[1], s_relaxed[2], s_relaxed[3], s_relaxed[4], s_relaxed[5], elo)
+        pk2_force_pass(g0, g1, g2, g3, g4, g5, g6, g7, g8, s_relaxed[0], s_relaxed[1], s_relaxed[2], s_relaxed[3],
+                       s_relaxed[4], s_relaxed[5], conn, d9, vol0, p_node, kappa, anp_weight, fe[0], fe[1], fe[2],
+                       fe[3], fe[4], fe[5], fe[6], fe[7], fe[8], fe[9], fe[10], fe[11], elo)
+    if gather:
+        gather_nodal_forces(fe.reshape(-1), node_ptr, inc_slot, vol0.size, fint, nlo)
     return np.int64(-1)
