@@ -238,8 +238,10 @@ def _card_for_fem(path: Path) -> dict:
 
 
 def run_fem_torsion(card_paths: Sequence, averages_path, out_nc, out_csv, figure_path, element_size_m: float = 2.5e-3,
-                    n_points: int = 12, rates: Sequence[float] | None = None, vtu_dir=None) -> pd.DataFrame:
-    """Twist the rheometer sample as in the dataset's constant-shear-rate tests, for every card.
+                    n_points: int = 12, rates: Sequence[float] | None = None, vtu_dir=None,
+                    n_threads: int = 1) -> pd.DataFrame:
+    """Twist the rheometer sample as in the dataset's constant-shear-rate tests, for every card
+    (``n_threads`` numba threads per solve: the job's Snakemake threads).
 
     The simulated torque of each card is compared with the measured mean torque of the same rate
     (``shear_stress * pi R^3 / 2`` of the averaged apparent rim stress); the error table reports the
@@ -280,7 +282,7 @@ def run_fem_torsion(card_paths: Sequence, averages_path, out_nc, out_csv, figure
             card_name = f"{Path(path).parent.name}/{Path(path).stem}"
             try:
                 ds = rheometer_torsion(card, gamma_sim / rate, gamma_sim, radius_m=radius, gap_m=gap,
-                                       element_size_m=element_size_m, n_threads=1, vtu_path=vtu)
+                                       element_size_m=element_size_m, n_threads=n_threads, vtu_path=vtu)
             except (ElementInversionError, DynamicRelaxationError) as err:
                 logger.warning("torsion %s: %s", label, err)
                 rows.append({"card": card_name, "rate_1_s": rate, "nrmse": float("nan"),
@@ -312,8 +314,9 @@ def run_fem_torsion(card_paths: Sequence, averages_path, out_nc, out_csv, figure
 
 def run_fem_indentation(card_paths: Sequence, out_nc, figure_path, punch_diameters_m=(8e-3, 15e-3),
                         max_depth_m: float = 1.5e-3, speed_m_s: float = 1e-4, element_size_m: float = 1e-3,
-                        vtu_dir=None) -> xr.Dataset:
-    """Flat-punch indentation (8 and 15 mm punches, constant slow speed) of a tissue sample per card."""
+                        vtu_dir=None, n_threads: int = 1) -> xr.Dataset:
+    """Flat-punch indentation (8 and 15 mm punches, constant slow speed) of a tissue sample per card
+    (``n_threads`` numba threads per solve)."""
     from .fem.experiments import flat_punch_indentation
     from .fem.tled import DynamicRelaxationError, ElementInversionError
     from .plots import plot_force_depth
@@ -329,7 +332,7 @@ def run_fem_indentation(card_paths: Sequence, out_nc, figure_path, punch_diamete
             n_increments = 10
             try:
                 ds = flat_punch_indentation(card, d, max_depth_m, speed_m_s, element_size_m=min(element_size_m, d / 4),
-                                            n_increments=n_increments, n_threads=1, vtu_path=vtu)
+                                            n_increments=n_increments, n_threads=n_threads, vtu_path=vtu)
             except (ElementInversionError, DynamicRelaxationError) as err:
                 # a card fitted in one mode can be unstable in another (e.g. a shear-only polynomial in
                 # compression): the failure is a result to report for that card, not a reason to lose the others

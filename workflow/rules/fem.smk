@@ -7,6 +7,8 @@ BRAIN_DATASET = next(
     (d for d in config["fem"].get("indentation_datasets", []) if d in DATASETS), None
 )
 BRAIN_INDENTATION = BRAIN_MESH and BRAIN_DATASET is not None
+# numba threads of one FEM job (Snakemake schedules jobs by these threads)
+FEM_THREADS = int(config["fem"].get("threads", 1))
 BRAIN_FILES = {
     "brain_mesh": "results/fem/brain_mesh.vtu",
     "brain_indentation": "results/fem/brain_indentation.nc",
@@ -38,6 +40,7 @@ rule fem_torsion:
         "logs/{dataset}/fem_torsion.log",
     benchmark:
         "benchmarks/runs/{dataset}/fem_torsion.tsv"
+    threads: FEM_THREADS
     params:
         cards_root="results/{dataset}/cards",
         element_size_m=config["fem"]["cylinder_element_size_m"],
@@ -63,6 +66,7 @@ rule fem_indentation:
         "logs/{dataset}/fem_indentation.log",
     benchmark:
         "benchmarks/runs/{dataset}/fem_indentation.tsv"
+    threads: FEM_THREADS
     params:
         cards_root="results/{dataset}/cards",
         element_size_m=config["fem"]["block_element_size_m"],
@@ -96,6 +100,7 @@ rule fem_brain_indentation:
         "logs/fem_brain_indentation.log",
     benchmark:
         "benchmarks/runs/fem_brain_indentation.tsv"
+    threads: FEM_THREADS
     params:
         cards_root=f"results/{BRAIN_DATASET}/cards",
         pkg=script_hash("workflow/scripts/fem_brain_indentation.py"),

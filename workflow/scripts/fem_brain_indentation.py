@@ -18,7 +18,8 @@ with job_log(snakemake.log[0]) as log:
     cases, depth, force, attrs = [], [], [], {}
     for diameter in (8e-3, 15e-3):
         t0 = time.perf_counter()
-        ds = brain_indentation(_card_for_fem(card_path), diameter, 2e-3, mesh=mesh, n_increments=8, n_threads=1,
+        ds = brain_indentation(_card_for_fem(card_path), diameter, 2e-3, mesh=mesh, n_increments=8,
+                                n_threads=snakemake.threads,
                                vtu_path=Path(snakemake.output.vtu) / f"brain__{diameter * 1e3:g}mm.vtu")
         wall = time.perf_counter() - t0
         label = f"{diameter * 1e3:g}mm"

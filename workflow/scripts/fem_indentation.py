@@ -9,4 +9,5 @@ with job_log(snakemake.log[0]) as log:
     log.info("indentation with cards: %s", [str(c) for c in cards])
     Path(snakemake.output.vtu).mkdir(parents=True, exist_ok=True)
     run_fem_indentation(cards, snakemake.output.data, snakemake.output.figure,
-                        element_size_m=snakemake.params.element_size_m, vtu_dir=snakemake.output.vtu)
+                        element_size_m=snakemake.params.element_size_m, vtu_dir=snakemake.output.vtu,
+                        n_threads=snakemake.threads)

@@ -7,5 +7,5 @@ with job_log(snakemake.log[0]) as log:
     log.info("torsion with cards: %s", [str(c) for c in cards])
     table = run_fem_torsion(cards, snakemake.input.averages, snakemake.output.data, snakemake.output.table,
                             snakemake.output.figure, element_size_m=snakemake.params.element_size_m,
-                            vtu_dir=snakemake.output.vtu)
+                            vtu_dir=snakemake.output.vtu, n_threads=snakemake.threads)
     log.info("\n%s", table.to_string())
