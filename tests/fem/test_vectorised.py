@@ -15,6 +15,12 @@ MATERIALS = {
     "svk": ("saint_venant_kirchhoff", {"mu": 1000.0}, (), ()),
     "qlv_nh": ("neo_hookean", {"mu": 1000.0}, (0.3, 0.2, 0.1), (0.002, 0.02, 0.2)),
     "qlv_mr": ("mooney_rivlin", {"C10": 300.0, "C01": 200.0}, (0.4,), (0.01,)),
+    # laws evaluated per element through the fitting code's functions (I1 only; I1 and I2)
+    "rp3": ("reduced_polynomial3", {"C10": 400.0, "C20": 300.0, "C30": 100.0}, (), ()),
+    "lp2": ("lopez_pamies2", {"mu1": 900.0, "alpha1": 1.2, "mu2": 100.0, "alpha2": 3.0}, (), ()),
+    "polynomial2": ("polynomial2", {"C10": 300.0, "C01": 100.0, "C20": 200.0, "C11": 50.0, "C02": 30.0}, (), ()),
+    "qlv_lp2": ("lopez_pamies2", {"mu1": 900.0, "alpha1": 1.2, "mu2": 100.0, "alpha2": 3.0}, (0.3, 0.2, 0.1, 0.05),
+                (0.002, 0.02, 0.2, 2.0)),
 }
 
 
@@ -48,7 +54,7 @@ def test_explicit_run_equals_generic_kernel(name, anp):
         np.testing.assert_allclose(vec.energy_j[k], gen.energy_j[k], rtol=1e-10, atol=1e-16)
 
 
-@pytest.mark.parametrize("name", ["neo_hookean", "qlv_nh"])
+@pytest.mark.parametrize("name", ["neo_hookean", "qlv_nh", "qlv_lp2"])
 def test_quasistatic_equals_generic_kernel_and_continues_from_state(name):
     model = _sheared_block(_material(name))
     gen = solve_quasistatic(model, [0.01, 0.02], kernel="generic")
@@ -69,7 +75,7 @@ def test_float32_storage_agrees_with_float64_to_single_precision():
     assert np.abs(b - a).max() < 1e-4 * np.abs(a).max()
 
 
-@pytest.mark.parametrize("name", ["neo_hookean", "qlv_nh"])
+@pytest.mark.parametrize("name", ["neo_hookean", "qlv_nh", "lp2"])
 def test_large_volume_changes_outside_the_newton_range_take_the_cbrt_path(name):
     """``u_z = c z^2`` gives J = 1 + 2 c z from 1 to 10: elements on both sides of the branch-free range."""
     mat = _material(name, nu=0.3)
@@ -111,14 +117,17 @@ def test_inverted_element_is_reported_by_id(anp):
 
 def test_kernel_choice():
     assert vectorised_law(_material("svk"))[0] is True
-    assert vectorised_law(_material("neo_hookean")) == (False, 500.0, 0.0)
+    assert vectorised_law(_material("neo_hookean")) == (False, True, 500.0, 0.0)
     assert constant_invariant_derivatives(_material("mooney_rivlin")) == (300.0, 200.0)
+    assert vectorised_law(_material("rp3"))[:2] == (False, False)  # per-element law evaluation
     ogden = make_material("ogden1", {"mu1": 1000.0, "alpha1": -5.0}, poisson_ratio=0.45)
-    rp2 = make_material("reduced_polynomial2", {"C10": 500.0, "C20": 50.0}, poisson_ratio=0.45)
-    assert vectorised_law(ogden) is None and vectorised_law(rp2) is None
-    model = _sheared_block(rp2)
+    five_terms = make_material("neo_hookean", {"mu": 1e3}, poisson_ratio=0.45, prony_g=[0.1] * 5,
+                               prony_tau_s=[0.01, 0.1, 1, 10, 100])
+    assert vectorised_law(ogden) is None and vectorised_law(five_terms) is None
+    model = _sheared_block(ogden)
     assert run_explicit(model, 1e-3, kernel="auto").kernel == "generic"
-    with pytest.raises(ValueError, match="reduced_polynomial2"):
+    assert run_explicit(_sheared_block(_material("rp3")), 1e-3, kernel="auto").kernel == "vectorised"
+    with pytest.raises(ValueError, match="ogden1"):
         run_explicit(model, 1e-3, kernel="vectorised")
     with pytest.raises(ValueError, match="kernel must be one of"):
         run_explicit(model, 1e-3, kernel="fast")

@@ -37,8 +37,8 @@ from numba import njit, prange
 
 from ..models.recursion import relaxation_factors
 from . import vectorised
-from .materials import (FASTMATH, KIND_SVK, Material, constant_invariant_derivatives, j_minus_two_thirds,
-                        kirchhoff_deviatoric)
+from .materials import (FASTMATH, KIND_INVARIANT, KIND_INVARIANT_I1, KIND_SVK, Material,
+                        constant_invariant_derivatives, j_minus_two_thirds, kirchhoff_deviatoric)
 from .mesh import TetMesh, element_min_altitudes, element_volumes
 
 STATUS_OK = 0
@@ -350,14 +350,15 @@ def _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_nod
     """One complete internal-force evaluation (optional ANP passes + element pass + optional reduction
     into ``fint``; without it the forces stay in ``fbuf`` for a fused node pass).
 
-    ``vec = (enabled, workspace, svk, dW/dI1, dW/dI2)``: when enabled the vectorised passes
+    ``vec = (enabled, workspace, svk, constant, dW/dI1, dW/dI2)``: when enabled the vectorised passes
     (:func:`.vectorised.internal_forces`, QLV states in the workspace) compute the forces instead and
     ``fbuf`` is not used; without ``reduce`` they stay as element forces in the workspace for
     :func:`_cd_node_pass`. Returns the id of an inverted element or -1.
     """
     if vec[0]:
-        return vectorised.internal_forces(u, vec[1], vec[2], vec[3], vec[4], params[0], kappa, use_anp, prony_g,
-                                          prony_e, prony_f, commit, fint, reduce)
+        return vectorised.internal_forces(u, vec[1], vec[2], vec[3], vec[4], vec[5], w1fn, w2fn, params,
+                                          kind == KIND_INVARIANT, kappa, use_anp, prony_g, prony_e, prony_f, commit,
+                                          fint, reduce)
     bad[:] = -1
     if use_anp:
         _anp_element_pass(u, elements, dndx, vol0, chunk_lo, pbuf, kappa, bad)
@@ -1056,16 +1057,20 @@ def _state(model: TLEDModel, state: tuple | None):
 KERNELS = ("auto", "vectorised", "generic")
 
 
-def vectorised_law(material: Material) -> tuple[bool, float, float] | None:
-    """``(svk, dW/dI1, dW/dI2)`` when the vectorised kernels (:mod:`.vectorised`) can run this material
-    (Saint Venant-Kirchhoff, or a law linear in the invariants, with or without up to four QLV Prony
-    terms); else None."""
+def vectorised_law(material: Material) -> tuple[bool, bool, float, float] | None:
+    """``(svk, constant, dW/dI1, dW/dI2)`` when the vectorised kernels (:mod:`.vectorised`) can run this
+    material: Saint Venant-Kirchhoff, or any invariant law ``W(I1bar, I2bar)`` (``constant`` with its
+    derivatives for laws linear in the invariants, else the law functions are evaluated per element), with
+    or without up to four QLV Prony terms. None for stretch-based laws (Ogden: spectral decomposition),
+    beyond-QLV branch energies and more Prony terms (the generic kernel runs those)."""
     if material.branch_params.shape[0] > 0 or material.prony_g.size > vectorised.MAX_PRONY_TERMS:
         return None
     if material.kind == KIND_SVK:
-        return True, 0.0, 0.0
+        return True, True, 0.0, 0.0
+    if material.kind not in (KIND_INVARIANT, KIND_INVARIANT_I1):
+        return None
     w = constant_invariant_derivatives(material)
-    return None if w is None else (False, w[0], w[1])
+    return (False, False, 0.0, 0.0) if w is None else (False, True, w[0], w[1])
 
 
 def _vector_setup(model: TLEDModel, kernel: str, h_state, s_prev):
@@ -1080,8 +1085,8 @@ def _vector_setup(model: TLEDModel, kernel: str, h_state, s_prev):
         raise ValueError(f"kernel must be one of {KERNELS}, not {kernel!r}")
     law = vectorised_law(model.material) if kernel != "generic" else None
     if kernel == "vectorised" and law is None:
-        raise ValueError(f"the vectorised kernel needs Saint Venant-Kirchhoff or a law linear in the invariants "
-                         f"with at most {vectorised.MAX_PRONY_TERMS} Prony terms and no branch energies; "
+        raise ValueError(f"the vectorised kernel needs Saint Venant-Kirchhoff or an invariant law with at most "
+                         f"{vectorised.MAX_PRONY_TERMS} Prony terms and no branch energies; "
                          f"{model.material.law_key!r} ({model.material.prony_g.size} terms) runs on the generic "
                          f"kernel")
     enabled = law is not None
@@ -1116,8 +1121,10 @@ def _vector_setup(model: TLEDModel, kernel: str, h_state, s_prev):
           np.zeros((9, ne), dt), np.zeros(ne, dt), np.zeros(nn), np.zeros((12, ne), dt),
           np.zeros(nchunk, np.int64), np.zeros(nchunk, np.int64), sprev, hstate, np.zeros(ne),
           np.zeros((6, ne if nt else 0), dt))
-    svk, w1, w2 = law if enabled else (False, 0.0, 0.0)
-    vec = (enabled, ws, svk, float(w1), float(w2))
+    svk, constant, w1, w2 = law if enabled else (False, True, 0.0, 0.0)
+    # per-element law derivatives: filled once for a constant-derivative law, else by the law pass
+    ws = ws + (np.full(ne, w1), np.full(ne, w2))
+    vec = (enabled, ws, svk, constant, float(w1), float(w2))
     nbuf = 0 if enabled else nchunk
     fbuf = np.zeros((nbuf, model.mesh.n_nodes, 3), model.dtype)
     pbuf = np.zeros((nbuf, model.mesh.n_nodes))
@@ -1175,8 +1182,9 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
     n_threads : numba threads for this run (None: numba's current setting)
     track_energy : accumulate the energy balance (``RunResult.energy_j``; a serial pass over the nodes per
         step, a few % of the step time)
-    kernel : ``"auto"`` (the vectorised kernels of :mod:`.vectorised` for SVK and laws linear in the
-        invariants, with or without QLV; the generic kernel otherwise), ``"vectorised"`` or ``"generic"``
+    kernel : ``"auto"`` (the vectorised kernels of :mod:`.vectorised` for SVK and invariant laws, with or
+        without up to four QLV terms; the generic kernel for stretch-based laws and beyond-QLV), ``"vectorised"``
+        or ``"generic"``
     """
     m = model.material
     dt = critical_time_step(model, safety) if dt_s is None else float(dt_s)

@@ -90,8 +90,8 @@ def _left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33):
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
 def _isochoric_kirchhoff_constant(w1, w2, jm23, b11, b22, b33, b12, b23, b13):
-    """``tau_iso = dev(2 (W1 + I1bar W2) bbar - 2 W2 bbar^2)`` for constant ``W1 = dW/dI1``, ``W2 = dW/dI2``
-    (the formula of ``materials._iso_from_bbar``)."""
+    """``tau_iso = dev(2 (W1 + I1bar W2) bbar - 2 W2 bbar^2)`` for given ``W1 = dW/dI1``, ``W2 = dW/dI2`` at
+    this element's invariants (the formula of ``materials._iso_from_bbar``)."""
     b11 *= jm23
     b22 *= jm23
     b33 *= jm23
@@ -221,6 +221,29 @@ def exact_far_jm23(grad_u, jm23a, n_elements):
             jm23a[e] = j_minus_two_thirds(J)
 
 
+@njit(parallel=True, cache=True, fastmath=FASTMATH)
+def invariant_law_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a, w1fn, w2fn, params,
+                       i2_dependent, w1a, w2a, lo):
+    """The law's derivatives ``dW/dI1``, ``dW/dI2`` at every element's isochoric invariants, through the
+    fitting code's law functions (C function pointers, so this loop is scalar; the stress passes that
+    follow are not). ``i2_dependent`` False: ``W(I1bar)`` only, ``dW/dI2 = 0`` without a call."""
+    for c in prange(lo.size - 1):
+        for e in range(lo[c], lo[c + 1]):
+            f11, f12, f13 = 1.0 + f11a[e], f12a[e], f13a[e]
+            f21, f22, f23 = f21a[e], 1.0 + f22a[e], f23a[e]
+            f31, f32, f33 = f31a[e], f32a[e], 1.0 + f33a[e]
+            b11, b22, b33, b12, b23, b13 = _left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
+            jm23 = jm23a[e]
+            i1 = jm23 * (b11 + b22 + b33)
+            if i2_dependent:
+                q = b11 * b11 + b22 * b22 + b33 * b33 + 2.0 * (b12 * b12 + b23 * b23 + b13 * b13)
+                i2 = 0.5 * (i1 * i1 - jm23 * jm23 * q)
+                w1a[e] = w1fn(params, i1, i2)
+                w2a[e] = w2fn(params, i1, i2)
+            else:
+                w1a[e] = w1fn(params, i1, 3.0)
+
+
 @njit(**_PASS)
 def nodal_pressure_pass(pe, node_ptr, inc_elem, inv_vnode, p_node, lo):
     """Average nodal pressure ``p_n = sum_e kappa (J_e - 1) V0_e / sum_e V0_e`` over the incident elements."""
@@ -257,10 +280,10 @@ def _store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
 
 
 @njit(**_PASS)
-def invariant_force_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a, conn, d9, vol0, p_node, w1, w2,
+def invariant_force_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a, conn, d9, vol0, p_node, w1a, w2a,
                          kappa, anp_weight, fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11, lo):
-    """Element nodal forces ``fe[3 a + i]`` (N) of a law with constant ``W1 = dW/dI1``, ``W2 = dW/dI2`` plus the
-    volumetric pressure ``anp_weight p_ANP + (1 - anp_weight) kappa (J - 1)`` (weight 1: average nodal
+    """Element nodal forces ``fe[3 a + i]`` (N) of an invariant law (``W1 = dW/dI1``, ``W2 = dW/dI2`` of every
+    element in ``w1a``, ``w2a``: constants, or from :func:`invariant_law_pass`) plus the volumetric pressure ``anp_weight p_ANP + (1 - anp_weight) kappa (J - 1)`` (weight 1: average nodal
     pressure; 0: the element's own); ``J^(-2/3)`` from :func:`kinematics_pass`."""
     for c in prange(lo.size - 1):
         for e in range(lo[c], lo[c + 1]):
@@ -269,8 +292,8 @@ def invariant_force_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, j
             f31, f32, f33 = f31a[e], f32a[e], 1.0 + f33a[e]
             c11, c12, c13, c21, c22, c23, c31, c32, c33, J = _cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
             b11, b22, b33, b12, b23, b13 = _left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-            t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff_constant(w1, w2, jm23a[e], b11, b22, b33, b12, b23,
-                                                                         b13)
+            t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff_constant(w1a[e], w2a[e], jm23a[e], b11, b22, b33, b12,
+                                                                         b23, b13)
             jp = J * _element_pressure(anp_weight, kappa, J, p_node, conn[0, e], conn[1, e], conn[2, e], conn[3, e])
             r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = _nodal_forces(
                 t11 + jp, t22 + jp, t33 + jp, t12, t23, t13, c11, c12, c13, c21, c22, c23, c31, c32, c33,
@@ -282,7 +305,7 @@ def invariant_force_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, j
 @njit(cache=True, fastmath=FASTMATH, inline="always")
 def _isochoric_pk2(w1, w2, jm23, f11, f12, f13, f21, f22, f23, f31, f32, f33, c11, c12, c13, c21, c22, c23, c31,
                    c32, c33, J):
-    """Isochoric 2nd Piola-Kirchhoff ``S = F^-1 tau_iso F^-T`` (11 22 33 12 23 13) of a constant-derivative law."""
+    """Isochoric 2nd Piola-Kirchhoff ``S = F^-1 tau_iso F^-T`` (11 22 33 12 23 13) of an invariant law."""
     b11, b22, b33, b12, b23, b13 = _left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
     t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff_constant(w1, w2, jm23, b11, b22, b33, b12, b23, b13)
     ij = 1.0 / J
@@ -331,11 +354,12 @@ MAX_PRONY_TERMS = 4
 
 
 @njit(**_PASS)
-def qlv_stress_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a, w1, w2, g_inf, commit,
+def qlv_stress_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a, w1a, w2a, g_inf, commit,
                     sp0, sp1, sp2, sp3, sp4, sp5, decay, gain, ha0, ha1, ha2, ha3, ha4, ha5, hb0, hb1, hb2, hb3, hb4, hb5,
                     hc0, hc1, hc2, hc3, hc4, hc5, hd0, hd1, hd2, hd3, hd4, hd5, s0a, s1a, s2a, s3a, s4a, s5a, lo):
     """QLV with up to four Prony terms (the generic kernel's formulas): the instantaneous isochoric 2nd
-    Piola-Kirchhoff stress ``S_e = F^-1 tau_iso F^-T`` of a constant-derivative law and the relaxed
+    Piola-Kirchhoff stress ``S_e = F^-1 tau_iso F^-T`` of an invariant law (derivatives per element in
+    ``w1a``, ``w2a``) and the relaxed
     ``S = g_inf S_e + sum_i h_i`` (into ``s0a``...``s5a``) with the recursive update of every term (states
     ``h_i`` = rows ``ha``...``hd``, previous ``S_e`` = ``sp``; unused terms have ``decay = gain = 0``). The
     states are written only when ``commit``. (Stress and forces in one pass would hold ~70 values per
@@ -349,7 +373,7 @@ def qlv_stress_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a,
             f21, f22, f23 = f21a[e], 1.0 + f22a[e], f23a[e]
             f31, f32, f33 = f31a[e], f32a[e], 1.0 + f33a[e]
             c11, c12, c13, c21, c22, c23, c31, c32, c33, J = _cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-            se0, se1, se2, se3, se4, se5 = _isochoric_pk2(w1, w2, jm23a[e], f11, f12, f13, f21, f22, f23, f31, f32,
+            se0, se1, se2, se3, se4, se5 = _isochoric_pk2(w1a[e], w2a[e], jm23a[e], f11, f12, f13, f21, f22, f23, f31, f32,
                                                           f33, c11, c12, c13, c21, c22, c23, c31, c32, c33, J)
             d0, d1, d2, d3, d4, d5 = se0 - sp0[e], se1 - sp1[e], se2 - sp2[e], se3 - sp3[e], se4 - sp4[e], se5 - sp5[e]
             # selects, not branches, so that the loop stays vectorisable
@@ -515,18 +539,23 @@ def first_inverted_element(grad_u, lo):
 
 
 @njit(cache=True)
-def internal_forces(u, ws, svk, w1, w2, mu, kappa, use_anp, prony_g, prony_e, prony_f, commit, fint, gather):
+def internal_forces(u, ws, svk, constant, w1, w2, w1fn, w2fn, params, i2_dependent, kappa, use_anp, prony_g, prony_e,
+                    prony_f, commit, fint, gather):
     """Internal nodal forces ``fint`` (N) of the displacement ``u`` (m) through the passes above.
 
-    ``ws`` is the workspace tuple of ``tissuemech.fem.tled._vector_setup``. Without average nodal pressure
-    and viscoelastic states one fused element pass does the element work; otherwise kinematics, nodal
+    ``ws`` is the workspace tuple of ``tissuemech.fem.tled._vector_setup``. The law: Saint Venant-Kirchhoff
+    (``svk``, shear modulus ``params[0]``), constant derivatives ``w1``, ``w2`` (``constant``: neo-Hookean,
+    Mooney-Rivlin; the workspace arrays hold them) or the law functions ``w1fn``, ``w2fn`` of ``params``
+    evaluated per element by :func:`invariant_law_pass`. Without average nodal pressure and viscoelastic
+    states a constant-derivative law (and SVK) runs in one fused element pass; otherwise kinematics, nodal
     pressure and stress passes. QLV (``prony_g.size > 0``) advances the states in ``ws`` (committed only
     when ``commit``). Without ``gather`` the element forces stay in ``ws`` (the caller's node pass gathers
     them into ``fint``). Returns the first inverted element or -1.
     """
     (conn, d9, vol0, node_ptr, inc_elem, inc_slot, inv_vnode, elo, nlo, grad_u, pe, p_node, fe, n_bad, n_far,
-     sprev, hstate, jm23a, s_relaxed) = ws
-    if svk or (not use_anp and prony_g.size == 0):
+     sprev, hstate, jm23a, s_relaxed, w1a, w2a) = ws
+    mu = params[0]
+    if svk or (constant and not use_anp and prony_g.size == 0):
         element_force_pass(u, conn, d9, vol0, svk, w1, w2, mu, kappa, n_bad, fe[0], fe[1], fe[2], fe[3], fe[4],
                            fe[5], fe[6], fe[7], fe[8], fe[9], fe[10], fe[11], elo)
         if n_bad.sum() > 0:
@@ -541,13 +570,15 @@ def internal_forces(u, ws, svk, w1, w2, mu, kappa, use_anp, prony_g, prony_e, pr
         return first_inverted_element(grad_u, elo)
     if n_far.sum() > 0:
         exact_far_jm23(grad_u, jm23a, vol0.size)
+    if not constant:
+        invariant_law_pass(g0, g1, g2, g3, g4, g5, g6, g7, g8, jm23a, w1fn, w2fn, params, i2_dependent, w1a, w2a, elo)
     anp_weight = 1.0 if use_anp else 0.0
     if use_anp:
         nodal_pressure_pass(pe, node_ptr, inc_elem, inv_vnode, p_node, nlo)
     nterm = prony_g.size
     if nterm == 0:
         invariant_force_pass(g0, g1, g2, g3, g4, g5, g6, g7, g8, jm23a, conn, d9, vol0, p_node,
-                             w1, w2, kappa, anp_weight, fe[0], fe[1], fe[2], fe[3], fe[4], fe[5], fe[6],
+                             w1a, w2a, kappa, anp_weight, fe[0], fe[1], fe[2], fe[3], fe[4], fe[5], fe[6],
                              fe[7], fe[8], fe[9], fe[10], fe[11], elo)
     else:
         decay = np.zeros(MAX_PRONY_TERMS)
@@ -555,7 +586,7 @@ def internal_forces(u, ws, svk, w1, w2, mu, kappa, use_anp, prony_g, prony_e, pr
         decay[:nterm] = prony_e
         gain[:nterm] = prony_g * prony_f
         ha, hb, hc, hd = hstate[0], hstate[1], hstate[2], hstate[3]
-        qlv_stress_pass(g0, g1, g2, g3, g4, g5, g6, g7, g8, jm23a, w1, w2, 1.0 - prony_g.sum(), commit,
+        qlv_stress_pass(g0, g1, g2, g3, g4, g5, g6, g7, g8, jm23a, w1a, w2a, 1.0 - prony_g.sum(), commit,
                         sprev[0], sprev[1], sprev[2], sprev[3], sprev[4], sprev[5], decay, gain,
                         ha[0], ha[1], ha[2], ha[3], ha[4], ha[5], hb[0], hb[1], hb[2], hb[3], hb[4], hb[5],
                         hc[0], hc[1], hc[2], hc[3], hc[4], hc[5], hd[0], hd[1], hd[2], hd[3], hd[4], hd[5],
