@@ -32,6 +32,7 @@ from numba import cfunc, njit, types
 
 from ..models.hyperelastic import (lopez_pamies_dw_di1, mooney_rivlin_dw_di1, mooney_rivlin_dw_di2,
                                   neo_hookean_dw_di1, ogden_dw_dlambda, reduced_polynomial_dw_di1)
+from .kinematics import FASTMATH, left_cauchy_green
 
 KIND_INVARIANT = 0
 KIND_STRETCH = 1
@@ -44,7 +45,6 @@ KIND_INVARIANT_I1 = 3
 INVARIANT_SIG = types.float64(types.float64[::1], types.float64, types.float64)
 STRETCH_SIG = types.float64(types.float64[::1], types.float64)
 
-FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
 
 # --------------------------------------------------------------------------------------------------
@@ -361,6 +361,42 @@ def small_strain_shear_modulus(material: Material) -> float:
 # element stress (scalar code, inlined into the kernels)
 # --------------------------------------------------------------------------------------------------
 @njit(cache=True, fastmath=FASTMATH, inline="always")
+def isochoric_kirchhoff_invariant(w1, w2, b11, b22, b33, b12, b23, b13):
+    """``tau_iso = dev(2 (W1 + I1bar W2) bbar - 2 W2 bbar^2)`` of an invariant law ``W(I1bar, I2bar)`` from the
+    isochoric left Cauchy-Green tensor ``bbar`` and the derivatives ``W1 = dW/dI1bar``, ``W2 = dW/dI2bar``
+    there (Pa)."""
+    i1 = b11 + b22 + b33
+    q11 = b11 * b11 + b12 * b12 + b13 * b13
+    q22 = b12 * b12 + b22 * b22 + b23 * b23
+    q33 = b13 * b13 + b23 * b23 + b33 * b33
+    q12 = b11 * b12 + b12 * b22 + b13 * b23
+    q23 = b12 * b13 + b22 * b23 + b23 * b33
+    q13 = b11 * b13 + b12 * b23 + b13 * b33
+    a = 2.0 * (w1 + i1 * w2)
+    c = -2.0 * w2
+    t11 = a * b11 + c * q11
+    t22 = a * b22 + c * q22
+    t33 = a * b33 + c * q33
+    m = (t11 + t22 + t33) * (1.0 / 3.0)
+    return t11 - m, t22 - m, t33 - m, a * b12 + c * q12, a * b23 + c * q23, a * b13 + c * q13
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def svk_kirchhoff(mu, lam, b11, b22, b33, b12, b23, b13):
+    """Saint Venant-Kirchhoff ``tau = F S F^T = lam tr(E) b + mu (b^2 - b)`` with ``E = (C - I)/2`` (Pa)."""
+    tre = 0.5 * (b11 + b22 + b33 - 3.0)
+    q11 = b11 * b11 + b12 * b12 + b13 * b13
+    q22 = b12 * b12 + b22 * b22 + b23 * b23
+    q33 = b13 * b13 + b23 * b23 + b33 * b33
+    q12 = b11 * b12 + b12 * b22 + b13 * b23
+    q23 = b12 * b13 + b22 * b23 + b23 * b33
+    q13 = b11 * b13 + b12 * b23 + b13 * b33
+    a = lam * tre - mu
+    return (a * b11 + mu * q11, a * b22 + mu * q22, a * b33 + mu * q33,
+            a * b12 + mu * q12, a * b23 + mu * q23, a * b13 + mu * q13)
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
 def _iso_from_bbar(kind, w1fn, w2fn, wlfn, p, b11, b22, b33, b12, b23, b13):
     """Isochoric Kirchhoff stress (6 comps: 11 22 33 12 23 13) from the isochoric left Cauchy-Green tensor."""
     if kind == KIND_INVARIANT_I1:
@@ -371,23 +407,8 @@ def _iso_from_bbar(kind, w1fn, w2fn, wlfn, p, b11, b22, b33, b12, b23, b13):
         return (a * b11 - m, a * b22 - m, a * b33 - m, a * b12, a * b23, a * b13)
     if kind == KIND_INVARIANT:
         i1 = b11 + b22 + b33
-        # bbar^2 components
-        q11 = b11 * b11 + b12 * b12 + b13 * b13
-        q22 = b12 * b12 + b22 * b22 + b23 * b23
-        q33 = b13 * b13 + b23 * b23 + b33 * b33
-        q12 = b11 * b12 + b12 * b22 + b13 * b23
-        q23 = b12 * b13 + b22 * b23 + b23 * b33
-        q13 = b11 * b13 + b12 * b23 + b13 * b33
-        i2 = 0.5 * (i1 * i1 - (q11 + q22 + q33))
-        w1 = w1fn(p, i1, i2)
-        w2 = w2fn(p, i1, i2)
-        a = 2.0 * (w1 + i1 * w2)
-        c = -2.0 * w2
-        t11 = a * b11 + c * q11
-        t22 = a * b22 + c * q22
-        t33 = a * b33 + c * q33
-        m = (t11 + t22 + t33) / 3.0
-        return (t11 - m, t22 - m, t33 - m, a * b12 + c * q12, a * b23 + c * q23, a * b13 + c * q13)
+        i2 = 0.5 * (i1 * i1 - (b11 * b11 + b22 * b22 + b33 * b33 + 2.0 * (b12 * b12 + b23 * b23 + b13 * b13)))
+        return isochoric_kirchhoff_invariant(w1fn(p, i1, i2), w2fn(p, i1, i2), b11, b22, b33, b12, b23, b13)
     # stretch-based (Valanis-Landel): spectral decomposition of bbar
     bb = np.empty((3, 3))
     bb[0, 0], bb[1, 1], bb[2, 2] = b11, b22, b33
@@ -437,26 +458,9 @@ def kirchhoff_deviatoric(kind, w1fn, w2fn, wlfn, p, kappa, f11, f12, f13, f21, f
     For split laws this is the isochoric part; for Saint Venant-Kirchhoff (compressible, no split) it is the
     whole ``tau = F S F^T`` and the caller must not add a pressure.
     """
-    b11 = f11 * f11 + f12 * f12 + f13 * f13
-    b22 = f21 * f21 + f22 * f22 + f23 * f23
-    b33 = f31 * f31 + f32 * f32 + f33 * f33
-    b12 = f11 * f21 + f12 * f22 + f13 * f23
-    b23 = f21 * f31 + f22 * f32 + f23 * f33
-    b13 = f11 * f31 + f12 * f32 + f13 * f33
+    b11, b22, b33, b12, b23, b13 = left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
     if kind == KIND_SVK:
-        mu = p[0]
-        lam = kappa - 2.0 * mu / 3.0
-        # tau = F S F^T = lam tr(E) b + mu (b^2 - b),  E = (C - I)/2
-        tre = 0.5 * (b11 + b22 + b33 - 3.0)
-        q11 = b11 * b11 + b12 * b12 + b13 * b13
-        q22 = b12 * b12 + b22 * b22 + b23 * b23
-        q33 = b13 * b13 + b23 * b23 + b33 * b33
-        q12 = b11 * b12 + b12 * b22 + b13 * b23
-        q23 = b12 * b13 + b22 * b23 + b23 * b33
-        q13 = b11 * b13 + b12 * b23 + b13 * b33
-        a = lam * tre - mu
-        return (a * b11 + mu * q11, a * b22 + mu * q22, a * b33 + mu * q33,
-                a * b12 + mu * q12, a * b23 + mu * q23, a * b13 + mu * q13)
+        return svk_kirchhoff(p[0], kappa - 2.0 * p[0] / 3.0, b11, b22, b33, b12, b23, b13)
     jm23 = j_minus_two_thirds(J)
     return _iso_from_bbar(kind, w1fn, w2fn, wlfn, p, jm23 * b11, jm23 * b22, jm23 * b33,
                           jm23 * b12, jm23 * b23, jm23 * b13)

@@ -37,6 +37,7 @@ from numba import njit, prange
 
 from ..models.recursion import relaxation_factors
 from . import vectorised
+from .kinematics import cofactor, left_cauchy_green, pull_back, push_forward
 from .materials import (FASTMATH, KIND_INVARIANT, KIND_INVARIANT_I1, KIND_SVK, Material,
                         constant_invariant_derivatives, j_minus_two_thirds, kirchhoff_deviatoric)
 from .mesh import TetMesh, element_min_altitudes, element_volumes
@@ -138,54 +139,20 @@ def _element_force_pass(u, elements, dndx, vol0, chunk_lo, fbuf, kind, w1fn, w2f
             f31 = uz0 * d0x + uz1 * d1x + uz2 * d2x + uz3 * d3x
             f32 = uz0 * d0y + uz1 * d1y + uz2 * d2y + uz3 * d3y
             f33 = 1.0 + uz0 * d0z + uz1 * d1z + uz2 * d2z + uz3 * d3z
-            # cofactor matrix of F (cof = J F^-T)
-            c11 = f22 * f33 - f23 * f32
-            c12 = f23 * f31 - f21 * f33
-            c13 = f21 * f32 - f22 * f31
-            c21 = f13 * f32 - f12 * f33
-            c22 = f11 * f33 - f13 * f31
-            c23 = f12 * f31 - f11 * f32
-            c31 = f12 * f23 - f13 * f22
-            c32 = f13 * f21 - f11 * f23
-            c33 = f11 * f22 - f12 * f21
-            J = f11 * c11 + f12 * c12 + f13 * c13
+            c11, c12, c13, c21, c22, c23, c31, c32, c33, J = cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
             if not J > 0.0:
                 bad[c] = e
                 continue
             t11, t22, t33, t12, t23, t13 = kirchhoff_deviatoric(kind, w1fn, w2fn, wlfn, params, kappa,
                                                                 f11, f12, f13, f21, f22, f23, f31, f32, f33, J)
             if nterm > 0:
-                # S_e = F^-1 tau F^-T, F^-1 = cof^T / J
-                ij = 1.0 / J
-                a11, a12, a13 = c11 * ij, c21 * ij, c31 * ij
-                a21, a22, a23 = c12 * ij, c22 * ij, c32 * ij
-                a31, a32, a33 = c13 * ij, c23 * ij, c33 * ij
-                # m = F^-1 tau
-                m11 = a11 * t11 + a12 * t12 + a13 * t13
-                m12 = a11 * t12 + a12 * t22 + a13 * t23
-                m13 = a11 * t13 + a12 * t23 + a13 * t33
-                m21 = a21 * t11 + a22 * t12 + a23 * t13
-                m22 = a21 * t12 + a22 * t22 + a23 * t23
-                m23 = a21 * t13 + a22 * t23 + a23 * t33
-                m31 = a31 * t11 + a32 * t12 + a33 * t13
-                m32 = a31 * t12 + a32 * t22 + a33 * t23
-                m33 = a31 * t13 + a32 * t23 + a33 * t33
-                se0 = m11 * a11 + m12 * a12 + m13 * a13
-                se1 = m21 * a21 + m22 * a22 + m23 * a23
-                se2 = m31 * a31 + m32 * a32 + m33 * a33
-                se3 = m11 * a21 + m12 * a22 + m13 * a23
-                se4 = m21 * a31 + m22 * a32 + m23 * a33
-                se5 = m11 * a31 + m12 * a32 + m13 * a33
+                se0, se1, se2, se3, se4, se5 = pull_back(c11, c12, c13, c21, c22, c23, c31, c32, c33, J,
+                                                         t11, t22, t33, t12, t23, t13)
                 if branch_params.shape[0] > 0:
                     # beyond QLV: branch energies W_i(I1bar), S_i = 2 W_i' dI1bar/dC = 2 W_i' F^-1 dev(bbar) F^-T;
                     # the drive increments are S_i(C_n+1) - S_i(C_n) (science.md 1.1 "3D/TLED"), the
                     # equilibrium stress S_e is the main law in full (g_inf = 1)
-                    bb11 = f11 * f11 + f12 * f12 + f13 * f13
-                    bb22 = f21 * f21 + f22 * f22 + f23 * f23
-                    bb33 = f31 * f31 + f32 * f32 + f33 * f33
-                    bb12 = f11 * f21 + f12 * f22 + f13 * f23
-                    bb23 = f21 * f31 + f22 * f32 + f23 * f33
-                    bb13 = f11 * f31 + f12 * f32 + f13 * f33
+                    bb11, bb22, bb33, bb12, bb23, bb13 = left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
                     jm23 = j_minus_two_thirds(J)
                     bb11 *= jm23
                     bb22 *= jm23
@@ -197,22 +164,9 @@ def _element_force_pass(u, elements, dndx, vol0, chunk_lo, fbuf, kind, w1fn, w2f
                     bi2 = 0.5 * (bi1 * bi1 - (bb11 * bb11 + bb22 * bb22 + bb33 * bb33
                                               + 2.0 * (bb12 * bb12 + bb23 * bb23 + bb13 * bb13)))
                     mb = bi1 / 3.0
-                    v11, v22, v33 = bb11 - mb, bb22 - mb, bb33 - mb
-                    n11 = a11 * v11 + a12 * bb12 + a13 * bb13
-                    n12 = a11 * bb12 + a12 * v22 + a13 * bb23
-                    n13 = a11 * bb13 + a12 * bb23 + a13 * v33
-                    n21 = a21 * v11 + a22 * bb12 + a23 * bb13
-                    n22 = a21 * bb12 + a22 * v22 + a23 * bb23
-                    n23 = a21 * bb13 + a22 * bb23 + a23 * v33
-                    n31 = a31 * v11 + a32 * bb12 + a33 * bb13
-                    n32 = a31 * bb12 + a32 * v22 + a33 * bb23
-                    n33 = a31 * bb13 + a32 * bb23 + a33 * v33
-                    q0 = 2.0 * (n11 * a11 + n12 * a12 + n13 * a13)
-                    q1 = 2.0 * (n21 * a21 + n22 * a22 + n23 * a23)
-                    q2 = 2.0 * (n31 * a31 + n32 * a32 + n33 * a33)
-                    q3 = 2.0 * (n11 * a21 + n12 * a22 + n13 * a23)
-                    q4 = 2.0 * (n21 * a31 + n22 * a32 + n23 * a33)
-                    q5 = 2.0 * (n11 * a31 + n12 * a32 + n13 * a33)
+                    q0, q1, q2, q3, q4, q5 = pull_back(c11, c12, c13, c21, c22, c23, c31, c32, c33, J,
+                                                       2.0 * (bb11 - mb), 2.0 * (bb22 - mb), 2.0 * (bb33 - mb),
+                                                       2.0 * bb12, 2.0 * bb23, 2.0 * bb13)
                     s0, s1, s2, s3, s4, s5 = se0, se1, se2, se3, se4, se5
                     for i in range(nterm):
                         ee = prony_e[i]
@@ -284,22 +238,8 @@ def _element_force_pass(u, elements, dndx, vol0, chunk_lo, fbuf, kind, w1fn, w2f
                         s_prev[e, 3] = se3
                         s_prev[e, 4] = se4
                         s_prev[e, 5] = se5
-                # tau = F S F^T
-                q11 = f11 * s0 + f12 * s3 + f13 * s5
-                q12 = f11 * s3 + f12 * s1 + f13 * s4
-                q13 = f11 * s5 + f12 * s4 + f13 * s2
-                q21 = f21 * s0 + f22 * s3 + f23 * s5
-                q22 = f21 * s3 + f22 * s1 + f23 * s4
-                q23 = f21 * s5 + f22 * s4 + f23 * s2
-                q31 = f31 * s0 + f32 * s3 + f33 * s5
-                q32 = f31 * s3 + f32 * s1 + f33 * s4
-                q33 = f31 * s5 + f32 * s4 + f33 * s2
-                t11 = q11 * f11 + q12 * f12 + q13 * f13
-                t22 = q21 * f21 + q22 * f22 + q23 * f23
-                t33 = q31 * f31 + q32 * f32 + q33 * f33
-                t12 = q11 * f21 + q12 * f22 + q13 * f23
-                t23 = q21 * f31 + q22 * f32 + q23 * f33
-                t13 = q11 * f31 + q12 * f32 + q13 * f33
+                t11, t22, t33, t12, t23, t13 = push_forward(f11, f12, f13, f21, f22, f23, f31, f32, f33,
+                                                            s0, s1, s2, s3, s4, s5)
             if kind != KIND_SVK:
                 if use_anp:
                     pr = 0.25 * (p_node[n0] + p_node[n1] + p_node[n2] + p_node[n3])
@@ -488,21 +428,10 @@ def _cd_node_pass(fbuf, fint, fext_ref, s_ext, u, u_old, u_new, coef_a, coef_b, 
     nchunk = fbuf.shape[0]
     gather = vec[0]
     ws = vec[1]
-    node_ptr, inc_slot, fe_flat = ws[3], ws[5], ws[12].reshape(-1)
-    ne = np.uint64(ws[12].shape[1])
+    node_ptr, inc_slot, fe_flat, ne = ws[3], ws[5], ws[12].reshape(-1), ws[12].shape[1]
     for n in prange(u.shape[0]):
         if gather:
-            fx = 0.0
-            fy = 0.0
-            fz = 0.0
-            for k in range(node_ptr[n], node_ptr[n + 1]):
-                s = np.uint64(inc_slot[k])
-                fx += fe_flat[s]
-                fy += fe_flat[s + ne]
-                fz += fe_flat[s + ne + ne]
-            fint[n, 0] = fx
-            fint[n, 1] = fy
-            fint[n, 2] = fz
+            fint[n, 0], fint[n, 1], fint[n, 2] = vectorised.node_force(fe_flat, node_ptr, inc_slot, ne, n)
         a, b, cc = coef_a[n], coef_b[n], coef_c[n]
         for i in range(3):
             if nchunk > 0:

@@ -41,7 +41,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .materials import FASTMATH, j_minus_two_thirds
+from .kinematics import FASTMATH, cofactor, left_cauchy_green, pull_back, push_forward
+from .materials import isochoric_kirchhoff_invariant, j_minus_two_thirds, svk_kirchhoff
 
 #: ``J`` range of the branch-free ``J^(-2/3)`` (:func:`jm23_newton` is within 1e-15 of ``J**(-2/3)`` on
 #: (0.25, 3.9)); elements outside it are computed again with ``cbrt``
@@ -65,69 +66,10 @@ def jm23_newton(J):
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
-def _cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33):
-    """Cofactor matrix ``J F^-T`` (row-major) and ``J``."""
-    c11 = f22 * f33 - f23 * f32
-    c12 = f23 * f31 - f21 * f33
-    c13 = f21 * f32 - f22 * f31
-    c21 = f13 * f32 - f12 * f33
-    c22 = f11 * f33 - f13 * f31
-    c23 = f12 * f31 - f11 * f32
-    c31 = f12 * f23 - f13 * f22
-    c32 = f13 * f21 - f11 * f23
-    c33 = f11 * f22 - f12 * f21
-    J = f11 * c11 + f12 * c12 + f13 * c13
-    return c11, c12, c13, c21, c22, c23, c31, c32, c33, J
-
-
-@njit(cache=True, fastmath=FASTMATH, inline="always")
-def _left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33):
-    """``b = F F^T`` (11 22 33 12 23 13)."""
-    return (f11 * f11 + f12 * f12 + f13 * f13, f21 * f21 + f22 * f22 + f23 * f23,
-            f31 * f31 + f32 * f32 + f33 * f33, f11 * f21 + f12 * f22 + f13 * f23,
-            f21 * f31 + f22 * f32 + f23 * f33, f11 * f31 + f12 * f32 + f13 * f33)
-
-
-@njit(cache=True, fastmath=FASTMATH, inline="always")
-def _isochoric_kirchhoff_constant(w1, w2, jm23, b11, b22, b33, b12, b23, b13):
-    """``tau_iso = dev(2 (W1 + I1bar W2) bbar - 2 W2 bbar^2)`` for given ``W1 = dW/dI1``, ``W2 = dW/dI2`` at
-    this element's invariants (the formula of ``materials._iso_from_bbar``)."""
-    b11 *= jm23
-    b22 *= jm23
-    b33 *= jm23
-    b12 *= jm23
-    b23 *= jm23
-    b13 *= jm23
-    i1 = b11 + b22 + b33
-    q11 = b11 * b11 + b12 * b12 + b13 * b13
-    q22 = b12 * b12 + b22 * b22 + b23 * b23
-    q33 = b13 * b13 + b23 * b23 + b33 * b33
-    q12 = b11 * b12 + b12 * b22 + b13 * b23
-    q23 = b12 * b13 + b22 * b23 + b23 * b33
-    q13 = b11 * b13 + b12 * b23 + b13 * b33
-    a = 2.0 * (w1 + i1 * w2)
-    c = -2.0 * w2
-    t11 = a * b11 + c * q11
-    t22 = a * b22 + c * q22
-    t33 = a * b33 + c * q33
-    m = (t11 + t22 + t33) * (1.0 / 3.0)
-    return t11 - m, t22 - m, t33 - m, a * b12 + c * q12, a * b23 + c * q23, a * b13 + c * q13
-
-
-@njit(cache=True, fastmath=FASTMATH, inline="always")
-def _svk_kirchhoff(mu, lam, b11, b22, b33, b12, b23, b13):
-    """Saint Venant-Kirchhoff ``tau = F S F^T = lam tr(E) b + mu (b^2 - b)`` (the formula of
-    ``materials.kirchhoff_deviatoric``)."""
-    tre = 0.5 * (b11 + b22 + b33 - 3.0)
-    q11 = b11 * b11 + b12 * b12 + b13 * b13
-    q22 = b12 * b12 + b22 * b22 + b23 * b23
-    q33 = b13 * b13 + b23 * b23 + b33 * b33
-    q12 = b11 * b12 + b12 * b22 + b13 * b23
-    q23 = b12 * b13 + b22 * b23 + b23 * b33
-    q13 = b11 * b13 + b12 * b23 + b13 * b33
-    a = lam * tre - mu
-    return (a * b11 + mu * q11, a * b22 + mu * q22, a * b33 + mu * q33,
-            a * b12 + mu * q12, a * b23 + mu * q23, a * b13 + mu * q13)
+def _isochoric_kirchhoff(w1, w2, jm23, b11, b22, b33, b12, b23, b13):
+    """Isochoric Kirchhoff stress of an invariant law from ``b``, ``J^(-2/3)`` and the law's derivatives."""
+    return isochoric_kirchhoff_invariant(w1, w2, jm23 * b11, jm23 * b22, jm23 * b33, jm23 * b12, jm23 * b23,
+                                         jm23 * b13)
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
@@ -232,7 +174,7 @@ def invariant_law_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm2
             f11, f12, f13 = 1.0 + f11a[e], f12a[e], f13a[e]
             f21, f22, f23 = f21a[e], 1.0 + f22a[e], f23a[e]
             f31, f32, f33 = f31a[e], f32a[e], 1.0 + f33a[e]
-            b11, b22, b33, b12, b23, b13 = _left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
+            b11, b22, b33, b12, b23, b13 = left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
             jm23 = jm23a[e]
             i1 = jm23 * (b11 + b22 + b33)
             if i2_dependent:
@@ -265,6 +207,9 @@ def _element_pressure(anp_weight, kappa, J, p_node, n0, n1, n2, n3):
 @njit(cache=True, fastmath=FASTMATH, inline="always")
 def _store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
                         fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11):
+    # The passes repeat "pressure, _nodal_forces, _store_nodal_forces" instead of one helper: numba 0.68
+    # refuses an inlined helper that takes these arrays and calls other inlined helpers inside a parfor
+    # ("Calling a closure with *args is unsupported").
     fe0[e] = -(r1x + r2x + r3x)
     fe1[e] = -(r1y + r2y + r3y)
     fe2[e] = -(r1z + r2z + r3z)
@@ -290,9 +235,9 @@ def invariant_force_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, j
             f11, f12, f13 = 1.0 + f11a[e], f12a[e], f13a[e]
             f21, f22, f23 = f21a[e], 1.0 + f22a[e], f23a[e]
             f31, f32, f33 = f31a[e], f32a[e], 1.0 + f33a[e]
-            c11, c12, c13, c21, c22, c23, c31, c32, c33, J = _cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-            b11, b22, b33, b12, b23, b13 = _left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-            t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff_constant(w1a[e], w2a[e], jm23a[e], b11, b22, b33, b12,
+            c11, c12, c13, c21, c22, c23, c31, c32, c33, J = cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
+            b11, b22, b33, b12, b23, b13 = left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
+            t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff(w1a[e], w2a[e], jm23a[e], b11, b22, b33, b12,
                                                                          b23, b13)
             jp = J * _element_pressure(anp_weight, kappa, J, p_node, conn[0, e], conn[1, e], conn[2, e], conn[3, e])
             r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = _nodal_forces(
@@ -306,23 +251,9 @@ def invariant_force_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, j
 def _isochoric_pk2(w1, w2, jm23, f11, f12, f13, f21, f22, f23, f31, f32, f33, c11, c12, c13, c21, c22, c23, c31,
                    c32, c33, J):
     """Isochoric 2nd Piola-Kirchhoff ``S = F^-1 tau_iso F^-T`` (11 22 33 12 23 13) of an invariant law."""
-    b11, b22, b33, b12, b23, b13 = _left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-    t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff_constant(w1, w2, jm23, b11, b22, b33, b12, b23, b13)
-    ij = 1.0 / J
-    a11, a12, a13 = c11 * ij, c21 * ij, c31 * ij
-    a21, a22, a23 = c12 * ij, c22 * ij, c32 * ij
-    a31, a32, a33 = c13 * ij, c23 * ij, c33 * ij
-    m11 = a11 * t11 + a12 * t12 + a13 * t13
-    m12 = a11 * t12 + a12 * t22 + a13 * t23
-    m13 = a11 * t13 + a12 * t23 + a13 * t33
-    m21 = a21 * t11 + a22 * t12 + a23 * t13
-    m22 = a21 * t12 + a22 * t22 + a23 * t23
-    m23 = a21 * t13 + a22 * t23 + a23 * t33
-    m31 = a31 * t11 + a32 * t12 + a33 * t13
-    m32 = a31 * t12 + a32 * t22 + a33 * t23
-    m33 = a31 * t13 + a32 * t23 + a33 * t33
-    return (m11 * a11 + m12 * a12 + m13 * a13, m21 * a21 + m22 * a22 + m23 * a23, m31 * a31 + m32 * a32 + m33 * a33,
-            m11 * a21 + m12 * a22 + m13 * a23, m21 * a31 + m22 * a32 + m23 * a33, m11 * a31 + m12 * a32 + m13 * a33)
+    b11, b22, b33, b12, b23, b13 = left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
+    t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff(w1, w2, jm23, b11, b22, b33, b12, b23, b13)
+    return pull_back(c11, c12, c13, c21, c22, c23, c31, c32, c33, J, t11, t22, t33, t12, t23, t13)
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
@@ -331,22 +262,6 @@ def _prony_update(decay, gain, h0, h1, h2, h3, h4, h5, d0, d1, d2, d3, d4, d5):
     ``decay = exp(-dt/tau)`` and ``gain = g (1 - decay)/(dt/tau)``."""
     return (decay * h0 + gain * d0, decay * h1 + gain * d1, decay * h2 + gain * d2,
             decay * h3 + gain * d3, decay * h4 + gain * d4, decay * h5 + gain * d5)
-
-
-@njit(cache=True, fastmath=FASTMATH, inline="always")
-def _push_forward(f11, f12, f13, f21, f22, f23, f31, f32, f33, s0, s1, s2, s3, s4, s5):
-    """Kirchhoff ``tau = F S F^T`` of a symmetric 2nd Piola-Kirchhoff ``S`` (11 22 33 12 23 13)."""
-    q11 = f11 * s0 + f12 * s3 + f13 * s5
-    q12 = f11 * s3 + f12 * s1 + f13 * s4
-    q13 = f11 * s5 + f12 * s4 + f13 * s2
-    q21 = f21 * s0 + f22 * s3 + f23 * s5
-    q22 = f21 * s3 + f22 * s1 + f23 * s4
-    q23 = f21 * s5 + f22 * s4 + f23 * s2
-    q31 = f31 * s0 + f32 * s3 + f33 * s5
-    q32 = f31 * s3 + f32 * s1 + f33 * s4
-    q33 = f31 * s5 + f32 * s4 + f33 * s2
-    return (q11 * f11 + q12 * f12 + q13 * f13, q21 * f21 + q22 * f22 + q23 * f23, q31 * f31 + q32 * f32 + q33 * f33,
-            q11 * f21 + q12 * f22 + q13 * f23, q21 * f31 + q22 * f32 + q23 * f33, q11 * f31 + q12 * f32 + q13 * f33)
 
 
 #: Prony terms of :func:`qlv_stress_pass` (materials with more run on the generic kernel)
@@ -372,7 +287,7 @@ def qlv_stress_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a,
             f11, f12, f13 = 1.0 + f11a[e], f12a[e], f13a[e]
             f21, f22, f23 = f21a[e], 1.0 + f22a[e], f23a[e]
             f31, f32, f33 = f31a[e], f32a[e], 1.0 + f33a[e]
-            c11, c12, c13, c21, c22, c23, c31, c32, c33, J = _cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
+            c11, c12, c13, c21, c22, c23, c31, c32, c33, J = cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
             se0, se1, se2, se3, se4, se5 = _isochoric_pk2(w1a[e], w2a[e], jm23a[e], f11, f12, f13, f21, f22, f23, f31, f32,
                                                           f33, c11, c12, c13, c21, c22, c23, c31, c32, c33, J)
             d0, d1, d2, d3, d4, d5 = se0 - sp0[e], se1 - sp1[e], se2 - sp2[e], se3 - sp3[e], se4 - sp4[e], se5 - sp5[e]
@@ -413,8 +328,8 @@ def pk2_force_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, s0a, s1
             f11, f12, f13 = 1.0 + f11a[e], f12a[e], f13a[e]
             f21, f22, f23 = f21a[e], 1.0 + f22a[e], f23a[e]
             f31, f32, f33 = f31a[e], f32a[e], 1.0 + f33a[e]
-            c11, c12, c13, c21, c22, c23, c31, c32, c33, J = _cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-            t11, t22, t33, t12, t23, t13 = _push_forward(f11, f12, f13, f21, f22, f23, f31, f32, f33,
+            c11, c12, c13, c21, c22, c23, c31, c32, c33, J = cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
+            t11, t22, t33, t12, t23, t13 = push_forward(f11, f12, f13, f21, f22, f23, f31, f32, f33,
                                                          s0a[e], s1a[e], s2a[e], s3a[e], s4a[e], s5a[e])
             jp = J * _element_pressure(anp_weight, kappa, J, p_node, conn[0, e], conn[1, e], conn[2, e], conn[3, e])
             r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = _nodal_forces(
@@ -454,12 +369,12 @@ def element_force_pass(u, conn, d9, vol0, svk, w1, w2, mu, kappa, n_bad,
         far = 0
         for e in range(lo[c], lo[c + 1]):
             f11, f12, f13, f21, f22, f23, f31, f32, f33 = _gathered_deformation_gradient(u, conn, d9, e)
-            c11, c12, c13, c21, c22, c23, c31, c32, c33, J = _cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-            b11, b22, b33, b12, b23, b13 = _left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
+            c11, c12, c13, c21, c22, c23, c31, c32, c33, J = cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
+            b11, b22, b33, b12, b23, b13 = left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
             if svk:
-                t11, t22, t33, t12, t23, t13 = _svk_kirchhoff(mu, lam, b11, b22, b33, b12, b23, b13)
+                t11, t22, t33, t12, t23, t13 = svk_kirchhoff(mu, lam, b11, b22, b33, b12, b23, b13)
             else:
-                t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff_constant(w1, w2, jm23_newton(J), b11, b22, b33,
+                t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff(w1, w2, jm23_newton(J), b11, b22, b33,
                                                                              b12, b23, b13)
                 jp = J * kappa * (J - 1.0)
                 t11 += jp
@@ -477,11 +392,11 @@ def element_force_pass(u, conn, d9, vol0, svk, w1, w2, mu, kappa, n_bad,
             continue
         for e in range(lo[c], lo[c + 1]):
             f11, f12, f13, f21, f22, f23, f31, f32, f33 = _gathered_deformation_gradient(u, conn, d9, e)
-            c11, c12, c13, c21, c22, c23, c31, c32, c33, J = _cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
+            c11, c12, c13, c21, c22, c23, c31, c32, c33, J = cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
             if J > JM23_NEWTON_MIN and J < JM23_NEWTON_MAX:
                 continue
-            b11, b22, b33, b12, b23, b13 = _left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-            t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff_constant(w1, w2, j_minus_two_thirds(J), b11, b22,
+            b11, b22, b33, b12, b23, b13 = left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
+            t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff(w1, w2, j_minus_two_thirds(J), b11, b22,
                                                                          b33, b12, b23, b13)
             jp = J * kappa * (J - 1.0)
             r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = _nodal_forces(
@@ -502,29 +417,30 @@ def first_inverted_element_of(u, conn, d9, n_elements):
     return np.int64(-1)
 
 
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def node_force(fe_flat, node_ptr, inc_slot, n_elements, n):
+    """Internal force of node ``n``: the sum of its element forces; ``inc_slot = 3 a n_elements + e``
+    indexes the flattened ``(12, n_elements)`` element force array for local node ``a`` of element ``e``."""
+    ne = np.uint64(n_elements)
+    fx = 0.0
+    fy = 0.0
+    fz = 0.0
+    for k in range(node_ptr[n], node_ptr[n + 1]):
+        s = np.uint64(inc_slot[k])
+        fx += fe_flat[s]
+        fy += fe_flat[s + ne]
+        fz += fe_flat[s + ne + ne]
+    return fx, fy, fz
+
+
 @njit(**_PASS)
 def gather_nodal_forces(fe_flat, node_ptr, inc_slot, n_elements, fint, lo):
-    """``fint[n] = sum`` of the element forces of node ``n``; ``inc_slot = 3 a n_elements + e`` indexes the
-    flattened ``(12, n_elements)`` element force array for local node ``a`` of element ``e``."""
-    ne = np.uint64(n_elements)
+    """``fint[n]`` = :func:`node_force` for every node."""
     for c in prange(lo.size - 1):
         for n in range(lo[c], lo[c + 1]):
-            fx = 0.0
-            fy = 0.0
-            fz = 0.0
-            for k in range(node_ptr[n], node_ptr[n + 1]):
-                s = np.uint64(inc_slot[k])
-                fx += fe_flat[s]
-                fy += fe_flat[s + ne]
-                fz += fe_flat[s + ne + ne]
-            fint[n, 0] = fx
-            fint[n, 1] = fy
-            fint[n, 2] = fz
+            fint[n, 0], fint[n, 1], fint[n, 2] = node_force(fe_flat, node_ptr, inc_slot, n_elements, n)
 
 
-# --------------------------------------------------------------------------------------------------
-# one force evaluation
-# --------------------------------------------------------------------------------------------------
 @njit(cache=True)
 def first_inverted_element(grad_u, lo):
     """Smallest element id with ``J <= 0`` (or NaN), from the stored displacement gradients ``F - I``; -1 if none."""
