@@ -320,7 +320,8 @@ def plot_meshes(vtu_dirs: Mapping[str, str | Path], out_dir, max_per_experiment:
 def plot_timing(timing_csv, step_path, realtime_path) -> list[Path]:
     """TLED wall time per explicit step and real-time factor against the number of tetrahedra.
 
-    One curve per law / precision / device (``benchmarks/fem_timing.py`` table); the real-time figure marks
+    One curve per law / precision / device (and kernel and mesh, when the ``benchmarks/fem_timing.py`` table
+    has those columns); the real-time figure marks
     factor 1 (a simulated second costs one wall-clock second) as the reference.
     """
     table = pd.read_csv(timing_csv)
@@ -329,9 +330,10 @@ def plot_timing(timing_csv, step_path, realtime_path) -> list[Path]:
     if missing:
         raise ValueError(f"{timing_csv}: timing table lacks columns {missing}")
     step, realtime = {}, {}
-    for (law, precision, device), rows in table.groupby(["law", "precision", "device"], sort=True):
+    keys = ["law", "precision", "device"] + [k for k in ("kernel", "mesh") if k in table.columns]
+    for key, rows in table.groupby(keys, sort=True):
         rows = rows.sort_values("n_elements")
-        name = f"{law} {precision} {device}"
+        name = " ".join(str(k) for k in key)
         n = rows["n_elements"].to_numpy(float)
         step[name] = (n, 1.0 / rows["steps_per_s"].to_numpy(float))
         realtime[name] = (n, rows["real_time_factor"].to_numpy(float))
