@@ -985,6 +985,12 @@ def _state(model: TLEDModel, state: tuple | None):
 
 KERNELS = ("auto", "vectorised", "generic")
 
+#: above this many elements ``kernel="auto"`` keeps float64 runs on the generic kernel: the vectorised passes
+#: move ~3x the bytes per element (stored F, element forces), which costs more than vectorisation gains once
+#: the arrays leave the caches (docs/fem_timing.md: 1e6 tets on the 2-core VM, NH 26 vs 29, QLV4 11 vs 21
+#: Mupd/s; at 1e5 tets and in float32 at every size the vectorised kernel is faster)
+AUTO_VECTORISED_MAX_FLOAT64_ELEMENTS = 300_000
+
 
 def vectorised_law(material: Material) -> tuple[bool, bool, float, float] | None:
     """``(svk, constant, dW/dI1, dW/dI2)`` when the vectorised kernels (:mod:`.vectorised`) can run this
@@ -1005,14 +1011,18 @@ def vectorised_law(material: Material) -> tuple[bool, bool, float, float] | None
 def _vector_setup(model: TLEDModel, kernel: str, h_state, s_prev):
     """The ``vec`` argument of the compiled loops and the force buffers of the generic kernel.
 
-    ``kernel``: ``"auto"`` (vectorised when :func:`vectorised_law` allows it), ``"vectorised"`` (required) or
-    ``"generic"``. The vectorised workspace holds the QLV states in structure-of-arrays form (copied from
-    ``h_state``/``s_prev``; :func:`_vector_state_back` copies them back). A disabled workspace has the same
+    ``kernel``: ``"auto"`` (vectorised when :func:`vectorised_law` allows it, except float64 meshes above
+    :data:`AUTO_VECTORISED_MAX_FLOAT64_ELEMENTS`), ``"vectorised"`` (required) or ``"generic"``. The
+    vectorised workspace holds the QLV states in structure-of-arrays form (copied from ``h_state``/``s_prev``;
+    :func:`_vector_state_back` copies them back). A disabled workspace has the same
     types with zero sizes, so one compiled loop serves both kernels.
     """
     if kernel not in KERNELS:
         raise ValueError(f"kernel must be one of {KERNELS}, not {kernel!r}")
     law = vectorised_law(model.material) if kernel != "generic" else None
+    if kernel == "auto" and model.dtype == np.float64 \
+            and model.mesh.n_elements > AUTO_VECTORISED_MAX_FLOAT64_ELEMENTS:
+        law = None
     if kernel == "vectorised" and law is None:
         raise ValueError(f"the vectorised kernel needs Saint Venant-Kirchhoff or an invariant law with at most "
                          f"{vectorised.MAX_PRONY_TERMS} Prony terms and no branch energies; "
@@ -1112,8 +1122,8 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
     track_energy : accumulate the energy balance (``RunResult.energy_j``; a serial pass over the nodes per
         step, a few % of the step time)
     kernel : ``"auto"`` (the vectorised kernels of :mod:`.vectorised` for SVK and invariant laws, with or
-        without up to four QLV terms; the generic kernel for stretch-based laws and beyond-QLV), ``"vectorised"``
-        or ``"generic"``
+        without up to four QLV terms, except float64 meshes above :data:`AUTO_VECTORISED_MAX_FLOAT64_ELEMENTS`
+        elements; the generic kernel for stretch-based laws and beyond-QLV), ``"vectorised"`` or ``"generic"``
     """
     m = model.material
     dt = critical_time_step(model, safety) if dt_s is None else float(dt_s)
