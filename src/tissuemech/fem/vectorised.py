@@ -1,25 +1,27 @@
 """Internal forces of linear tets in a structure-of-arrays layout that LLVM vectorises across elements.
 
-This is the CPU fast path of :mod:`.tled` for the laws whose invariant derivatives are constants
-(Saint Venant-Kirchhoff, neo-Hookean, Mooney-Rivlin; alone or as the instantaneous law of QLV). It computes
-exactly what the generic per-element kernel computes (same formulas: ``F``, average nodal pressure,
-isochoric Kirchhoff stress, the recursive Prony update of the isochoric 2nd Piola-Kirchhoff stress,
-``f_a = V0 tau (cof dN_a) / J``), in four or more passes per force evaluation:
+The CPU fast path of :mod:`.tled` for Saint Venant-Kirchhoff and every invariant law ``W(I1bar, I2bar)``,
+alone or as the instantaneous law of QLV with up to four Prony terms (stretch-based laws and beyond-QLV
+branch energies stay on the generic kernel). It computes what the generic per-element kernel computes (the
+same formulas: ``F``, average nodal pressure, isochoric Kirchhoff stress, the recursive Prony update of the
+isochoric 2nd Piola-Kirchhoff stress, ``f_a = V0 tau (cof dN_a) / J``), in passes:
 
-1. :func:`kinematics_pass` (elements): ``F`` from gathered displacements, stored as ``F - I`` in 9 arrays; the element
-   pressure contribution ``kappa (J - 1) V0``; a count of inverted elements and of elements outside the
-   range of the branch-free ``J^(-2/3)``;
-2. :func:`nodal_pressure_pass` (nodes): volume-weighted average of the element pressures (ANP);
-3. :func:`invariant_force_pass` (elements): stress and the 12 element nodal forces, or for QLV (up to four
-   Prony terms) :func:`qlv_stress_pass` (relaxed stress, advances the element states) and
-   :func:`pk2_force_pass`;
-4. :func:`gather_nodal_forces` (nodes): every node sums its incident element forces through a CSR incidence
-   list (no scatter, no atomics, no per-thread force buffers).
+1. :func:`kinematics_pass` (elements): ``F`` from gathered displacements, stored as ``F - I`` in 9 arrays;
+   ``J^(-2/3)``; the element pressure contribution ``kappa (J - 1) V0``; counts of inverted elements and of
+   elements outside the range of the branch-free ``J^(-2/3)``;
+2. :func:`invariant_law_pass` (elements, only for laws whose derivatives depend on the invariants): the
+   fitting code's ``dW/dI1``, ``dW/dI2`` at every element (function pointers: this loop is scalar);
+3. :func:`nodal_pressure_pass` (nodes): volume-weighted average of the element pressures (ANP);
+4. :func:`invariant_force_pass` (elements): stress and the 12 element nodal forces, or for QLV
+   :func:`qlv_stress_pass` (relaxed stress, advances the element states) and :func:`pk2_force_pass`;
+5. :func:`gather_nodal_forces` (nodes; or the caller's node pass through :func:`node_force`): every node
+   sums its incident element forces through a CSR incidence list (no scatter, no atomics, no per-thread
+   force buffers).
 
-Without average nodal pressure and without viscoelastic states (and always for Saint Venant-Kirchhoff) a
-single fused :func:`element_force_pass` replaces steps 1-3.
+Without average nodal pressure and viscoelastic states a law with constant derivatives (neo-Hookean,
+Mooney-Rivlin) and Saint Venant-Kirchhoff run one fused :func:`element_force_pass` instead of 1-4.
 
-Why this shape (measured in ``docs/fem_timing.md``; the loop that is not vectorised runs at a third of the
+Why this shape (measured in ``docs/fem_timing.md``; a loop that is not vectorised runs at a third of the
 speed):
 
 * unsigned indices (``uint32`` connectivity, ``uint64`` loop bounds): numba wraps negative signed indices
@@ -27,14 +29,13 @@ speed):
 * one output array per stored component: LLVM cannot prove that two rows of one 2-D array do not overlap
   (their distance is the run-time row length) and refuses to vectorise a loop that stores to several rows;
   rows passed as separate arguments of a parallel function are marked ``noalias`` by numba's parfor lowering;
-* no calls and no branches in the element loops: the law enters as the constants ``dW/dI1``, ``dW/dI2``
-  (evaluated once from the fitting code's law functions), ``J^(-2/3)`` by four Newton steps (exact to
-  rounding for ``0.3 < J < 3.5``; a serial pass corrects elements outside, or in the fused pass they are
-  computed again with ``cbrt``), stores under a flag written as selects, and the Prony terms unrolled (a fixed four, unused ones with zero weight) instead of
-  an inner loop.
+* no calls and no branches in the vectorised loops: the law's derivatives come in as arrays (or constants),
+  ``J^(-2/3)`` by four Newton steps (exact to rounding for ``0.3 < J < 3.5``; a serial pass corrects the
+  elements outside, or in the fused pass they are computed again with ``cbrt``), stores under a flag are
+  written as selects, and the Prony terms are unrolled (a fixed four, unused ones with zero weight).
 
 The arithmetic is double precision; the stored arrays follow the model's precision (float32 halves the
-traffic).
+traffic, which is what bounds large meshes).
 """
 from __future__ import annotations
 
