@@ -19,6 +19,10 @@ Method (Miller, Joldes, Lance & Wittek 2007; Taylor, Cheng & Ourselin 2008; Nift
 * element inversion (``J <= 0``) or a non-finite state stops the run and raises
   :class:`ElementInversionError` with the element id, step and time.
 
+Two kernels compute the internal forces (``kernel=`` of :func:`run_explicit` / :func:`solve_quasistatic`):
+the generic one below (any law) and the vectorised structure-of-arrays passes of :mod:`.vectorised` (SVK
+and invariant laws, with up to four Prony terms; chosen by ``"auto"``), which agree to rounding.
+
 The whole time loop runs inside one compiled function (no Python per step). The element stress of
 :mod:`.materials` is inlined into the kernels: numba's cache does not see changes of inlined code in
 another file, so after editing ``materials.py`` touch this module (or clear ``NUMBA_CACHE_DIR``). Reaction forces are sums of
