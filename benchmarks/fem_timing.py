@@ -42,6 +42,8 @@ LAWS = {
     "NH": ("neo_hookean", {"mu": 1000.0}, (), ()),
     "LP2": ("lopez_pamies2", {"mu1": 900.0, "alpha1": 1.2, "mu2": 100.0, "alpha2": 3.0}, (), ()),
     "QLV4-NH": ("neo_hookean", {"mu": 1000.0}, (0.3, 0.2, 0.1, 0.05), (0.01, 0.1, 1.0, 10.0)),
+    # stretch-based (spectral decomposition per element; generic kernel), Budday-like cortex parameters
+    "OG1": ("ogden1", {"mu1": 1000.0, "alpha1": -25.0}, (), ()),
 }
 
 

@@ -32,7 +32,7 @@ from numba import cfunc, njit, types
 
 from ..models.hyperelastic import (lopez_pamies_dw_di1, mooney_rivlin_dw_di1, mooney_rivlin_dw_di2,
                                   neo_hookean_dw_di1, ogden_dw_dlambda, reduced_polynomial_dw_di1)
-from .kinematics import FASTMATH, left_cauchy_green
+from .kinematics import FASTMATH, left_cauchy_green, symmetric_eigen3
 
 KIND_INVARIANT = 0
 KIND_STRETCH = 1
@@ -409,29 +409,16 @@ def _iso_from_bbar(kind, w1fn, w2fn, wlfn, p, b11, b22, b33, b12, b23, b13):
         i1 = b11 + b22 + b33
         i2 = 0.5 * (i1 * i1 - (b11 * b11 + b22 * b22 + b33 * b33 + 2.0 * (b12 * b12 + b23 * b23 + b13 * b13)))
         return isochoric_kirchhoff_invariant(w1fn(p, i1, i2), w2fn(p, i1, i2), b11, b22, b33, b12, b23, b13)
-    # stretch-based (Valanis-Landel): spectral decomposition of bbar
-    bb = np.empty((3, 3))
-    bb[0, 0], bb[1, 1], bb[2, 2] = b11, b22, b33
-    bb[0, 1] = bb[1, 0] = b12
-    bb[1, 2] = bb[2, 1] = b23
-    bb[0, 2] = bb[2, 0] = b13
-    lam2, vec = np.linalg.eigh(bb)
-    beta = np.empty(3)
-    for k in range(3):
-        lk = math.sqrt(lam2[k])
-        beta[k] = lk * wlfn(p, lk)
-    m = (beta[0] + beta[1] + beta[2]) / 3.0
-    t = np.zeros(6)
-    for k in range(3):
-        d = beta[k] - m
-        n0, n1, n2 = vec[0, k], vec[1, k], vec[2, k]
-        t[0] += d * n0 * n0
-        t[1] += d * n1 * n1
-        t[2] += d * n2 * n2
-        t[3] += d * n0 * n1
-        t[4] += d * n1 * n2
-        t[5] += d * n0 * n2
-    return (t[0], t[1], t[2], t[3], t[4], t[5])
+    # stretch-based (Valanis-Landel): tau_iso = sum_k (beta_k - mean beta) n_k n_k, beta_k = lam_k dW/dlam_k,
+    # from the spectral decomposition of bbar
+    l1, l2, l3, n11, n21, n31, n12, n22, n32, n13, n23, n33 = symmetric_eigen3(b11, b22, b33, b12, b23, b13)
+    s1, s2, s3 = math.sqrt(l1), math.sqrt(l2), math.sqrt(l3)
+    beta1, beta2, beta3 = s1 * wlfn(p, s1), s2 * wlfn(p, s2), s3 * wlfn(p, s3)
+    m = (beta1 + beta2 + beta3) / 3.0
+    d1, d2, d3 = beta1 - m, beta2 - m, beta3 - m
+    return (d1 * n11 * n11 + d2 * n12 * n12 + d3 * n13 * n13, d1 * n21 * n21 + d2 * n22 * n22 + d3 * n23 * n23,
+            d1 * n31 * n31 + d2 * n32 * n32 + d3 * n33 * n33, d1 * n11 * n21 + d2 * n12 * n22 + d3 * n13 * n23,
+            d1 * n21 * n31 + d2 * n22 * n32 + d3 * n23 * n33, d1 * n11 * n31 + d2 * n12 * n32 + d3 * n13 * n33)
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
