@@ -229,8 +229,9 @@ def _store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
 def invariant_force_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a, conn, d9, vol0, p_node, w1a, w2a,
                          kappa, anp_weight, fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11, lo):
     """Element nodal forces ``fe[3 a + i]`` (N) of an invariant law (``W1 = dW/dI1``, ``W2 = dW/dI2`` of every
-    element in ``w1a``, ``w2a``: constants, or from :func:`invariant_law_pass`) plus the volumetric pressure ``anp_weight p_ANP + (1 - anp_weight) kappa (J - 1)`` (weight 1: average nodal
-    pressure; 0: the element's own); ``J^(-2/3)`` from :func:`kinematics_pass`."""
+    element in ``w1a``, ``w2a``: constants, or from :func:`invariant_law_pass`) plus the volumetric pressure
+    ``anp_weight p_ANP + (1 - anp_weight) kappa (J - 1)`` (weight 1: average nodal pressure; 0: the
+    element's own); ``J^(-2/3)`` from :func:`kinematics_pass`."""
     for c in prange(lo.size - 1):
         for e in range(lo[c], lo[c + 1]):
             f11, f12, f13 = 1.0 + f11a[e], f12a[e], f13a[e]
@@ -271,12 +272,13 @@ MAX_PRONY_TERMS = 4
 
 @njit(**_PASS)
 def qlv_stress_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a, w1a, w2a, g_inf, commit,
-                    sp0, sp1, sp2, sp3, sp4, sp5, decay, gain, ha0, ha1, ha2, ha3, ha4, ha5, hb0, hb1, hb2, hb3, hb4, hb5,
-                    hc0, hc1, hc2, hc3, hc4, hc5, hd0, hd1, hd2, hd3, hd4, hd5, s0a, s1a, s2a, s3a, s4a, s5a, lo):
+                    sp0, sp1, sp2, sp3, sp4, sp5, decay, gain, ha0, ha1, ha2, ha3, ha4, ha5,
+                    hb0, hb1, hb2, hb3, hb4, hb5, hc0, hc1, hc2, hc3, hc4, hc5, hd0, hd1, hd2, hd3, hd4, hd5,
+                    s0a, s1a, s2a, s3a, s4a, s5a, lo):
     """QLV with up to four Prony terms (the generic kernel's formulas): the instantaneous isochoric 2nd
     Piola-Kirchhoff stress ``S_e = F^-1 tau_iso F^-T`` of an invariant law (derivatives per element in
-    ``w1a``, ``w2a``) and the relaxed
-    ``S = g_inf S_e + sum_i h_i`` (into ``s0a``...``s5a``) with the recursive update of every term (states
+    ``w1a``, ``w2a``) and the relaxed ``S = g_inf S_e + sum_i h_i`` (into ``s0a``...``s5a``) with the
+    recursive update of every term (states
     ``h_i`` = rows ``ha``...``hd``, previous ``S_e`` = ``sp``; unused terms have ``decay = gain = 0``). The
     states are written only when ``commit``. (Stress and forces in one pass would hold ~70 values per
     element and spill the vector registers: two passes are faster.)
@@ -289,12 +291,18 @@ def qlv_stress_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a,
             f21, f22, f23 = f21a[e], 1.0 + f22a[e], f23a[e]
             f31, f32, f33 = f31a[e], f32a[e], 1.0 + f33a[e]
             c11, c12, c13, c21, c22, c23, c31, c32, c33, J = cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-            se0, se1, se2, se3, se4, se5 = _isochoric_pk2(w1a[e], w2a[e], jm23a[e], f11, f12, f13, f21, f22, f23, f31, f32,
-                                                          f33, c11, c12, c13, c21, c22, c23, c31, c32, c33, J)
-            d0, d1, d2, d3, d4, d5 = se0 - sp0[e], se1 - sp1[e], se2 - sp2[e], se3 - sp3[e], se4 - sp4[e], se5 - sp5[e]
+            se0, se1, se2, se3, se4, se5 = _isochoric_pk2(w1a[e], w2a[e], jm23a[e], f11, f12, f13, f21, f22, f23,
+                                                          f31, f32, f33, c11, c12, c13, c21, c22, c23, c31, c32,
+                                                          c33, J)
+            d0, d1, d2 = se0 - sp0[e], se1 - sp1[e], se2 - sp2[e]
+            d3, d4, d5 = se3 - sp3[e], se4 - sp4[e], se5 - sp5[e]
             # selects, not branches, so that the loop stays vectorisable
-            sp0[e], sp1[e], sp2[e] = (se0 if commit else sp0[e]), (se1 if commit else sp1[e]), (se2 if commit else sp2[e])
-            sp3[e], sp4[e], sp5[e] = (se3 if commit else sp3[e]), (se4 if commit else sp4[e]), (se5 if commit else sp5[e])
+            sp0[e] = se0 if commit else sp0[e]
+            sp1[e] = se1 if commit else sp1[e]
+            sp2[e] = se2 if commit else sp2[e]
+            sp3[e] = se3 if commit else sp3[e]
+            sp4[e] = se4 if commit else sp4[e]
+            sp5[e] = se5 if commit else sp5[e]
             s0, s1, s2, s3, s4, s5 = g_inf * se0, g_inf * se1, g_inf * se2, g_inf * se3, g_inf * se4, g_inf * se5
             x0, x1, x2, x3, x4, x5 = _prony_update(da, ga, ha0[e], ha1[e], ha2[e], ha3[e], ha4[e], ha5[e],
                                                    d0, d1, d2, d3, d4, d5)
