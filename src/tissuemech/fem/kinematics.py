@@ -38,6 +38,14 @@ def left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33):
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
+def symmetric_square(b11, b22, b33, b12, b23, b13):
+    """``b b`` of a symmetric tensor."""
+    return (b11 * b11 + b12 * b12 + b13 * b13, b12 * b12 + b22 * b22 + b23 * b23,
+            b13 * b13 + b23 * b23 + b33 * b33, b11 * b12 + b12 * b22 + b13 * b23,
+            b12 * b13 + b22 * b23 + b23 * b33, b11 * b13 + b12 * b23 + b13 * b33)
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
 def pull_back(c11, c12, c13, c21, c22, c23, c31, c32, c33, J, t11, t22, t33, t12, t23, t13):
     """``F^-1 t F^-T`` of a symmetric spatial tensor ``t`` (e.g. Kirchhoff stress -> 2nd Piola-Kirchhoff),
     with ``F^-1 = cof^T / J``."""

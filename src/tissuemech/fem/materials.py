@@ -32,7 +32,7 @@ from numba import cfunc, njit, types
 
 from ..models.hyperelastic import (lopez_pamies_dw_di1, mooney_rivlin_dw_di1, mooney_rivlin_dw_di2,
                                   neo_hookean_dw_di1, ogden_dw_dlambda, reduced_polynomial_dw_di1)
-from .kinematics import FASTMATH, left_cauchy_green, symmetric_eigen3
+from .kinematics import FASTMATH, left_cauchy_green, symmetric_eigen3, symmetric_square
 
 KIND_INVARIANT = 0
 KIND_STRETCH = 1
@@ -366,12 +366,7 @@ def isochoric_kirchhoff_invariant(w1, w2, b11, b22, b33, b12, b23, b13):
     isochoric left Cauchy-Green tensor ``bbar`` and the derivatives ``W1 = dW/dI1bar``, ``W2 = dW/dI2bar``
     there (Pa)."""
     i1 = b11 + b22 + b33
-    q11 = b11 * b11 + b12 * b12 + b13 * b13
-    q22 = b12 * b12 + b22 * b22 + b23 * b23
-    q33 = b13 * b13 + b23 * b23 + b33 * b33
-    q12 = b11 * b12 + b12 * b22 + b13 * b23
-    q23 = b12 * b13 + b22 * b23 + b23 * b33
-    q13 = b11 * b13 + b12 * b23 + b13 * b33
+    q11, q22, q33, q12, q23, q13 = symmetric_square(b11, b22, b33, b12, b23, b13)
     a = 2.0 * (w1 + i1 * w2)
     c = -2.0 * w2
     t11 = a * b11 + c * q11
@@ -385,12 +380,7 @@ def isochoric_kirchhoff_invariant(w1, w2, b11, b22, b33, b12, b23, b13):
 def svk_kirchhoff(mu, lam, b11, b22, b33, b12, b23, b13):
     """Saint Venant-Kirchhoff ``tau = F S F^T = lam tr(E) b + mu (b^2 - b)`` with ``E = (C - I)/2`` (Pa)."""
     tre = 0.5 * (b11 + b22 + b33 - 3.0)
-    q11 = b11 * b11 + b12 * b12 + b13 * b13
-    q22 = b12 * b12 + b22 * b22 + b23 * b23
-    q33 = b13 * b13 + b23 * b23 + b33 * b33
-    q12 = b11 * b12 + b12 * b22 + b13 * b23
-    q23 = b12 * b13 + b22 * b23 + b23 * b33
-    q13 = b11 * b13 + b12 * b23 + b13 * b33
+    q11, q22, q33, q12, q23, q13 = symmetric_square(b11, b22, b33, b12, b23, b13)
     a = lam * tre - mu
     return (a * b11 + mu * q11, a * b22 + mu * q22, a * b33 + mu * q33,
             a * b12 + mu * q12, a * b23 + mu * q23, a * b13 + mu * q13)
