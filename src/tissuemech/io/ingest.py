@@ -18,6 +18,7 @@ from ..canonical import make_run_dataset, sha256_of, write_netcdf, write_text
 from .blocks import Block
 from .dispatch import read_export
 from .errors import IngestError
+from .quality import flag_run_files
 from .samples import NUMERIC, READER_OPTIONS, STANDARD, load_dataset_yaml, load_samples, row_problems, source_folder
 
 log = logging.getLogger(__name__)
@@ -117,7 +118,7 @@ def ingest_dataset(dataset_dir, runs_dir, report_path) -> pd.DataFrame:
     dataset_dir, runs_dir = Path(dataset_dir), Path(runs_dir)
     runs_dir.mkdir(parents=True, exist_ok=True)
     dataset = dataset_dir.name
-    load_dataset_yaml(dataset_dir)
+    meta = load_dataset_yaml(dataset_dir)
     sheet = load_samples(dataset_dir)
     source = source_folder(dataset_dir)
     cache: dict[Path, list[Block]] = {}
@@ -157,6 +158,9 @@ def ingest_dataset(dataset_dir, runs_dir, report_path) -> pd.DataFrame:
             rec.update(status="error", reason=str(exc))
             log.warning("rejected %s: %s", rid, exc)
         records.append(rec)
+    # --- hook: point-level quality flags (io/quality.py). A second pass over the runs written above, because the
+    # LVE check of a frequency sweep needs the amplitude sweep of the same sample. ------------------------------
+    flag_run_files([runs_dir / f"{r['run']}.nc" for r in records if r["status"] == "ok"], meta)
     report = pd.DataFrame(records, columns=list(REPORT_COLUMNS))
     write_text(report.to_csv(index=False), report_path)
     return report
