@@ -55,9 +55,18 @@ Dimensions ``curve`` (one per test + condition), ``grid`` (padded to the longest
 
 Use :func:`load_average` (file) or :func:`select_average` (in memory) to get one curve back as a tidy
 dataset whose dimension is the grid variable.
+
+Flagged points (the fit-data selection)
+---------------------------------------
+Run files carry the point-level bitmask ``quality_flags`` set at ingest (:mod:`tissuemech.io.quality`:
+inertia-dominated raw phase, torque below the declared resolution, frequency-sweep points above the LVE limit).
+With ``exclude_flagged=True`` (the default; pipeline config ``fit.exclude_flagged``) :func:`average_runs` drops
+those points before averaging, so the curves the fits read hold none of them; a run left with no point is not
+averaged. The averages attributes ``exclude_flagged`` (0/1) and ``n_flagged_points_excluded`` record it.
 """
 from __future__ import annotations
 
+import logging
 import math
 from collections import defaultdict
 from collections.abc import Mapping, Sequence
@@ -68,6 +77,8 @@ import numpy as np
 import xarray as xr
 
 from .canonical import CANONICAL_VARIABLES, read_netcdf, write_netcdf
+
+_log = logging.getLogger(__name__)
 
 #: nominal condition attributes (run attrs) that, with the test, define a condition
 CONDITION_ATTRS: tuple[str, ...] = ("shear_rate_1_per_s", "strain_pct", "stress_pa", "frequency_hz")
@@ -92,6 +103,22 @@ GRID_SPECS: dict[str, tuple[str, str]] = {
 _NOT_AVERAGED = frozenset({"total_time"})
 
 _NO_CONDITION = "default"
+
+#: name of the point-level quality bitmask in run files (written by :mod:`tissuemech.io.quality`)
+QUALITY_FLAG_VARIABLE = "quality_flags"
+
+
+def unflagged_points(run: xr.Dataset) -> np.ndarray:
+    """Boolean mask over ``point``: True where the run has no quality flag (all True without ``quality_flags``)."""
+    if QUALITY_FLAG_VARIABLE not in run:
+        return np.ones(run.sizes.get("point", 0), dtype=bool)
+    return np.asarray(run[QUALITY_FLAG_VARIABLE].values) == 0
+
+
+def drop_flagged(run: xr.Dataset) -> xr.Dataset:
+    """The run without its quality-flagged points (the same object when none is flagged)."""
+    keep = unflagged_points(run)
+    return run if keep.all() else run.isel(point=np.flatnonzero(keep))
 
 
 def condition_of(run: xr.Dataset) -> dict[str, float]:
@@ -374,6 +401,7 @@ def average_runs(
     point_count_tolerance: float = 0.5,
     range_tolerance_decades: float = 0.5,
     range_tolerance_span: float = 0.25,
+    exclude_flagged: bool = True,
 ) -> xr.Dataset:
     """Average canonical runs per test and condition (layout in the module docstring).
 
@@ -389,6 +417,7 @@ def average_runs(
     range_tolerance_decades : deviation of a member's x range ends from the condition medians that flags it
         on log grids, in decades.
     range_tolerance_span : the same on linear grids, as a fraction of the median span.
+    exclude_flagged : drop points with a non-zero ``quality_flags`` before averaging (module docstring).
 
     Returns
     -------
@@ -401,10 +430,18 @@ def average_runs(
     """
     groups: dict[tuple[str, str], list[xr.Dataset]] = defaultdict(list)
     conditions: dict[tuple[str, str], dict[str, float]] = {}
+    n_excluded = 0
     for run in runs:
         test = str(run.attrs.get("test", ""))
         if test not in GRID_SPECS:
             continue
+        if exclude_flagged:
+            kept = drop_flagged(run)
+            n_excluded += run.sizes.get("point", 0) - kept.sizes.get("point", 0)
+            if kept.sizes.get("point", 0) == 0:
+                _log.warning("run %s: every point is quality-flagged; not averaged", run.attrs.get("run", "?"))
+                continue
+            run = kept
         condition = condition_of(run)
         key = (test, condition_label(condition))
         groups[key].append(run)
@@ -429,7 +466,10 @@ def average_runs(
         curves.append(curve)
         members.extend(curve_members)
     _mark_missing_samples(curves)
-    return _to_dataset(curves, members)
+    averages = _to_dataset(curves, members)
+    averages.attrs["exclude_flagged"] = int(exclude_flagged)
+    averages.attrs["n_flagged_points_excluded"] = n_excluded
+    return averages
 
 
 def _mark_missing_samples(curves: list[dict]) -> None:

@@ -24,6 +24,7 @@ from matplotlib.colors import TwoSlopeNorm
 from matplotlib.figure import Figure
 
 from .canonical import CANONICAL_VARIABLES, atomic_write
+from .curves import QUALITY_FLAG_VARIABLE, unflagged_points
 
 #: axis labels (symbol [unit]) of canonical variables
 AXIS_LABELS: dict[str, str] = {
@@ -104,20 +105,23 @@ def _positive(values: np.ndarray) -> bool:
 
 
 def figure_average(curve: xr.Dataset, variable: str, runs: Sequence[xr.Dataset] = (), title: str | None = None) -> Figure:
-    """Raw runs (thin lines) and the sample mean with a ±1 SD band.
+    """Raw runs (thin lines) and the sample mean with a ±1 SD band; quality-flagged points as hollow markers.
 
     Parameters
     ----------
     curve : one averaged curve (:func:`tissuemech.curves.select_average`): grid coordinate, ``<variable>_mean``,
         ``<variable>_sd``, attrs ``grid_scale``, ``n_samples``, ``test``, ``condition``.
     variable : canonical variable on the y axis.
-    runs : the member runs, drawn raw (their own points, not resampled).
+    runs : the member runs, drawn raw (their own points, not resampled). Points with a non-zero
+        ``quality_flags`` (:mod:`tissuemech.io.quality`) are drawn as hollow red circles; the legend names the
+        flags that occur (``flagged: inertia_dominated`` ...).
     """
     grid_name = next(iter(curve.coords))
     x = np.asarray(curve[grid_name].values, dtype=float)
     mean = np.asarray(curve[f"{variable}_mean"].values, dtype=float)
     sd = np.asarray(curve[f"{variable}_sd"].values, dtype=float) if f"{variable}_sd" in curve else np.full_like(mean, np.nan)
     fig, (ax,) = _new_figure()
+    meanings: set[str] = set()
     for run in runs:
         if variable not in run:
             continue
@@ -128,6 +132,11 @@ def figure_average(curve: xr.Dataset, variable: str, runs: Sequence[xr.Dataset] 
         else:
             continue
         ax.plot(rx, run[variable].values, color="0.6", lw=0.7, alpha=0.7, zorder=1)
+        flagged = ~unflagged_points(run)
+        if flagged.any():
+            ax.plot(rx[flagged], np.asarray(run[variable].values, dtype=float)[flagged], "o", mfc="none",
+                    mec="C3", ms=4, mew=0.8, zorder=4)
+            meanings.update(flag_meanings(run, flagged))
     band = np.isfinite(sd)
     ax.fill_between(x, np.where(band, mean - sd, np.nan), np.where(band, mean + sd, np.nan), color="C0",
                     alpha=0.3, lw=0, label="±1 SD", zorder=2)
@@ -135,6 +144,8 @@ def figure_average(curve: xr.Dataset, variable: str, runs: Sequence[xr.Dataset] 
     ax.plot(x, mean, color="C0", lw=2, label=f"mean (n = {n})", zorder=3)
     if runs:
         ax.plot([], [], color="0.6", lw=0.7, label="runs")
+    if meanings:
+        ax.plot([], [], "o", mfc="none", mec="C3", ms=4, mew=0.8, label="flagged: " + ", ".join(sorted(meanings)))
     log = curve.attrs.get("grid_scale") == "log"
     if log:
         ax.set_xscale("log")
@@ -145,6 +156,20 @@ def figure_average(curve: xr.Dataset, variable: str, runs: Sequence[xr.Dataset] 
     ax.set_title(title or f"{curve.attrs.get('test', '')} [{curve.attrs.get('condition', '')}]", fontsize=10)
     ax.legend(fontsize=8)
     return fig
+
+
+def flag_meanings(run: xr.Dataset, points: np.ndarray | None = None) -> list[str]:
+    """Names of the quality flags set on ``points`` (bool mask; all points when None) of a run, from the CF
+    ``flag_masks``/``flag_meanings`` attributes of its ``quality_flags`` variable."""
+    if QUALITY_FLAG_VARIABLE not in run:
+        return []
+    var = run[QUALITY_FLAG_VARIABLE]
+    flags = np.asarray(var.values)
+    if points is not None:
+        flags = flags[points]
+    masks = np.atleast_1d(var.attrs.get("flag_masks", []))
+    names = str(var.attrs.get("flag_meanings", "")).split()
+    return [name for mask, name in zip(masks, names) if np.any(flags & int(mask))]
 
 
 def plot_average(curve: xr.Dataset, variable: str, path: str | Path, runs: Sequence[xr.Dataset] = (),

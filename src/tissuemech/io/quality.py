@@ -33,6 +33,9 @@ LVE limit. Only for frequency sweeps whose specimen and sample also have an ampl
 flagged). The strain amplitude of a point is its measured ``shear_strain``, or the nominal ``strain_pct`` of the
 sample sheet for every point when the export has no strain column.
 
+Fits exclude flagged points by default: :func:`tissuemech.curves.average_runs` (``exclude_flagged``, pipeline
+config ``fit.exclude_flagged``) drops them before the averages the fits read.
+
 Checks that could not be made are recorded, with the reason, in the run attribute ``quality_not_testable``
 (``"<check>: <reason>"`` entries joined by ``"; "``); ``quality_checks`` lists those that were made. The counts
 per bit are ``quality_n_<meaning>``.
@@ -49,6 +52,7 @@ import numpy as np
 import xarray as xr
 
 from ..canonical import read_netcdf, write_netcdf
+from ..curves import QUALITY_FLAG_VARIABLE
 from ..lve import lve_limit
 
 log = logging.getLogger(__name__)
@@ -64,8 +68,8 @@ INERTIA_DOMINATED, TORQUE_BELOW_RESOLUTION, OUTSIDE_LVE = 1, 2, 4
 #: raw-phase threshold [rad] above which a point is inertia-dominated (150 deg, see the module docstring)
 RAW_PHASE_LIMIT_RAD: float = math.radians(150.0)
 
-#: name of the flag variable in a run file
-FLAG_VARIABLE = "quality_flags"
+#: name of the flag variable in a run file (defined with the fit-data selection in :mod:`tissuemech.curves`)
+FLAG_VARIABLE = QUALITY_FLAG_VARIABLE
 
 #: oscillation test kinds (raw phase only has a meaning there)
 OSCILLATION_TESTS = ("amplitude_sweep", "frequency_sweep")
@@ -271,19 +275,6 @@ def flag_run_files(paths: Iterable[str | Path], meta: Mapping | None = None) -> 
         if flagged[FLAG_VARIABLE].values.any():
             log.info("%s: %d flagged points", path.name, int(np.count_nonzero(flagged[FLAG_VARIABLE].values)))
     return paths
-
-
-def unflagged(run: xr.Dataset) -> np.ndarray:
-    """Boolean mask of the points without any quality flag (all True for a run without ``quality_flags``)."""
-    if FLAG_VARIABLE not in run:
-        return np.ones(run.sizes.get("point", 0), dtype=bool)
-    return np.asarray(run[FLAG_VARIABLE].values) == 0
-
-
-def drop_flagged(run: xr.Dataset) -> xr.Dataset:
-    """The run without its flagged points (unchanged when it has no ``quality_flags``)."""
-    keep = unflagged(run)
-    return run if keep.all() else run.isel(point=np.flatnonzero(keep))
 
 
 def describe_flags(run: xr.Dataset) -> str:
