@@ -4,6 +4,7 @@ Sub-commands
 ------------
 synth        generate a virtual-rheometer dataset folder (``tissuemech synth --config c.yaml --seed 1 --out raw/x``)
 ingest       ingest one dataset folder into canonical run files
+check        validate a dataset folder before any run (``tissuemech check raw/<name>``; exit 1 on errors)
 regression   check (or ``--update``) the committed reference table of fitted parameters
 """
 from __future__ import annotations
@@ -15,6 +16,7 @@ import sys
 SUBCOMMANDS = {
     "synth": ("tissuemech.synth.cli", "generate a synthetic dataset with the virtual rheometer"),
     "ingest": ("tissuemech.io.cli", "ingest a dataset folder into canonical netCDF runs"),
+    "check": ("tissuemech.io.check", "validate a dataset folder (reads only) and print what was found per run"),
     "regression": ("tissuemech.regression", "check or update the fitted-parameter reference table"),
 }
 

@@ -107,10 +107,10 @@ def torque_resolution_flags(run: xr.Dataset, resolution_n_m: float | None) -> tu
     -------
     (mask, reason) as :func:`inertia_flags`.
     """
-    if resolution_n_m is None:
-        return None, "no torque resolution declared (dataset.yaml instrument: torque_resolution_nm)"
     if "torque" not in run or not np.isfinite(run["torque"].values).any():
         return None, "no torque channel in the export"
+    if resolution_n_m is None:
+        return None, "no torque resolution declared (dataset.yaml instrument: torque_resolution_nm)"
     torque = np.asarray(run["torque"].values, dtype=float)
     with np.errstate(invalid="ignore"):
         return np.abs(torque) < resolution_n_m, ""
