@@ -6,8 +6,9 @@ schema, every export through its reader, the variables each test needs, the qual
 pipeline will do. The dataset folder is only read; nothing is written into it. Per run it prints the test, the
 nominal condition, the plate radius and gap with their source (``samples.csv`` / ``dataset.yaml`` / ``export``
 when ingest records it in ``radius_source``/``gap_source``; ``no plate radius`` when the data give none), the
-canonical columns with their SI units, the quality flags and the checks that were not testable, and for a
-rejected run the problem (file, line/column, reason). Files of the folder that no sample-sheet row names are
+canonical columns with their SI units, the quality flags and the checks that were not testable, the ingest
+report's warnings (geometry conflicts, missing citation ...), and for a rejected run the problem (file,
+line/column, reason). Files of the folder that no sample-sheet row names are
 listed as a note.
 
 Exit status: 0 when every run was read, 1 when the dataset description cannot be read or any run has an error.
@@ -43,6 +44,7 @@ class RunCheck:
     file: str
     status: str                   # "ok", "error" or another ingest status (reported as a warning)
     reason: str = ""
+    warnings: str = ""            # the ingest report's ``warnings`` column, when it has one
     lines: list[str] = field(default_factory=list)
 
 
@@ -84,6 +86,10 @@ def describe_run(run: xr.Dataset) -> list[str]:
     return lines
 
 
+def _text(value) -> str:
+    return "" if value is None or (isinstance(value, float) and pd.isna(value)) else str(value)
+
+
 def _referenced(sheet: pd.DataFrame) -> set[str]:
     return {Path(str(f)).as_posix() for f in sheet["file"].dropna()}
 
@@ -113,7 +119,7 @@ def check_dataset(dataset_dir: str | Path) -> DatasetCheck:
             return result
         for rec in report.to_dict("records"):
             entry = RunCheck(run=str(rec["run"]), file=str(rec["file"]), status=str(rec["status"]),
-                             reason="" if pd.isna(rec["reason"]) else str(rec["reason"]))
+                             reason=_text(rec.get("reason")), warnings=_text(rec.get("warnings")))
             path = out / "runs" / f"{entry.run}.nc"
             if entry.status != "error" and path.is_file():
                 entry.lines = describe_run(read_netcdf(path))
@@ -140,9 +146,11 @@ def format_check(result: DatasetCheck) -> str:
         lines += [f"    {line}" for line in r.lines]
         if r.reason:
             lines.append(f"    problem: {r.reason}")
+        if r.warnings:
+            lines.append(f"    warnings: {r.warnings}")
     lines += [f"note: {n}" for n in result.notes]
     n_err = sum(r.status == "error" for r in result.runs)
-    n_warn = sum(r.status not in ("ok", "error") for r in result.runs)
+    n_warn = sum(r.status != "error" and (r.status != "ok" or bool(r.warnings)) for r in result.runs)
     lines.append(f"{len(result.runs) - n_err} of {len(result.runs)} runs readable, {n_err} with errors, "
                  f"{n_warn} with warnings" + (f"; {len(result.errors)} dataset error(s)" if result.errors else "")
                  + (" -> OK" if result.ok else " -> FAILED"))
