@@ -118,8 +118,9 @@ def fit_settings(config_path=DEFAULT_CONFIG) -> dict:
     return dict(fit)
 
 
-def dataset_averages(dataset_dir, work_dir) -> tuple[xr.Dataset, list[str]]:
-    """Ingest ``dataset_dir`` into ``work_dir`` and average its runs, as the ``ingest`` and ``average`` rules do.
+def dataset_averages(dataset_dir, work_dir, exclude_flagged: bool = True) -> tuple[xr.Dataset, list[str]]:
+    """Ingest ``dataset_dir`` into ``work_dir`` and average its runs, as the ``ingest`` and ``average`` rules do
+    (``exclude_flagged``: config ``fit.exclude_flagged``, quality-flagged points left out).
 
     Returns the averages and the sorted test kinds of the dataset. Rejected runs are logged (the fits then
     move and the comparison says by how much).
@@ -136,7 +137,7 @@ def dataset_averages(dataset_dir, work_dir) -> tuple[xr.Dataset, list[str]]:
         log.warning("%s: run %s rejected: %s", dataset_dir.name, row["run"], row["reason"])
     runs = load_runs(work_dir / "runs")
     tests = sorted({str(r.attrs.get("test", "")) for r in runs} - {""})
-    return average_runs(runs), tests
+    return average_runs(runs, exclude_flagged=exclude_flagged), tests
 
 
 def _parameter_flags(flags: Sequence[str], name: str) -> list[str]:
@@ -232,7 +233,8 @@ def fresh_table(raw_dir=DEFAULT_RAW_DIR, config_path=DEFAULT_CONFIG,
     for dataset, scopes in selection.items():
         started = time.perf_counter()
         with tempfile.TemporaryDirectory(prefix=f"tissuemech_regression_{dataset}_") as work:
-            averages, tests = dataset_averages(Path(raw_dir) / dataset, work)
+            averages, tests = dataset_averages(Path(raw_dir) / dataset, work,
+                                               exclude_flagged=bool(settings.get("exclude_flagged", True)))
         available = dataset_scopes(tests, settings)
         for scope, models in scopes.items():
             if scope not in available:

@@ -5,9 +5,12 @@ import hashlib
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from tissuemech.canonical import make_run_dataset
 from tissuemech.cli import main as cli_main
+from tissuemech.io.check import describe_run
 
 
 def tree_digest(folder: Path) -> dict[str, str]:
@@ -72,3 +75,14 @@ def test_unreferenced_files_are_noted_not_errors(agar_copy, capsys):
     (agar_copy / "extra_run.csv").write_text("x\n", encoding="utf-8")
     assert cli_main(["check", str(agar_copy)]) == 0
     assert "note: 1 file(s) not named in samples.csv: extra_run.csv" in capsys.readouterr().out
+
+
+def test_geometry_is_shown_with_its_source_or_as_missing():
+    columns = {"shear_strain": np.array([0.01, 0.02]), "storage_modulus": np.array([100.0, 99.0])}
+    stated = make_run_dataset(columns, {"test": "amplitude_sweep", "radius_m": 0.004, "radius_source": "export",
+                                        "gap_m": 0.003, "gap_source": "samples.csv", "frequency_hz": 1.0})
+    lines = describe_run(stated)
+    assert "geometry: R = 4 mm (export), gap = 3 mm (samples.csv)" in lines
+    assert "columns (2 points): shear_strain [1], storage_modulus [Pa]" in lines
+    bare = describe_run(make_run_dataset(columns, {"test": "amplitude_sweep"}))
+    assert "geometry: no plate radius, no gap" in bare
