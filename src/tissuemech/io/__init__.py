@@ -42,4 +42,8 @@ The table of names is :data:`tissuemech.canonical.CANONICAL_VARIABLES`; conversi
 quantity than the column's (a modulus with no unit, a torque in s), is an error naming file, line and column,
 never assumed. Errors are :class:`~tissuemech.io.errors.IngestError`; see ``docs/ingest.md`` for the formats,
 their quirks and the list of bad inputs that are reported.
+
+After ingest, :mod:`tissuemech.io.quality` adds the point-level bitmask ``quality_flags`` to every run file
+(inertia-dominated raw phase, torque below a declared resolution, frequency-sweep points above the LVE limit), and
+:mod:`tissuemech.io.check` (``tissuemech check raw/<name>``) validates a dataset folder without writing into it.
 """
