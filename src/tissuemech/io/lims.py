@@ -140,8 +140,9 @@ def _step(path: Path, lines: list[str], start: int, end: int, index: int, meta_c
         except (IndexError, ValueError):
             raise IngestError(path, "'Number of points' is not an integer", line=keys["number of points"][0]) from None
     last_line = line_no[-1] if line_no else units_line
-    if declared is not None and len(rows) < declared:
-        raise IngestError(path, f"truncated file: step {name!r} declares {declared} points, found {len(rows)}",
+    if declared is not None and len(rows) != declared:
+        what = "truncated file" if len(rows) < declared else "more points than declared"
+        raise IngestError(path, f"{what}: step {name!r} declares {declared} points, found {len(rows)}",
                           line=last_line)
     if not rows:
         raise IngestError(path, f"step {name!r} has no data points", line=units_line)

@@ -30,7 +30,8 @@ from pathlib import Path
 import numpy as np
 import openpyxl
 
-from .blocks import Block, canonical_frame_at, check_time, decode_text, detect_decimal_comma, parse_number
+from .blocks import (Block, canonical_frame_at, cell_problem, check_time, decode_text, detect_decimal_comma,
+                     parse_number)
 from .errors import IngestError
 from .geometry import measuring_system
 
@@ -225,7 +226,7 @@ def _block(path, names, sub, units, rows, line_no, offset, comma, result, interv
             try:
                 values[r] = parse_number(cell, comma)
             except ValueError:
-                raise IngestError(path, f"text in a numeric column: {cell.strip()!r}", line=line_no[r],
+                raise IngestError(path, cell_problem(cell, comma), line=line_no[r],
                                   column=label) from None
         seen.add(name)
         columns.append((name, unit, values, label))

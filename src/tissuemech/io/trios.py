@@ -16,7 +16,7 @@ import numpy as np
 import xlrd
 
 from ..units import UnknownUnitError
-from .blocks import Block, canonical_frame, check_time, decode_text, parse_number
+from .blocks import Block, canonical_frame, cell_problem, check_time, decode_text, parse_number
 from .errors import IngestError
 from .geometry import measuring_system, value_with_unit
 
@@ -120,7 +120,7 @@ def _step_block(path, name, index, cols, units, rows, line_no, meta_common) -> B
             try:
                 values[r] = float(raw) if isinstance(raw, float) else parse_number(cell, decimal_comma=False)
             except ValueError:
-                raise IngestError(path, f"text in a numeric column: {cell.strip()!r}", line=line_no[r],
+                raise IngestError(path, cell_problem(cell, False), line=line_no[r],
                                   column=label) from None
         unit = units[k] if k < len(units) else ""
         seen.add(canon)
