@@ -168,10 +168,11 @@ def _read_rows(path: Path, table: list[list[str]], comma: bool, result: str = "r
                 number = _LEADING_INT.match(pn)
                 if number:
                     # point numbers count up within an interval: a restart means a lost interval header
-                    if int(number.group(1)) <= last_pn:
+                    if last_pn and int(number.group(1)) != last_pn + 1:
                         raise IngestError(path, f"point number {int(number.group(1))} after {last_pn} in "
-                                                f"'{result} / {interval}': a missing interval header or a "
-                                                "duplicated row", line=j + 1, column=names[offset] or offset + 1)
+                                                f"'{result} / {interval}': a deleted, duplicated or moved row, or "
+                                                "a missing interval header", line=j + 1,
+                                          column=names[offset] or offset + 1)
                     last_pn = int(number.group(1))
                 if _INVALID.search(pn):
                     invalid += 1
@@ -180,6 +181,9 @@ def _read_rows(path: Path, table: list[list[str]], comma: bool, result: str = "r
                     if len(row) < len(names):
                         raise IngestError(path, f"truncated row: {len(row)} cells, the column row has {len(names)}",
                                           line=j + 1)
+                    if any(c.strip() for c in row[len(names):]):
+                        raise IngestError(path, f"row has {len(row)} cells, the column row only {len(names)} "
+                                                "(column row cut short?)", line=j + 1)
                     rows.append(row)
                     line_no.append(j + 1)
                 j += 1

@@ -8,6 +8,7 @@ converted per column (step time may be in minutes). Excel: a ``Details`` sheet a
 """
 from __future__ import annotations
 
+import io
 import re
 from pathlib import Path
 
@@ -81,6 +82,15 @@ def read_trios_text(path, text: str | None = None) -> list[Block]:
         raise IngestError(path, "no [step] block in a TRIOS export")
     meta_common = {"format": "ta_trios_text" if sep == "\t" else "ta_trios_csv",
                    **_geometry(path, lines[: starts[0]], sep)}
+    # the header lists the procedure's steps ("proceduresegments  Peak hold#Flow sweep#..."): fewer [step]
+    # blocks than that is a file cut at a step boundary
+    for n, line in enumerate(lines[: starts[0]], start=1):
+        cells = line.split(sep)
+        if cells[0].strip().lower() == "proceduresegments" and len(cells) > 1 and cells[1].strip():
+            declared = len(cells[1].split("#"))
+            if len(starts) < declared:
+                raise IngestError(path, f"truncated file: the procedure declares {declared} steps "
+                                        f"(proceduresegments), found {len(starts)}", line=n)
     blocks = []
     for b, s in enumerate(starts):
         end = starts[b + 1] if b + 1 < len(starts) else len(lines)
@@ -150,7 +160,7 @@ def read_trios_xls(path) -> list[Block]:
 
 
 def _read_xls(path: Path) -> list[Block]:
-    book = xlrd.open_workbook(str(path))
+    book = xlrd.open_workbook(str(path), logfile=io.StringIO())  # xlrd's damage warnings go to the error
     geometry: dict = {}
     blocks = []
     for sheet in book.sheets():
