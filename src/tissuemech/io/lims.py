@@ -123,7 +123,9 @@ def _step(path: Path, lines: list[str], start: int, end: int, index: int, meta_c
             line_no.append(j + 1)
         elif key and key not in keys:
             keys[key] = (j + 1, cells)
-    name = keys["step name"][1][1].strip() if "step name" in keys and len(keys["step name"][1]) > 1 else f"step {index}"
+    if "step name" in keys and not (len(keys["step name"][1]) > 1 and keys["step name"][1][1].strip()):
+        raise IngestError(path, "'Step name' row without a name (row cut short?)", line=keys["step name"][0])
+    name = keys["step name"][1][1].strip() if "step name" in keys else f"step {index}"
     for needed in ("variables", "units"):
         if needed not in keys:
             raise IngestError(path, f"step {name!r} has no '{needed.capitalize()}' row (truncated file?)",
