@@ -21,11 +21,12 @@ import math
 import re
 from collections.abc import Mapping
 
+from ..canonical import GEOMETRY_SOURCES
 from ..units import to_si
 
 #: relative difference above which two sources of the same geometry value conflict
 CONFLICT_REL = 0.01
-SOURCES = ("samples.csv", "dataset.yaml", "export")
+SOURCES = GEOMETRY_SOURCES
 
 _ANTON_PAAR = re.compile(r"^\s*(PP|CP|CC|PPR|CPR)\s*0*(\d+(?:[.,]\d+)?)(?:\s*-\s*(\d+(?:[.,]\d+)?))?", re.IGNORECASE)
 _TA_PLATE = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*mm\b.*\bparallel\s+plates?\b", re.IGNORECASE)

@@ -17,8 +17,12 @@ Layouts read, as the software writes them:
 ``Time`` is the interval time when no separate interval-time column exists; with both (``Temps`` and
 ``Intervalle Temps``) the interval time is ``time`` and the other ``total_time``.
 
-A file cut short is reported: an interval with fewer points than its ``Interval and data points:`` count, or a
-point row with fewer cells than the column row (real exports write every cell, empty ones included).
+A file cut short is reported: an interval with another point count than its ``Interval and data points:``
+count, a point row with fewer cells than the column row (real exports write every cell, empty ones included)
+or more non-empty ones, point numbers that do not count up by one (a deleted or duplicated row), and a data
+header whose ``Interval`` row is missing (it would merge or rename intervals and shift every later block
+index). A ``Measuring System:`` header row (``PP25``, ``CP50-1``) gives ``meta["measuring_system"]`` and the
+plate radius (:mod:`tissuemech.io.geometry`); the real exports seen so far do not write one.
 Excel exports (.xlsx, section 2.6) go through the same parsing, sheet by sheet (:func:`read_rheocompass_xlsx`).
 """
 from __future__ import annotations

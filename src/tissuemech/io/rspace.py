@@ -13,8 +13,9 @@ Each run of consecutive rows with the same action name is one :class:`~tissuemec
 is ``total_time``. Steady and oscillation twins share a canonical name (``Shear strain`` / ``Complex shear
 strain``): the one holding numbers in the action is used. In oscillation actions the rows that fill only the
 raw channels (torque, angular displacement, normal force; no frequency or modulus) are the sampled waveform:
-they are dropped (counted in ``meta["waveform_rows"]``), as RheoCompass waveform rows are. Columns empty
-throughout an action are left out of its block.
+they are dropped (counted in ``meta["waveform_rows"]``), as RheoCompass waveform rows are. An action whose
+rows all fill only the raw channels (a file cut inside an oscillation action, before its first point) is an
+error, never read as points. Columns empty throughout an action are left out of its block.
 """
 from __future__ import annotations
 

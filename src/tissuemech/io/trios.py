@@ -5,6 +5,13 @@ Text/CSV: a key/value header, ``[Section]`` blocks of key/value lines (``[Geomet
 (``Peak hold - 1``), the column row, the units row (empty cell = dimensionless) and data rows. Units are
 converted per column (step time may be in minutes). Excel: a ``Details`` sheet and one sheet per step
 (row 0 step name, row 1 columns, row 2 units, data from row 3); empty sheets are skipped.
+
+Geometry (``Block.meta``): ``measuring_system`` from ``Geometry name`` (``8.0mm parallel plate`` -> 4 mm
+radius, see :mod:`tissuemech.io.geometry`), ``radius_m``/``gap_m`` from ``Diameter``/``Gap`` with their
+units dimension-checked (concentric cylinders: none). Checks: every text data row has as many fields as
+the column row (a row cut short, or a decimal comma in a comma-separated file, would shift later columns),
+the header's ``proceduresegments`` step count against the ``[step]`` blocks found, ±inf/overflow cells; any
+failure of xlrd on a damaged ``.xls`` becomes an :class:`IngestError` naming the file.
 """
 from __future__ import annotations
 
