@@ -135,7 +135,9 @@ def _read_rows(path: Path, table: list[list[str]], comma: bool, result: str = "r
         if head.startswith(_MEASURING_SYSTEM) and len(cells) > 1:
             meta_common.update(measuring_system(cells[1]))
         if head.startswith(_RESULT):
-            result = cells[1].strip() if len(cells) > 1 else "result"
+            if not (len(cells) > 1 and cells[1].strip()):
+                raise IngestError(path, "'Result:' row without a result name (row cut short?)", line=i + 1)
+            result = cells[1].strip()
             fresh = True
         elif head.startswith(_INTERVAL):
             fresh = True
