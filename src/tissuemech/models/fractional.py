@@ -5,7 +5,8 @@ Models (parameters in Pa, Pa s^alpha, s; ``0 < alpha < 1``):
 * ``springpot`` (c, alpha): G* = c (i w)^alpha, G(t) = c t^-alpha / Gamma(1 - alpha),
   J(t) = t^alpha / (c Gamma(1 + alpha))
 * ``fractional_kelvin_voigt`` (G_e, c, alpha): G* = G_e + c (i w)^alpha, G(t) = G_e + c t^-alpha/Gamma(1 - alpha),
-  J(t) = (1 - E_alpha(-(G_e/c) t^alpha)) / G_e  (-> t^alpha/(c Gamma(1 + alpha)) as G_e -> 0)
+  J(t) = (1 - E_alpha(-(G_e/c) t^alpha)) / G_e = (t^alpha/c) E_{alpha,1+alpha}(-(G_e/c) t^alpha)
+  (= t^alpha/(c Gamma(1 + alpha)) at G_e = 0)
 * ``fractional_zener`` (G_e, G_m, tau, alpha): G* = G_e + G_m (i w tau)^alpha / (1 + (i w tau)^alpha),
   G(t) = G_e + G_m E_alpha(-(t/tau)^alpha),
   J(t) = 1/G_e - (1/G_e - 1/G_0) E_alpha(-(G_e/G_0) (t/tau)^alpha), G_0 = G_e + G_m
@@ -70,8 +71,10 @@ def mittag_leffler(z: np.ndarray, alpha: float, beta: float = 1.0) -> np.ndarray
     flat = np.ascontiguousarray(z.ravel())
     if flat.size == 0:
         return np.zeros(z.shape)
-    out = np.asarray(garrappa_mittag_leffler(flat, float(alpha), float(beta)))
-    return np.real(out).reshape(z.shape)
+    out = np.real(np.asarray(garrappa_mittag_leffler(flat, float(alpha), float(beta))))
+    # E_{a,b}(0) = 1/Gamma(b) exactly (pymittagleffler 0.3.0 returns NaN at z = 0 for alpha = 1, beta = 2)
+    out = np.where(flat == 0.0, 1.0 / gamma_fn(beta), out)
+    return out.reshape(z.shape)
 
 
 def mittag_leffler_neg(alpha: float, x: np.ndarray) -> np.ndarray:
@@ -103,20 +106,22 @@ def springpot_creep_integral(time_s: np.ndarray, c: float, alpha: float) -> np.n
 
 
 def fkv_creep(time_s: np.ndarray, g_e: float, c: float, alpha: float) -> np.ndarray:
-    """Creep compliance of the fractional Kelvin-Voigt model (1/Pa): (1 - E_alpha(-(G_e/c) t^alpha)) / G_e;
-    the springpot's t^alpha/(c Gamma(1 + alpha)) when ``g_e == 0``."""
-    if g_e == 0.0:
-        return springpot_creep(time_s, c, alpha)
+    """Creep compliance of the fractional Kelvin-Voigt model (1/Pa).
+
+    J(t) = (1 - E_alpha(-z))/G_e with z = (G_e/c) t^alpha, written without cancellation as
+    J(t) = (t^alpha/c) E_{alpha,1+alpha}(-z) (``E_{a,1}(-z) = 1 - z E_{a,1+a}(-z)``); ``g_e = 0`` gives the
+    springpot's t^alpha/(c Gamma(1 + alpha)).
+    """
     t = np.asarray(time_s, float)
-    return (1.0 - mittag_leffler(-(g_e / c) * t ** alpha, alpha, 1.0)) / g_e
+    ta = t ** alpha
+    return ta / c * mittag_leffler(-(g_e / c) * ta, alpha, 1.0 + alpha)
 
 
 def fkv_creep_integral(time_s: np.ndarray, g_e: float, c: float, alpha: float) -> np.ndarray:
-    """int_0^t J of the fractional Kelvin-Voigt model (s/Pa): t (1 - E_{alpha,2}(-(G_e/c) t^alpha)) / G_e."""
-    if g_e == 0.0:
-        return springpot_creep_integral(time_s, c, alpha)
+    """int_0^t J of the fractional Kelvin-Voigt model (s/Pa): (t^(1+alpha)/c) E_{alpha,2+alpha}(-(G_e/c) t^alpha)."""
     t = np.asarray(time_s, float)
-    return t * (1.0 - mittag_leffler(-(g_e / c) * t ** alpha, alpha, 2.0)) / g_e
+    ta = t ** alpha
+    return t * ta / c * mittag_leffler(-(g_e / c) * ta, alpha, 2.0 + alpha)
 
 
 def fzener_relaxation(time_s: np.ndarray, g_e: float, g_m: float, tau_s: float, alpha: float) -> np.ndarray:
@@ -132,17 +137,23 @@ def fzener_relaxation_integral(time_s: np.ndarray, g_e: float, g_m: float, tau_s
 
 
 def fzener_creep(time_s: np.ndarray, g_e: float, g_m: float, tau_s: float, alpha: float) -> np.ndarray:
-    """J(t) = 1/G_e - (1/G_e - 1/G_0) E_alpha(-(G_e/G_0)(t/tau)^alpha) in 1/Pa, G_0 = G_e + G_m (``g_e > 0``)."""
+    """Creep compliance of the fractional Zener model (1/Pa), G_0 = G_e + G_m, w = (G_e/G_0)(t/tau)^alpha.
+
+    J(t) = 1/G_e - (1/G_e - 1/G_0) E_alpha(-w), written without cancellation as
+    J(t) = 1/G_0 + (G_m/G_0^2) (t/tau)^alpha E_{alpha,1+alpha}(-w) (valid for ``g_e = 0`` too: fractional Maxwell).
+    """
     t = np.asarray(time_s, float)
     g0 = g_e + g_m
-    return 1.0 / g_e - (1.0 / g_e - 1.0 / g0) * mittag_leffler(-(g_e / g0) * (t / tau_s) ** alpha, alpha, 1.0)
+    x = (t / tau_s) ** alpha
+    return 1.0 / g0 + g_m / g0 ** 2 * x * mittag_leffler(-(g_e / g0) * x, alpha, 1.0 + alpha)
 
 
 def fzener_creep_integral(time_s: np.ndarray, g_e: float, g_m: float, tau_s: float, alpha: float) -> np.ndarray:
-    """int_0^t J = t/G_e - (1/G_e - 1/G_0) t E_{alpha,2}(-(G_e/G_0)(t/tau)^alpha) in s/Pa."""
+    """int_0^t J of the fractional Zener model (s/Pa): t/G_0 + (G_m/G_0^2) t (t/tau)^alpha E_{alpha,2+alpha}(-w)."""
     t = np.asarray(time_s, float)
     g0 = g_e + g_m
-    return t / g_e - (1.0 / g_e - 1.0 / g0) * t * mittag_leffler(-(g_e / g0) * (t / tau_s) ** alpha, alpha, 2.0)
+    x = (t / tau_s) ** alpha
+    return t / g0 + g_m / g0 ** 2 * t * x * mittag_leffler(-(g_e / g0) * x, alpha, 2.0 + alpha)
 
 
 # ------------------------------------------------------------------------------------------------------
