@@ -144,3 +144,26 @@ def test_fractional_zener_creep_at_alpha_one_is_the_sls_creep():
     g1, g2, eta1 = 100.0, 50.0, 50.0 * 0.1  # sls2 with tau = eta1/G2 = 0.1 s
     sls = 1 / g1 - (1 / g1 - 1 / (g1 + g2)) * np.exp(-t * g1 * g2 / (eta1 * (g1 + g2)))
     np.testing.assert_allclose(get_model("fractional_zener").creep_compliance({**FZ, "alpha": 1.0}, t), sls, rtol=1e-12)
+
+
+def test_fractional_qlv_is_fitted_jointly_to_relaxation_and_constant_rate_ramps():
+    m = get_model("qlv_neo_hookean_fzener")
+    truth = {"mu": 250.0, "beta_fz": 1.5, "tau_fz": 1.0, "alpha_fz": 0.5}
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 30.0 + 1e-9, 0.1)
+    g = 0.2 * np.minimum(t / 0.5, 1.0)  # relaxation at 20 % with a 0.5 s rise
+    y = m.shear_stress_history(truth, t, g) * (1 + 0.01 * rng.standard_normal(t.size))
+    curves = [F.thin(F.Curve(test="stress_relaxation", condition="strain=20%", response="shear_history",
+                             inputs={"time": t, "shear_strain": g}, observed={"shear_stress": y[1:]},
+                             obs_index=np.arange(1, t.size)), 40)]
+    for rate in (0.01, 0.1):
+        t = np.linspace(0.0, 0.3 / rate, 101)
+        y = m.shear_stress_history(truth, t, rate * t) * (1 + 0.01 * rng.standard_normal(t.size))
+        curves.append(F.thin(F.Curve(test="constant_shear_rate", condition=f"rate={rate}/s", response="shear_history",
+                                     inputs={"time": t, "shear_strain": rate * t}, observed={"shear_stress": y[1:]},
+                                     obs_index=np.arange(1, t.size)), 30))
+    res = F.fit(F.FitProblem(m, curves, target="none", model_key="qlv_neo_hookean_fzener"), n_random=0)
+    assert res.success
+    for k, v in truth.items():
+        assert res.params[k] == pytest.approx(v, rel=0.05), k
+    assert np.isfinite(res.aicc)
