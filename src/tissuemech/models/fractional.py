@@ -164,7 +164,7 @@ def _on_unique_lags(fun: Kernel, lags: np.ndarray, t_scale: float) -> np.ndarray
     time scale are merged: their difference is below double precision of the time stamps themselves)."""
     quantum = 8.0 * np.finfo(float).eps * max(t_scale, np.finfo(float).tiny)
     keys = np.rint(lags / quantum).astype(np.int64)
-    uniq, first, inverse = np.unique(keys.ravel(), return_index=True, return_inverse=True)
+    _, first, inverse = np.unique(keys.ravel(), return_index=True, return_inverse=True)
     values = np.asarray(fun(lags.ravel()[first]), float)
     return values[inverse].reshape(lags.shape)
 
