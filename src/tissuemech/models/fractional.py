@@ -31,8 +31,8 @@ step from the virgin state to ``x[0]`` at ``t[0]``::
 
 with the slope ``s_j`` of segment ``[t_j, t_{j+1}]``. The segment integrals are exact through the closed forms
 of Kbar: int_0^t E_a(-(u/tau)^a) du = t E_{a,2}(-(t/tau)^a) and int_0^t u^-a du = t^(1-a)/(1-a), so the only
-error is that of the Mittag-Leffler evaluation (a ramp agrees with adaptive quadrature of the hereditary
-integral to ~1e-10, ``tests/models/test_fractional.py``). Creep uses the same superposition with J and Jbar
+error is that of the Mittag-Leffler evaluation (ramp-and-hold responses agree with adaptive quadrature of
+the hereditary integral to the tested relative 1e-6, ``tests/models/test_fractional.py``). Creep uses the same superposition with J and Jbar
 (exact for a piecewise-linear stress, no time stepping). QLV uses it on the elastic-stress history
 sigma_e(gamma(t)); QLV creep is sigma_e = int J_r d sigma (J_r the creep compliance of the reduced Zener)
 followed by the inversion of the monotone law.
