@@ -68,6 +68,14 @@ REQUIRED_RUN_ATTRS: tuple[str, ...] = (
 )
 
 
+#: optional geometry run attributes, present only when a source states them (never NaN, never a default):
+#: ``radius_m``/``gap_m`` in metres, ``radius_source``/``gap_source`` one of :data:`GEOMETRY_SOURCES`,
+#: ``measuring_system`` as the export or dataset.yaml names it (e.g. ``PP25``)
+GEOMETRY_RUN_ATTRS: tuple[str, ...] = ("radius_m", "radius_source", "gap_m", "gap_source", "measuring_system")
+#: where a run's geometry came from, in order of precedence
+GEOMETRY_SOURCES: tuple[str, ...] = ("samples.csv", "dataset.yaml", "export")
+
+
 def sha256_of(path: str | os.PathLike) -> str:
     """Hex SHA-256 of a file's bytes."""
     h = hashlib.sha256()

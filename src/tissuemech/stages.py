@@ -257,9 +257,20 @@ def run_fem_torsion(card_paths: Sequence, averages_path, out_nc, out_csv, figure
     all_rates = sorted({float(avg["shear_rate_1_per_s"].values[i]) for i in idx})
     if rates is None:
         rates = [all_rates[0], all_rates[-1]] if len(all_rates) > 1 else all_rates
-    radius = _geometry_by_test(avg, "radius_m").get("constant_shear_rate", 12.5e-3)
-    gap = _geometry_by_test(avg, "gap_m").get("constant_shear_rate", 2e-3)
+    # geometry as the runs state it (samples.csv > dataset.yaml > export): never a default plate
+    radius = _geometry_by_test(avg, "radius_m").get("constant_shear_rate")
+    gap = _geometry_by_test(avg, "gap_m").get("constant_shear_rate")
     series, reference, rows, measured = {}, {}, [], {}
+    missing = [what for what, v in (("no plate radius", radius), ("no gap", gap)) if v is None]
+    if missing:
+        reason = (f"skipped: {' and '.join(missing)} for the constant_shear_rate runs (stated by neither samples.csv, "
+                  "dataset.yaml nor the export); the torsion comparison needs the plate geometry")
+        logger.warning("torsion: %s", reason)
+        rows = [{"card": f"{Path(p).parent.name}/{Path(p).stem}", "rate_1_s": rate, "nrmse": float("nan"),
+                 "rel_error_at_max_strain": float("nan"), "max_strain": float("nan"),
+                 "normal_force_at_max_strain_n": float("nan"), "status": reason}
+                for p in card_paths for rate in rates]
+        rates = []
     from .curves import select_average
 
     for rate in rates:

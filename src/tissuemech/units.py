@@ -1,101 +1,189 @@
-"""Unit strings as rheometers write them -> SI (factor and offset), per column.
+"""Unit strings as rheometers write them -> SI (factor and offset), per column, through pint.
 
-``to_si(values, unit)`` returns ``values * factor + offset`` in the canonical unit of
-:data:`tissuemech.canonical.CANONICAL_VARIABLES` (temperature stays in degree Celsius). Unknown units raise
-:class:`UnknownUnitError`: a column is never assumed to be in seconds or pascal. With ``expected`` (the
-canonical unit of the column, e.g. ``"Pa"``) a unit of another quantity (``s`` for a stress, ``Hz`` for an
-angular frequency, no unit at all for a modulus) is refused as well.
+``to_si(values, unit, expected)`` returns ``values * factor + offset`` in the canonical unit of
+:data:`tissuemech.canonical.CANONICAL_VARIABLES` (temperature stays in degree Celsius). Parsing and the
+conversion factors are pint's (a case-sensitive registry): SI prefixes are case-sensitive, so ``mPa`` is
+1e-3 Pa and ``MPa`` 1e6 Pa, ``mN·m`` is 1e-3 N m and ``MN·m`` 1e6 N m, ``1/mPa`` is 1e3 1/Pa. Unknown units
+raise :class:`UnknownUnitError`: a column is never assumed to be in seconds or pascal.
 
-Spellings understood (after :func:`normalise_unit`): brackets ``[mN·m]``, middle dots and spaces as products
-(``N m``, ``Pa·s``), micro as ``µ``/``μ``/``u``, superscripts (``s-¹``), ``°C``/``°``, ``g.cm`` (gram-force
-centimetre, TA torque), ``1/MPa`` (compliance), ``min``/``h``, ``%``.
+With ``expected`` (the canonical unit of the column, e.g. ``"Pa"``, ``"m"``) the unit's dimension is checked
+against it: a unit of another quantity (``s`` for a stress or a gap, ``Hz`` for an angular frequency, no
+unit at all for a modulus) is refused. Angles are dimensionless in pint, so the check also requires an angle
+unit on both sides or on neither: ``rad/s`` and ``Hz`` are never interchangeable; ``Hz`` and ``1/s`` are.
+
+Spellings understood (after :func:`normalise_unit`, which keeps the case): brackets ``[mN·m]``, middle dots,
+``*`` and spaces as products (``N m``, ``Pa·s``), micro as ``µ``/``μ``/``u``, superscripts and exponents
+(``s-¹``, ``s^-1``, ``m3``), ``°C``/``degC``/``C`` (Celsius), ``K`` (kelvin, offset to degC), ``°``/``deg``,
+``%``, ``min``/``h``, ``1/MPa`` (compliance), ``Nm``/``mNm``/``µNm`` (newton-metre). Explicit mappings where
+pint would read a rheometer unit otherwise:
+
+* ``g`` is gram-*force* (TA torque ``g·cm``, force ``g``): no rheometer column is a mass;
+* ``nm`` is nanometre for a length and newton-metre for a torque: it is resolved by the expected unit and
+  refused as ambiguous without one;
+* ``C`` is degree Celsius, not coulomb; ``Pa·s^n`` (power-law consistency) is read literally.
 """
 from __future__ import annotations
 
+import functools
 import re
+import tokenize
 
 import numpy as np
+import pint
+import pint.util
 
 GRAM_FORCE_N = 9.80665e-3
 
-#: normalised unit string -> (factor, offset, canonical SI unit it converts to)
-_TABLE: dict[str, tuple[float, float, str]] = {
-    # dimensionless / strain
-    "": (1.0, 0.0, "1"), "1": (1.0, 0.0, "1"), "-": (1.0, 0.0, "1"), "%": (0.01, 0.0, "1"),
-    # time
-    "s": (1.0, 0.0, "s"), "sec": (1.0, 0.0, "s"), "ms": (1e-3, 0.0, "s"), "min": (60.0, 0.0, "s"),
-    "h": (3600.0, 0.0, "s"),
-    # stress / modulus
-    "pa": (1.0, 0.0, "Pa"), "kpa": (1e3, 0.0, "Pa"), "mpa": (1e6, 0.0, "Pa"), "gpa": (1e9, 0.0, "Pa"),
-    "hpa": (100.0, 0.0, "Pa"), "mpa_milli": (1e-3, 0.0, "Pa"),
-    # compliance
-    "1/pa": (1.0, 0.0, "1/Pa"), "1/kpa": (1e-3, 0.0, "1/Pa"), "1/mpa": (1e-6, 0.0, "1/Pa"),
-    "pa^-1": (1.0, 0.0, "1/Pa"),
-    # rates and frequencies
-    "1/s": (1.0, 0.0, "1/s"), "s^-1": (1.0, 0.0, "1/s"), "s-1": (1.0, 0.0, "1/s"), "1/sec": (1.0, 0.0, "1/s"),
-    "1/min": (1 / 60.0, 0.0, "1/s"), "hz": (1.0, 0.0, "Hz"), "rad/s": (1.0, 0.0, "rad/s"),
-    # viscosity
-    "pa.s": (1.0, 0.0, "Pa s"), "pas": (1.0, 0.0, "Pa s"), "mpa.s": (1e-3, 0.0, "Pa s"),
-    "pa.s^n": (1.0, 0.0, "Pa s^n"),
-    # torque
-    "n.m": (1.0, 0.0, "N m"), "nm": (1.0, 0.0, "N m"), "mn.m": (1e-3, 0.0, "N m"), "un.m": (1e-6, 0.0, "N m"),
-    "nn.m": (1e-9, 0.0, "N m"), "g.cm": (GRAM_FORCE_N * 1e-2, 0.0, "N m"),
-    "gf.cm": (GRAM_FORCE_N * 1e-2, 0.0, "N m"),
-    # force
-    "n": (1.0, 0.0, "N"), "mn": (1e-3, 0.0, "N"), "un": (1e-6, 0.0, "N"), "g": (GRAM_FORCE_N, 0.0, "N"),
-    "gf": (GRAM_FORCE_N, 0.0, "N"),
-    # length
-    "m": (1.0, 0.0, "m"), "mm": (1e-3, 0.0, "m"), "um": (1e-6, 0.0, "m"), "cm": (1e-2, 0.0, "m"),
-    # angle
-    "rad": (1.0, 0.0, "rad"), "mrad": (1e-3, 0.0, "rad"), "urad": (1e-6, 0.0, "rad"),
-    "deg": (np.pi / 180.0, 0.0, "rad"),
-    # temperature (canonical: degree Celsius)
-    "degc": (1.0, 0.0, "degC"), "c": (1.0, 0.0, "degC"), "k": (1.0, -273.15, "degC"),
-    # energy density / misc (stiffness, strain constant and 1/temperature appear in TA LIMS exports)
-    "j/m3": (1.0, 0.0, "J/m3"), "n.m/rad": (1.0, 0.0, "N m/rad"), "1/rad": (1.0, 0.0, "1/rad"),
-    "1/k": (1.0, 0.0, "1/K"),
+#: canonical unit (as in CANONICAL_VARIABLES) -> pint expression
+_CANONICAL_PINT: dict[str, str] = {
+    "1": "dimensionless", "s": "s", "Pa": "Pa", "1/s": "1/s", "Hz": "Hz", "rad/s": "rad/s", "Pa s": "Pa*s",
+    "N m": "N*m", "rad": "rad", "N": "N", "m": "m", "degC": "degC", "1/Pa": "1/Pa", "J/m3": "J/m**3",
+    "N m/rad": "N*m/rad", "1/rad": "1/rad", "1/K": "1/K",
 }
-
-#: normalised unit string -> (factor, offset) to the canonical SI unit
-UNITS: dict[str, tuple[float, float]] = {k: (f, o) for k, (f, o, _) in _TABLE.items()}
-#: normalised unit string -> the canonical SI unit it converts to
-SI_UNIT: dict[str, str] = {k: si for k, (_, _, si) in _TABLE.items()}
+#: canonical units a column without ``expected`` is converted to, first dimension match wins
+_DEFAULT_TARGETS = ("1", "s", "Pa", "1/s", "rad/s", "Pa s", "N m", "rad", "N", "m", "degC", "1/Pa", "J/m3",
+                    "N m/rad", "1/rad", "1/K")
 #: canonical units that measure the same quantity (a frequency may be written 1/s; rad/s is NOT Hz)
 _SAME = {"Hz": {"Hz", "1/s"}, "1/s": {"1/s", "Hz"}}
+_ANGLE_UNITS = ("degree", "turn", "revolution", "arcminute", "arcsecond", "gradian")
+_TORQUE_CONCAT = {"Nm": "N*m", "mNm": "mN*m", "uNm": "uN*m", "nNm": "nN*m", "kNm": "kN*m"}
 
 
 class UnknownUnitError(ValueError):
     """A unit string that has no known conversion to SI (or to the SI unit a column needs)."""
 
 
+@functools.cache
+def registry() -> pint.UnitRegistry:
+    """The case-sensitive pint registry used for every conversion (created once)."""
+    return pint.UnitRegistry(case_sensitive=True, autoconvert_offset_to_baseunit=False)
+
+
 def normalise_unit(unit: str) -> str:
-    """Canonical spelling of a unit string: ``[mN·m]`` -> ``mn.m``, ``s-¹`` -> ``s-1``, ``°C`` -> ``degc``."""
+    """Canonical spelling of a unit string, case kept: ``[mN·m]`` -> ``mN.m``, ``s-¹`` -> ``s-1``,
+    ``°C`` -> ``degC``, ``µ``/``μ`` -> ``u``."""
     u = str(unit).strip()
     if u.startswith("[") and u.endswith("]"):
         u = u[1:-1].strip()
     u = (u.replace("µ", "u").replace("μ", "u").replace("·", ".").replace("⋅", ".").replace("*", ".")
-         .replace("¹", "1").replace("⁻", "-").replace("°c", "degc").replace("°C", "degc").replace("°", "deg"))
-    u = re.sub(r"\s+", ".", u.strip()).lower()
-    if u in ("mpa.s", "mpas"):
-        return "mpa.s"
-    if u in ("1/mpa", "mpa^-1", "mpa-1"):
-        return "1/mpa"
-    return u
+         .replace("¹", "1").replace("²", "2").replace("³", "3").replace("⁻", "-")
+         .replace("°C", "degC").replace("°F", "degF").replace("°", "deg"))
+    u = re.sub(r"\s*([./])\s*", r"\1", u.strip())
+    return re.sub(r"\s+", ".", u)
+
+
+def _pint_expression(key: str, expected: str | None) -> str:
+    """pint expression of a normalised unit string (see the module docstring for the explicit mappings)."""
+    if key in ("", "1", "-"):
+        return "dimensionless"
+    if key == "%":
+        return "0.01"
+    if key in ("C", "degC"):
+        return "degC"
+    if key == "nm":
+        if expected is None:
+            raise UnknownUnitError("ambiguous unit 'nm' (nanometre or newton-metre) without an expected quantity")
+        return "N*m" if expected in ("N m", "N m/rad") else "nm"
+    factors = []
+    for term in re.split(r"(/)", key):
+        if term == "/":
+            factors.append("/")
+            continue
+        parts = []
+        for tok in term.split("."):
+            m = re.fullmatch(r"([A-Za-z_]+)(?:\^?(-?\d+)|-(\d+))?", tok)
+            if tok in ("1",):
+                parts.append("1")
+                continue
+            if not m:
+                raise UnknownUnitError(f"unknown unit {key!r}")
+            name, exp = m.group(1), m.group(2) or (f"-{m.group(3)}" if m.group(3) else None)
+            name = _TORQUE_CONCAT.get(name, name)
+            if name in ("g", "gf"):
+                name = "gram_force"
+            elif name == "sec":
+                name = "s"
+            elif name == "deg":
+                name = "degree"
+            elif name in ("degC", "C"):  # inside a compound (1/°C): a temperature difference
+                name = "kelvin"
+            parts.append(f"({name})**{exp}" if exp else f"({name})")
+        factors.append("*".join(parts))
+    return "".join(factors)
+
+
+def _angle_exponent(quantity) -> int:
+    """Power of angle units in a pint quantity (angles are dimensionless in pint: ``rad/s`` vs ``Hz``)."""
+    return int(sum(exp for name, exp in pint.util.to_units_container(quantity.units).items()
+                   if name.endswith("radian") or name in _ANGLE_UNITS))
+
+
+@functools.cache
+def _conversion(unit: str, expected: str | None) -> tuple[float, float, str]:
+    key = normalise_unit(unit)
+    if expected is not None and expected not in _CANONICAL_PINT and expected != "Pa s^n":
+        raise UnknownUnitError(f"no canonical unit {expected!r}")
+    if key in ("Pa.s^n", "Pa.sn"):
+        canonical = "Pa s^n"
+        if expected not in (None, canonical):
+            raise UnknownUnitError(f"unit {unit!r} (a {canonical} quantity) cannot be converted to {expected}")
+        return 1.0, 0.0, canonical
+    ureg = registry()
+    expr = _pint_expression(key, expected)
+    try:
+        q_unit = ureg.parse_expression(expr) if expr not in ("dimensionless", "0.01") else None
+    except (pint.errors.PintError, AttributeError, SyntaxError, TypeError, ValueError, tokenize.TokenError) as exc:
+        raise UnknownUnitError(f"unknown unit {unit!r}") from exc
+    if q_unit is None:
+        dims, angle = ureg.dimensionless.dimensionality, 0
+        factor = 0.01 if expr == "0.01" else 1.0
+    else:
+        if not isinstance(q_unit, ureg.Quantity):  # a bare number is not a unit
+            raise UnknownUnitError(f"unknown unit {unit!r}")
+        dims, angle = q_unit.dimensionality, _angle_exponent(q_unit)
+    targets = [expected] if expected is not None else list(_DEFAULT_TARGETS)
+    for target in targets:
+        for same in sorted(_SAME.get(target, {target})):
+            t = ureg.parse_expression(_CANONICAL_PINT[same]) if same != "1" else None
+            t_dims = ureg.dimensionless.dimensionality if t is None else t.dimensionality
+            t_angle = 0 if t is None else _angle_exponent(t)
+            if t_dims != dims or t_angle != angle:
+                continue
+            if q_unit is None:
+                return factor, 0.0, target
+            scale = float(q_unit.magnitude)
+            zero = float(ureg.Quantity(0.0, q_unit.units).to(_CANONICAL_PINT[same]).magnitude)
+            one = float(ureg.Quantity(1.0, q_unit.units).to(_CANONICAL_PINT[same]).magnitude)
+            return scale * (one - zero), zero, target
+    if expected is None:
+        raise UnknownUnitError(f"unit {unit!r} has no canonical SI unit (dimension {dims})")
+    if key in ("", "1", "-"):
+        raise UnknownUnitError(f"no unit given where {expected} is expected (never assumed)")
+    try:
+        quantity = _conversion(unit, None)[2]
+    except UnknownUnitError:
+        quantity = str(dims)
+    raise UnknownUnitError(f"unit {unit!r} (a {quantity} quantity) cannot be "
+                           f"converted to {expected}")
+
+
+
+def canonical_unit(unit: str, expected: str | None = None) -> str:
+    """The canonical unit (a key of the ``CANONICAL_VARIABLES`` units) a unit string converts to."""
+    return _conversion(str(unit), expected)[2]
 
 
 def unit_factor(unit: str, expected: str | None = None) -> tuple[float, float]:
-    """``(factor, offset)`` of a unit string; raises :class:`UnknownUnitError`.
+    """``(factor, offset)`` of a unit string to its canonical SI unit; raises :class:`UnknownUnitError`.
 
-    ``expected``: the canonical unit the column must convert to (``"Pa"``, ``"s"`` ...), when known.
+    Parameters
+    ----------
+    unit : the unit as the export writes it (case-sensitive prefixes)
+    expected : the canonical unit the column must convert to (``"Pa"``, ``"s"``, ``"m"`` ...), when known;
+        a unit of another dimension is refused.
     """
-    key = normalise_unit(unit)
-    if key not in UNITS:
-        raise UnknownUnitError(f"unknown unit {unit!r}")
-    if expected is not None and SI_UNIT[key] not in _SAME.get(expected, {expected}):
-        if key == "":
-            raise UnknownUnitError(f"no unit given where {expected} is expected (never assumed)")
-        raise UnknownUnitError(f"unit {unit!r} (a {SI_UNIT[key]} quantity) cannot be converted to {expected}")
-    return UNITS[key]
+    factor, offset, _ = _conversion(str(unit), expected)
+    return factor, offset
 
 
 def to_si(values, unit: str, expected: str | None = None) -> np.ndarray:

@@ -58,19 +58,38 @@ _NUMBER = re.compile(r"^[+-]?(\d+([.,]\d*)?|[.,]\d+)([eE][+-]?\d+)?$")
 
 
 def parse_number(cell: str, decimal_comma: bool) -> float:
-    """A numeric cell (decimal comma or point); empty -> NaN; raises ``ValueError`` for text."""
+    """A numeric cell (decimal comma or point); empty or ``nan`` -> NaN.
+
+    Raises ``ValueError`` for text, and for ``inf`` or a value beyond the float range (``1e400``): an
+    instrument never measures infinity, so it is a damaged cell, never silently ±inf.
+    """
     s = cell.strip()
     if s == "":
         return np.nan
-    if s.lower() in ("nan", "-nan", "inf", "-inf", "+inf"):
-        return float(s)
+    if s.lower() in ("nan", "-nan"):
+        return np.nan
+    if s.lower().lstrip("+-") in ("inf", "infinity"):
+        raise ValueError(f"infinite value: {s!r}")
     if not _NUMBER.match(s):
         raise ValueError(f"not a number: {s!r}")
     if decimal_comma:
         s = s.replace(",", ".")
     elif "," in s:
         raise ValueError(f"not a number: {s!r}")
-    return float(s)
+    value = float(s)
+    if not np.isfinite(value):
+        raise ValueError(f"value out of range (overflows to ±inf): {s!r}")
+    return value
+
+
+def cell_problem(text: str, decimal_comma: bool) -> str:
+    """Report wording of a cell :func:`parse_number` refused (text, infinity or overflow)."""
+    try:
+        parse_number(str(text), decimal_comma)
+    except ValueError as exc:
+        if "not a number" not in str(exc):
+            return str(exc)
+    return f"text in a numeric column: {str(text).strip()!r}"
 
 
 def detect_decimal_comma(lines: list[str], sep: str) -> bool:
@@ -99,9 +118,14 @@ def canonical_frame(path: Path, columns: list[tuple[str, str, np.ndarray, int]])
         if name in data or name not in CANONICAL_VARIABLES:
             continue
         try:
-            data[name] = to_si(values, unit, expected=CANONICAL_VARIABLES[name][0])
+            with np.errstate(over="ignore"):
+                data[name] = to_si(values, unit, expected=CANONICAL_VARIABLES[name][0])
         except UnknownUnitError as exc:
             raise IngestError(path, f"{exc} in column {name!r}", column=col) from exc
+        overflow = np.isinf(data[name]) & np.isfinite(values)
+        if overflow.any():
+            raise IngestError(path, f"value {values[overflow][0]!r} {unit} overflows when converted to "
+                                    f"{CANONICAL_VARIABLES[name][0]}", column=col)
         labels[name] = unit
     return pd.DataFrame(data), labels
 
@@ -133,13 +157,15 @@ def parse_column(path: Path, label: str | int, cells, line_numbers, decimal_comm
     values = np.empty(len(cells))
     for r, cell in enumerate(cells):
         if isinstance(cell, (int, float)) and not isinstance(cell, bool):
+            if not np.isfinite(cell) and not np.isnan(cell):
+                raise IngestError(path, f"infinite value: {cell!r}", line=int(line_numbers[r]), column=label)
             values[r] = float(cell)
             continue
         text = "" if cell is None else str(cell)
         try:
             values[r] = parse_number(text, decimal_comma)
         except ValueError:
-            raise IngestError(path, f"text in a numeric column: {text.strip()!r}", line=int(line_numbers[r]),
+            raise IngestError(path, cell_problem(text, decimal_comma), line=int(line_numbers[r]),
                               column=label) from None
     return values
 
@@ -182,7 +208,11 @@ def auxiliary_frame(columns: list[tuple[str, str, list]], decimal_comma: bool) -
     for label, unit, cells in columns:
         try:
             values = np.array([parse_number("" if c is None else str(c), decimal_comma) for c in cells], float)
-            data[label] = to_si(values, unit)
+            with np.errstate(over="ignore"):
+                converted = to_si(values, unit)
+            if not np.isfinite(converted[np.isfinite(values)]).all():
+                continue
+            data[label] = converted
         except (ValueError, UnknownUnitError):
             continue
     return pd.DataFrame(data)

@@ -21,14 +21,14 @@ unknown.
 """
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import numpy as np
 
-from ..units import UnknownUnitError, to_si
+from ..units import UnknownUnitError
 from .blocks import Block, auxiliary_frame, canonical_frame_at, check_time, decode_text, pick_columns
 from .errors import IngestError
+from .geometry import measuring_system, value_with_unit
 
 #: canonical variable -> lower-cased LIMS/TRIOS variable names, preferred first (oscillation amplitude before
 #: the steady value of the same quantity; the first one holding numbers in a step is used)
@@ -64,9 +64,11 @@ def looks_like_lims(text: str) -> bool:
 
 
 def _geometry(path: Path, lines: list[str]) -> dict:
-    """Plate radius and gap of ``[Geometry: Standard]`` (value and unit in one cell: ``25.0 mm``)."""
+    """Measuring system (``Geometry name``/``Geometry type`` of ``[Geometry]``), plate radius and gap of
+    ``[Geometry: Standard]`` (value and unit in one cell: ``25.0 mm``), dimension-checked (a gap in ``s`` is an
+    error naming the line); zero values (anonymised exports) are unknown."""
     meta, section = {}, ""
-    for line in lines:
+    for n, line in enumerate(lines, start=1):
         s = line.strip()
         if s.startswith("[") and s.endswith("]"):
             section = s.lower()
@@ -74,18 +76,23 @@ def _geometry(path: Path, lines: list[str]) -> dict:
         if not section.startswith("[geometry"):
             continue
         cells = [c.strip() for c in line.split("\t")]
-        if len(cells) < 2 or cells[0].lower() not in ("diameter", "gap"):
+        if len(cells) < 2 or not cells[1]:
             continue
-        m = re.match(r"^([-+\d.eE]+)\s*(\S+)$", cells[1])
-        if not m:
+        key = cells[0].lower()
+        if key in ("geometry name", "name") and section == "[geometry]":
+            meta.update(measuring_system(cells[1]))
+            continue
+        if key not in ("diameter", "gap"):
             continue
         try:
-            value = float(to_si(float(m.group(1)), m.group(2)))
-        except (ValueError, UnknownUnitError):
-            continue
+            value = value_with_unit(cells[1])
+        except (ValueError, UnknownUnitError) as exc:
+            raise IngestError(path, f"geometry {cells[0]!r}: {exc}", line=n, column=2) from exc
         if value > 0:  # anonymised exports write 0.0 mm
-            key = "radius_m" if cells[0].lower() == "diameter" else "gap_m"
-            meta[key] = value / 2.0 if key == "radius_m" else value
+            if key == "diameter":
+                meta["radius_m"] = value / 2.0
+            else:
+                meta["gap_m"] = value
     return meta
 
 
@@ -116,7 +123,9 @@ def _step(path: Path, lines: list[str], start: int, end: int, index: int, meta_c
             line_no.append(j + 1)
         elif key and key not in keys:
             keys[key] = (j + 1, cells)
-    name = keys["step name"][1][1].strip() if "step name" in keys and len(keys["step name"][1]) > 1 else f"step {index}"
+    if "step name" in keys and not (len(keys["step name"][1]) > 1 and keys["step name"][1][1].strip()):
+        raise IngestError(path, "'Step name' row without a name (row cut short?)", line=keys["step name"][0])
+    name = keys["step name"][1][1].strip() if "step name" in keys else f"step {index}"
     for needed in ("variables", "units"):
         if needed not in keys:
             raise IngestError(path, f"step {name!r} has no '{needed.capitalize()}' row (truncated file?)",
@@ -133,8 +142,9 @@ def _step(path: Path, lines: list[str], start: int, end: int, index: int, meta_c
         except (IndexError, ValueError):
             raise IngestError(path, "'Number of points' is not an integer", line=keys["number of points"][0]) from None
     last_line = line_no[-1] if line_no else units_line
-    if declared is not None and len(rows) < declared:
-        raise IngestError(path, f"truncated file: step {name!r} declares {declared} points, found {len(rows)}",
+    if declared is not None and len(rows) != declared:
+        what = "truncated file" if len(rows) < declared else "more points than declared"
+        raise IngestError(path, f"{what}: step {name!r} declares {declared} points, found {len(rows)}",
                           line=last_line)
     if not rows:
         raise IngestError(path, f"step {name!r} has no data points", line=units_line)

@@ -17,8 +17,12 @@ Layouts read, as the software writes them:
 ``Time`` is the interval time when no separate interval-time column exists; with both (``Temps`` and
 ``Intervalle Temps``) the interval time is ``time`` and the other ``total_time``.
 
-A file cut short is reported: an interval with fewer points than its ``Interval and data points:`` count, or a
-point row with fewer cells than the column row (real exports write every cell, empty ones included).
+A file cut short is reported: an interval with another point count than its ``Interval and data points:``
+count, a point row with fewer cells than the column row (real exports write every cell, empty ones included)
+or more non-empty ones, point numbers that do not count up by one (a deleted or duplicated row), and a data
+header whose ``Interval`` row is missing (it would merge or rename intervals and shift every later block
+index). A ``Measuring System:`` header row (``PP25``, ``CP50-1``) gives ``meta["measuring_system"]`` and the
+plate radius (:mod:`tissuemech.io.geometry`); the real exports seen so far do not write one.
 Excel exports (.xlsx, section 2.6) go through the same parsing, sheet by sheet (:func:`read_rheocompass_xlsx`).
 """
 from __future__ import annotations
@@ -28,9 +32,12 @@ import re
 from pathlib import Path
 
 import numpy as np
+import openpyxl
 
-from .blocks import Block, canonical_frame_at, check_time, decode_text, detect_decimal_comma, parse_number
+from .blocks import (Block, canonical_frame_at, cell_problem, check_time, decode_text, detect_decimal_comma,
+                     parse_number)
 from .errors import IngestError
+from .geometry import measuring_system
 
 #: lower-cased RheoCompass label -> canonical variable (English, French, German)
 LABELS: dict[str, str] = {
@@ -73,6 +80,10 @@ _INTERVAL_DATA = ("interval data:", "interval données:", "intervalle données:"
 #: point numbers the software marks as invalid ("12 (invalid)", "12  (invalide)", "12 (ungültig)")
 _INVALID = re.compile(r"\((invalid|invalide|ungültig|ungueltig)\)", re.IGNORECASE)
 _POINT_NO = ("point no.", "point no", "punkt nr.", "messpunkt", "n° de point")
+#: header rows naming the measuring system (``Measuring System:	PP25``)
+_MEASURING_SYSTEM = ("measuring system:", "measuring-system:", "système de mesure:", "systeme de mesure:",
+                     "messsystem:", "geometry:", "géométrie:", "geometrie:")
+_LEADING_INT = re.compile(r"^\s*(\d+)")
 
 
 def looks_like_rheocompass(text: str) -> bool:
@@ -114,15 +125,22 @@ def _read_rows(path: Path, table: list[list[str]], comma: bool, result: str = "r
     index = first_index - 1
     interval = "1"
     declared = None
+    fresh = True  # a Result:/Interval: row since the last block (a block header without one lost its interval row)
     i = 0
     while i < len(table):
         cells = table[i]
         head = cells[0].strip().lower() if cells else ""
         if head.startswith(("test:",)):
             meta_common["test_name"] = cells[1].strip() if len(cells) > 1 else ""
+        if head.startswith(_MEASURING_SYSTEM) and len(cells) > 1:
+            meta_common.update(measuring_system(cells[1]))
         if head.startswith(_RESULT):
-            result = cells[1].strip() if len(cells) > 1 else "result"
+            if not (len(cells) > 1 and cells[1].strip()):
+                raise IngestError(path, "'Result:' row without a result name (row cut short?)", line=i + 1)
+            result = cells[1].strip()
+            fresh = True
         elif head.startswith(_INTERVAL):
+            fresh = True
             interval = cells[1].strip() if len(cells) > 1 else str(len(blocks) + 1)
             # "Interval and data points:  1  60": the point count lets a cut-short file be told from a short test
             try:
@@ -131,13 +149,18 @@ def _read_rows(path: Path, table: list[list[str]], comma: bool, result: str = "r
                 declared = None
         elif head.startswith(_INTERVAL_DATA) or head in _POINT_NO:
             offset = 1 if head.startswith(_INTERVAL_DATA) else 0
+            if not fresh:
+                # a deleted "Interval:" row would merge or rename intervals and shift every later block index
+                raise IngestError(path, f"data header without its 'Interval' row (after block '{result} / "
+                                        f"{interval}'): interval numbering cannot be trusted", line=i + 1)
+            fresh = False
             names = [c.strip() for c in cells]
             if i + 2 >= len(table):
                 raise IngestError(path, "truncated file: column header without sub-label and unit rows", line=i + 1)
             sub = table[i + 1]
             units = table[i + 2]
             j = i + 3
-            rows, line_no, invalid = [], [], 0
+            rows, line_no, invalid, last_pn = [], [], 0, 0
             while j < len(table):
                 row = table[j]
                 first = row[0].strip().lower() if row else ""
@@ -148,6 +171,15 @@ def _read_rows(path: Path, table: list[list[str]], comma: bool, result: str = "r
                     j += 1
                     continue
                 pn = row[offset].strip() if len(row) > offset else ""
+                number = _LEADING_INT.match(pn)
+                if number:
+                    # point numbers count up within an interval: a restart means a lost interval header
+                    if last_pn and int(number.group(1)) != last_pn + 1:
+                        raise IngestError(path, f"point number {int(number.group(1))} after {last_pn} in "
+                                                f"'{result} / {interval}': a deleted, duplicated or moved row, or "
+                                                "a missing interval header", line=j + 1,
+                                          column=names[offset] or offset + 1)
+                    last_pn = int(number.group(1))
                 if _INVALID.search(pn):
                     invalid += 1
                 elif pn:
@@ -155,12 +187,16 @@ def _read_rows(path: Path, table: list[list[str]], comma: bool, result: str = "r
                     if len(row) < len(names):
                         raise IngestError(path, f"truncated row: {len(row)} cells, the column row has {len(names)}",
                                           line=j + 1)
+                    if any(c.strip() for c in row[len(names):]):
+                        raise IngestError(path, f"row has {len(row)} cells, the column row only {len(names)} "
+                                                "(column row cut short?)", line=j + 1)
                     rows.append(row)
                     line_no.append(j + 1)
                 j += 1
             index += 1
-            if declared is not None and len(rows) + invalid < declared:
-                raise IngestError(path, f"truncated file: interval '{result} / {interval}' declares {declared} "
+            if declared is not None and len(rows) + invalid != declared:
+                what = "truncated file" if len(rows) + invalid < declared else "more points than declared"
+                raise IngestError(path, f"{what}: interval '{result} / {interval}' declares {declared} "
                                         f"points, found {len(rows) + invalid}", line=j)
             declared = None
             if rows or not invalid:
@@ -200,7 +236,7 @@ def _block(path, names, sub, units, rows, line_no, offset, comma, result, interv
             try:
                 values[r] = parse_number(cell, comma)
             except ValueError:
-                raise IngestError(path, f"text in a numeric column: {cell.strip()!r}", line=line_no[r],
+                raise IngestError(path, cell_problem(cell, comma), line=line_no[r],
                                   column=label) from None
         seen.add(name)
         columns.append((name, unit, values, label))
@@ -239,8 +275,6 @@ def read_rheocompass_xlsx(path) -> list[Block]:
     (as ``line``) and the column label. Sheets without a ``Point No.`` column row are skipped; blocks are
     numbered through the workbook.
     """
-    import openpyxl
-
     path = Path(path)
     try:
         # a file object, because openpyxl refuses paths whose extension is not .xlsx (format comes from content)

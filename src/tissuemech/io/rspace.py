@@ -13,8 +13,9 @@ Each run of consecutive rows with the same action name is one :class:`~tissuemec
 is ``total_time``. Steady and oscillation twins share a canonical name (``Shear strain`` / ``Complex shear
 strain``): the one holding numbers in the action is used. In oscillation actions the rows that fill only the
 raw channels (torque, angular displacement, normal force; no frequency or modulus) are the sampled waveform:
-they are dropped (counted in ``meta["waveform_rows"]``), as RheoCompass waveform rows are. Columns empty
-throughout an action are left out of its block.
+they are dropped (counted in ``meta["waveform_rows"]``), as RheoCompass waveform rows are. An action whose
+rows all fill only the raw channels (a file cut inside an oscillation action, before its first point) is an
+error, never read as points. Columns empty throughout an action are left out of its block.
 """
 from __future__ import annotations
 
@@ -47,6 +48,9 @@ CANDIDATES: dict[str, tuple[str, ...]] = {
     "gap": ("gap",),
     "temperature": ("temperature",),
 }
+#: columns a raw waveform sample fills (everything else is empty in such a row)
+_RAW_ONLY = ("time (sequence)", "time (action)", "sequence time", "action time", "time", "torque",
+             "angular displacement", "normal force", "temperature", "gap")
 #: columns that only oscillation *points* fill (the raw waveform samples leave them empty)
 _POINT_ONLY = ("frequency", "complex shear strain", "complex shear stress", "shear modulus (elastic component)",
                "shear modulus (complex component)", "phase angle")
@@ -108,6 +112,12 @@ def read_rspace(path, text: str | None = None) -> list[Block]:
 def _block(path, name, index, rows, line_no, table, comma, meta_common) -> Block:
     point_cols = [table[c][2] for c in _POINT_ONLY if c in table]
     is_point = [any(row[k].strip() for k in point_cols) for row in rows]
+    derived_cols = [k for low, (_, _, k) in table.items() if low not in _RAW_ONLY]
+    if point_cols and not any(is_point) and not any(row[k].strip() for row in rows for k in derived_cols):
+        # only raw channels filled in every row: the sampled waveform of an oscillation action whose points
+        # are missing (file cut inside the action); they are never returned as points
+        raise IngestError(path, f"action {name!r} holds only raw waveform samples (torque, displacement), no "
+                                "oscillation points: file cut inside an oscillation action?", line=line_no[0])
     waveform_rows = 0
     if any(is_point) and not all(is_point):
         waveform_rows = len(rows) - sum(is_point)

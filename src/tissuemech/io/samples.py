@@ -65,8 +65,20 @@ def load_samples(dataset_dir) -> pd.DataFrame:
     return sheet
 
 
+#: dataset.yaml keys whose absence is a warning in the ingest report (only ``material`` is required)
+RECOMMENDED = ("citation", "license")
+
+
+def dataset_warnings(meta: dict) -> list[str]:
+    """Warnings about a valid ``dataset.yaml``: missing ``citation``/``license``."""
+    return [f"dataset.yaml has no {key!r}" for key in RECOMMENDED if not meta.get(key)]
+
+
 def load_dataset_yaml(dataset_dir) -> dict:
-    """``dataset.yaml`` validated against its schema (IngestError naming the field otherwise)."""
+    """``dataset.yaml`` validated against its schema (IngestError naming the field otherwise).
+
+    Only ``material`` is required; ``geometry`` is a mapping or a string (see :mod:`tissuemech.io.geometry`).
+    """
     path = Path(dataset_dir) / "dataset.yaml"
     if not path.is_file():
         raise IngestError(path, "dataset description not found")

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..canonical import CANONICAL_VARIABLES
-from .blocks import Block, canonical_frame, check_time, decode_text, parse_number
+from .blocks import Block, canonical_frame, cell_problem, check_time, decode_text, parse_number
 from .errors import IngestError
 
 _HEADER_CELL = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*\[([^\]]*)\]\s*$")
@@ -76,7 +76,7 @@ def read_tidy(path, text: str | None = None, columns: str | None = None, units: 
             try:
                 row.append(parse_number(cell, decimal_comma=False))
             except ValueError:
-                raise IngestError(path, f"text in a numeric column: {cell.strip()!r}", line=j + 1,
+                raise IngestError(path, cell_problem(cell, False), line=j + 1,
                                   column=names[k]) from None
         rows.append(row)
         line_no.append(j + 1)

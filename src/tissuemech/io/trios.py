@@ -5,16 +5,28 @@ Text/CSV: a key/value header, ``[Section]`` blocks of key/value lines (``[Geomet
 (``Peak hold - 1``), the column row, the units row (empty cell = dimensionless) and data rows. Units are
 converted per column (step time may be in minutes). Excel: a ``Details`` sheet and one sheet per step
 (row 0 step name, row 1 columns, row 2 units, data from row 3); empty sheets are skipped.
+
+Geometry (``Block.meta``): ``measuring_system`` from ``Geometry name`` (``8.0mm parallel plate`` -> 4 mm
+radius, see :mod:`tissuemech.io.geometry`), ``radius_m``/``gap_m`` from ``Diameter``/``Gap`` with their
+units dimension-checked (concentric cylinders: none). Checks: every text data row has as many fields as
+the column row (a row cut short, or a decimal comma in a comma-separated file, would shift later columns),
+the header's ``proceduresegments`` step count against the ``[step]`` blocks found, ±inf/overflow cells; any
+failure of xlrd on a damaged ``.xls`` becomes an :class:`IngestError` naming the file.
 """
 from __future__ import annotations
 
+import io
 import re
 from pathlib import Path
 
 import numpy as np
 
-from .blocks import Block, canonical_frame, check_time, decode_text, parse_number
+import xlrd
+
+from ..units import UnknownUnitError
+from .blocks import Block, canonical_frame, cell_problem, check_time, decode_text, parse_number
 from .errors import IngestError
+from .geometry import measuring_system, value_with_unit
 
 #: lower-cased TRIOS column -> canonical variable
 LABELS: dict[str, str] = {
@@ -37,26 +49,32 @@ def looks_like_trios(text: str) -> bool:
     return "[step]" in low and ("procedure name" in low or "instrument name" in low or "filename" in low)
 
 
-def _geometry(text_lines: list[str], sep: str) -> dict:
-    meta = {}
-    for line in text_lines:
+def _geometry(path: Path, text_lines: list[str], sep: str) -> dict:
+    """Measuring system and plate geometry of the header (``Geometry name``, ``Geometry Type``, ``Diameter``,
+    ``Gap``), dimension-checked: a diameter or gap whose unit is not a length is an error naming the line.
+    Concentric cylinders have no plate radius or plate gap."""
+    meta, values = {}, {}
+    for n, line in enumerate(text_lines, start=1):
         cells = [c.strip() for c in line.split(sep)]
-        if len(cells) < 2:
+        if len(cells) < 2 or not cells[1]:
             continue
         key = cells[0].lower()
-        m = re.match(r"^([-+\d.eE]+)\s*(\S+)$", cells[1])
-        if not m:
-            continue
-        from ..units import to_si
-
-        try:
-            value = float(to_si(float(m.group(1)), m.group(2)))
-        except ValueError:
-            continue
-        if key == "diameter":
-            meta["radius_m"] = value / 2.0
-        elif key == "gap":
-            meta["gap_m"] = value
+        if key == "geometry name":
+            meta.update(measuring_system(cells[1]))
+        elif key == "geometry type":
+            meta["geometry_type"] = cells[1]
+        elif key in ("diameter", "gap"):
+            try:
+                values[key] = value_with_unit(cells[1])
+            except (ValueError, UnknownUnitError) as exc:
+                raise IngestError(path, f"geometry {cells[0]!r}: {exc}", line=n, column=2) from exc
+    if "cylinder" in str(meta.get("geometry_type", "")).lower():
+        meta.pop("radius_m", None)
+        return meta
+    if values.get("diameter", 0) > 0:
+        meta["radius_m"] = values["diameter"] / 2.0
+    if values.get("gap", 0) > 0:
+        meta["gap_m"] = values["gap"]
     return meta
 
 
@@ -69,7 +87,17 @@ def read_trios_text(path, text: str | None = None) -> list[Block]:
     starts = [i for i, line in enumerate(lines) if line.strip().lower() == "[step]"]
     if not starts:
         raise IngestError(path, "no [step] block in a TRIOS export")
-    meta_common = {"format": "ta_trios_text" if sep == "\t" else "ta_trios_csv", **_geometry(lines[: starts[0]], sep)}
+    meta_common = {"format": "ta_trios_text" if sep == "\t" else "ta_trios_csv",
+                   **_geometry(path, lines[: starts[0]], sep)}
+    # the header lists the procedure's steps ("proceduresegments  Peak hold#Flow sweep#..."): fewer [step]
+    # blocks than that is a file cut at a step boundary
+    for n, line in enumerate(lines[: starts[0]], start=1):
+        cells = line.split(sep)
+        if cells[0].strip().lower() == "proceduresegments" and len(cells) > 1 and cells[1].strip():
+            declared = len(cells[1].split("#"))
+            if len(starts) < declared:
+                raise IngestError(path, f"truncated file: the procedure declares {declared} steps "
+                                        f"(proceduresegments), found {len(starts)}", line=n)
     blocks = []
     for b, s in enumerate(starts):
         end = starts[b + 1] if b + 1 < len(starts) else len(lines)
@@ -82,7 +110,13 @@ def read_trios_text(path, text: str | None = None) -> list[Block]:
         for j in range(s + 4, end):
             if not lines[j].strip():
                 continue
-            rows.append(lines[j].split(sep))
+            cells = lines[j].split(sep)
+            # a row cut short, or a decimal comma in a comma-separated file, would shift every later column
+            if len(cells) != len(cols):
+                raise IngestError(path, f"malformed row: {len(cells)} fields, the column row of step {name!r} has "
+                                        f"{len(cols)} (row cut short, or a decimal comma in a comma-separated "
+                                        "file)", line=j + 1)
+            rows.append(cells)
             line_no.append(j + 1)
         blocks.append(_step_block(path, name, b + 1, cols, units, rows, line_no, meta_common))
     return blocks
@@ -103,7 +137,7 @@ def _step_block(path, name, index, cols, units, rows, line_no, meta_common) -> B
             try:
                 values[r] = float(raw) if isinstance(raw, float) else parse_number(cell, decimal_comma=False)
             except ValueError:
-                raise IngestError(path, f"text in a numeric column: {cell.strip()!r}", line=line_no[r],
+                raise IngestError(path, cell_problem(cell, False), line=line_no[r],
                                   column=label) from None
         unit = units[k] if k < len(units) else ""
         seen.add(canon)
@@ -115,17 +149,35 @@ def _step_block(path, name, index, cols, units, rows, line_no, meta_common) -> B
 
 
 def read_trios_xls(path) -> list[Block]:
-    """Every step sheet of a TRIOS Excel (.xls, BIFF8) export."""
-    import xlrd
+    """Every step sheet of a TRIOS Excel (.xls, BIFF8) export.
 
+    The ``Details`` sheet gives the measuring system (``Geometry name``, e.g. ``8.0mm parallel plate``: an
+    8 mm plate). A damaged workbook (truncated, corrupt bytes) raises :class:`IngestError` naming the file,
+    whatever xlrd raised (``XLRDError``, ``struct.error``, ``IndexError``, ``AssertionError``,
+    ``RecursionError`` ...).
+    """
     path = Path(path)
     try:
-        book = xlrd.open_workbook(str(path))
-    except xlrd.XLRDError as exc:
-        raise IngestError(path, f"not a readable TRIOS .xls workbook: {exc}") from exc
+        return _read_xls(path)
+    except IngestError:
+        raise
+    except Exception as exc:  # xlrd surfaces damage as any of a dozen exception types
+        raise IngestError(path, f"not a readable TRIOS .xls workbook (truncated or damaged file?): "
+                                f"{type(exc).__name__}: {exc}") from exc
+
+
+def _read_xls(path: Path) -> list[Block]:
+    book = xlrd.open_workbook(str(path), logfile=io.StringIO())  # xlrd's damage warnings go to the error
+    geometry: dict = {}
     blocks = []
     for sheet in book.sheets():
-        if sheet.name.lower() == "details" or sheet.nrows < 4:
+        if sheet.name.lower() == "details":
+            for r in range(sheet.nrows):
+                vals = sheet.row_values(r)
+                if len(vals) > 1 and str(vals[0]).strip().lower() == "geometry name":
+                    geometry.update(measuring_system(str(vals[1])))
+            continue
+        if sheet.nrows < 4:
             continue
         name = str(sheet.cell_value(0, 0)).strip() or sheet.name
         cols = [str(v).strip() for v in sheet.row_values(1)]
@@ -138,4 +190,6 @@ def read_trios_xls(path) -> list[Block]:
                                   {"format": "ta_trios_xls", "sheet": sheet.name}))
     if not blocks:
         raise IngestError(path, "no step sheet with data in the workbook")
+    for block in blocks:
+        block.meta.update(geometry)
     return blocks

@@ -1,0 +1,174 @@
+"""Seeded mutation fuzzing of the readers: damage an export, read it, judge the outcome against the original.
+
+Used by ``tests/io/test_fuzz.py`` (CI-sized) and ``benchmarks/ingest_fuzz.py`` (large runs). Mutations
+(:data:`TEXT_MUTATIONS`, :data:`BINARY_MUTATIONS`): truncate, delete or duplicate a line, cut a row short,
+flip the case of a unit prefix (``mPa`` <-> ``MPa``, ``mN`` <-> ``MN``), put ``1e400`` in a numeric cell,
+swap the decimal separator of a cell; for ``.xls``/``.xlsx``: truncate and overwrite bytes.
+
+Outcomes (:func:`judge`):
+
+* ``error``: :class:`~tissuemech.io.errors.IngestError` (what a damaged file must give);
+* ``same``: the blocks equal the original's (the mutation did not touch data);
+* ``scaled``: after a prefix flip, exactly the flipped column changed, by the right factor;
+* ``rows_dropped``: every column is there and each point equals an original point, in order, but trailing
+  or deleted rows (or trailing blocks) are missing. A format that declares no point count cannot tell this from a short
+  test; counted apart and reported;
+* ``crash``: any exception other than IngestError (a defect);
+* ``wrong``: values, columns, block names or indices differ from the original (a defect), except after byte
+  corruption of a binary workbook, which has no checksum: that is ``undetectable``.
+"""
+from __future__ import annotations
+
+import random
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..canonical import CANONICAL_VARIABLES
+from ..units import UnknownUnitError, unit_factor
+from .dispatch import read_export
+from .errors import IngestError
+
+TEXT_MUTATIONS = ("truncate", "delete_line", "duplicate_line", "cut_row", "flip_prefix", "overflow",
+                  "swap_decimal")
+BINARY_MUTATIONS = ("truncate_bytes", "corrupt_bytes")
+_PREFIX = re.compile(r"(?<![A-Za-z])([mM])(?=(Pa|N)(?![A-Za-z]))")
+_NUMERIC_CELL = re.compile(r"(?<=[\t;,])[-+]?\d+[.,]\d+(?:[eE][-+]?\d+)?(?=[\t;,\r\n]|$)")
+
+
+@dataclass
+class Mutant:
+    """One damaged copy of an export: ``kind`` of mutation, ``detail`` in words, the bytes to write."""
+
+    kind: str
+    detail: str
+    data: bytes
+
+
+def _encoding(raw: bytes) -> str:
+    return "utf-16" if raw[:2] in (b"\xff\xfe", b"\xfe\xff") else "utf-8-sig" if raw[:3] == b"\xef\xbb\xbf" else "utf-8"
+
+
+def mutate(raw: bytes, kind: str, rng: random.Random) -> Mutant:
+    """A mutant of an export's bytes (text mutations on the decoded text, re-encoded the same way)."""
+    if kind == "truncate_bytes":
+        cut = rng.randrange(1, max(2, len(raw)))
+        return Mutant(kind, f"cut at byte {cut}", raw[:cut])
+    if kind == "corrupt_bytes":
+        data = bytearray(raw)
+        at = rng.randrange(len(data))
+        n = rng.randint(1, 16)
+        for k in range(at, min(len(data), at + n)):
+            data[k] = rng.randrange(256)
+        return Mutant(kind, f"{n} bytes overwritten at {at}", bytes(data))
+    enc = _encoding(raw)
+    text = raw.decode(enc)
+    lines = text.splitlines(keepends=True)
+    detail = ""
+    if kind == "truncate":
+        cut = rng.randrange(1, max(2, len(text)))
+        text, detail = text[:cut], f"cut at character {cut}"
+    elif kind in ("delete_line", "duplicate_line", "cut_row"):
+        k = rng.randrange(len(lines))
+        if kind == "delete_line":
+            del lines[k]
+        elif kind == "duplicate_line":
+            lines.insert(k, lines[k])
+        else:
+            seps = [m.start() for m in re.finditer(r"[\t;,]", lines[k])]
+            if seps:
+                lines[k] = lines[k][: rng.choice(seps)] + "\r\n" * lines[k].endswith("\r\n") + "\n" * (
+                    not lines[k].endswith("\r\n") and lines[k].endswith("\n"))
+        text, detail = "".join(lines), f"line {k + 1}"
+    elif kind in ("flip_prefix", "overflow", "swap_decimal"):
+        pattern = _PREFIX if kind == "flip_prefix" else _NUMERIC_CELL
+        hits = list(pattern.finditer(text))
+        if hits:
+            m = rng.choice(hits)
+            line = text.count("\n", 0, m.start()) + 1
+            if kind == "flip_prefix":
+                new = m.group(1).swapcase()
+            elif kind == "overflow":
+                new = "1e400"
+            else:
+                new = m.group(0).translate(str.maketrans(".,", ",."))
+            text, detail = text[: m.start()] + new + text[m.end():], f"line {line}: {m.group(0)!r} -> {new!r}"
+    else:
+        raise ValueError(f"unknown mutation {kind!r}")
+    return Mutant(kind, detail, text.encode(enc))
+
+
+def _frames_equal(a, b) -> bool:
+    return a.shape == b.shape and bool(np.allclose(a, b, rtol=1e-12, atol=0.0, equal_nan=True))
+
+
+def _is_subsequence(short: np.ndarray, long: np.ndarray) -> bool:
+    j = 0
+    for row in short:
+        while j < len(long) and not np.allclose(row, long[j], rtol=1e-12, atol=0.0, equal_nan=True):
+            j += 1
+        if j == len(long):
+            return False
+        j += 1
+    return True
+
+
+def judge(original: list, path: Path, kind: str, **options) -> tuple[str, str]:
+    """Read a mutant and classify the outcome against the original blocks (see module docstring)."""
+    try:
+        blocks = read_export(path, **options)
+    except IngestError as exc:
+        return "error", exc.problem
+    except Exception as exc:  # noqa: BLE001 - any other exception type is the defect being counted
+        return "crash", f"{type(exc).__name__}: {exc}"
+    undetectable = "undetectable" if kind == "corrupt_bytes" else "wrong"
+    names = [(b.index, b.name) for b in blocks]
+    if names != [(b.index, b.name) for b in original][: len(names)]:
+        return undetectable, "blocks differ: " + ", ".join(f"{b.index}:{b.name}" for b in blocks)[:200]
+    outcome = "same" if len(blocks) == len(original) else "rows_dropped"  # trailing blocks cut off
+    for new, old in zip(blocks, original):
+        if list(new.data.columns) != list(old.data.columns):
+            return undetectable, f"block {old.name!r}: columns {list(new.data.columns)} vs {list(old.data.columns)}"
+        ratio = np.ones(len(old.data.columns))
+        for k, col in enumerate(old.data.columns):
+            u_new, u_old = new.meta.get("labels", {}).get(col), old.meta.get("labels", {}).get(col)
+            if u_new != u_old:
+                try:
+                    expected = None if col == "temperature" else _expected(col)
+                    ratio[k] = unit_factor(u_new, expected)[0] / unit_factor(u_old, expected)[0]
+                except UnknownUnitError:
+                    return "wrong", f"column {col!r} unit {u_new!r} accepted"
+        a, b = new.data.to_numpy(float), old.data.to_numpy(float) * ratio
+        if _frames_equal(a, b):
+            outcome = "scaled" if (ratio != 1).any() or outcome == "scaled" else outcome
+            continue
+        if a.shape[0] < b.shape[0] and _is_subsequence(a, b):
+            outcome = "rows_dropped"
+            continue
+        return undetectable, f"block {old.name!r}: values differ"
+    return outcome, ""
+
+
+def _expected(column: str) -> str:
+    return CANONICAL_VARIABLES[column][0]
+
+
+def fuzz_file(path: Path, workdir: Path, n: int, seed: int, **options) -> list[tuple[str, str, str, str]]:
+    """``n`` seeded mutants of one export: ``(mutation, detail, outcome, message)`` per mutant."""
+    path, workdir = Path(path), Path(workdir)
+    raw = path.read_bytes()
+    binary = raw[:4] == b"PK\x03\x04" or raw[:8] == b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1"
+    kinds = BINARY_MUTATIONS if binary else TEXT_MUTATIONS
+    original = read_export(path, **options)
+    rng = random.Random(f"{seed}:{path.name}")
+    out = []
+    for i in range(n):
+        kind = kinds[i % len(kinds)]
+        mutant = mutate(raw, kind, rng)
+        target = workdir / f"mutant{path.suffix}"
+        target.write_bytes(mutant.data)
+        outcome, message = judge(original, target, kind, **options)
+        out.append((kind, mutant.detail, outcome, message))
+    return out
