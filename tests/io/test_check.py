@@ -45,7 +45,7 @@ def test_good_bundled_dataset_exits_0_and_describes_each_run(repo_root, capsys):
     # first row of samples.csv: batch01_s01_01_as.csv, amplitude sweep at 1 Hz, radius_mm 12.5, gap_mm 2.4312
     block = out.split("run batch01_s01_amplitude_sweep_1 [ok]  file: batch01_s01_01_as.csv\n", 1)[1].split("\nrun ", 1)[0]
     assert "test: amplitude_sweep   condition: frequency_hz=1" in block
-    assert "R = 12.5 mm" in block and "gap = 2.431 mm" in block
+    assert "geometry: R = 12.5 mm (samples.csv), gap = 2.431 mm (samples.csv)" in block
     assert "storage_modulus [Pa]" in block and "raw_phase [rad]" in block and "shear_strain [1]" in block
     assert "not testable: torque_below_resolution: no torque resolution declared" in block
     assert out.rstrip().endswith("12 of 12 runs readable, 0 with errors, 0 with warnings -> OK")
@@ -86,3 +86,18 @@ def test_geometry_is_shown_with_its_source_or_as_missing():
     assert "columns (2 points): shear_strain [1], storage_modulus [Pa]" in lines
     bare = describe_run(make_run_dataset(columns, {"test": "amplitude_sweep"}))
     assert "geometry: no plate radius, no gap" in bare
+
+
+def test_a_run_without_plate_radius_says_so_and_names_the_gap_source(agar_copy, capsys):
+    (agar_copy / "dataset.yaml").write_text("material: 3 % agar gel\n", encoding="utf-8")   # only material
+    lines = (agar_copy / "samples.csv").read_text(encoding="utf-8").splitlines()
+    header = lines[0].split(",")
+    first = lines[1].split(",")
+    first[header.index("radius_mm")] = first[header.index("gap_mm")] = ""
+    (agar_copy / "samples.csv").write_text("\n".join([lines[0], ",".join(first)] + lines[2:]) + "\n", encoding="utf-8")
+    assert cli_main(["check", str(agar_copy)]) == 0                # warnings, not errors
+    out = capsys.readouterr().out
+    block = out.split("run batch01_s01_amplitude_sweep_1 [ok]", 1)[1].split("\nrun ", 1)[0]
+    # no radius anywhere (the export's measuring system is not stated); the gap from the export's gap channel
+    assert "geometry: no plate radius, gap = 2.431 mm (export)" in block
+    assert "warnings: no plate radius" in block and "dataset.yaml has no 'citation'" in block
