@@ -19,9 +19,10 @@ section 2.5; nobadscience.com/rheo3.htm, "Locking the phase angle"). Above 90 de
 exceeds the sample's elastic torque; close to 180 deg the sample's contribution is a small difference of two
 large numbers and G', G'' depend entirely on the inertia calibration (J Rheol 53:765, 2009, PMC2947155: errors
 grow quadratically with the inertia uncertainty above the coupled resonance). The threshold is the
-instrument maker's rule of thumb: TA Instruments' guidance for its DHR/AR rheometers is that data whose raw phase
-exceeds about 150 deg (often quoted up to 175 deg) are dominated by instrument inertia. We use the conservative end,
-150 deg; it is a named constant and a keyword of :func:`inertia_flags`. Runs without a raw-phase channel (most
+instrument maker's rule of thumb as issue 13 cites it (TA Instruments: a raw phase above about 150-175 deg means
+instrument inertia dominates); the primary TA text was not at hand when this was written, so the physical
+argument above is the independent reason for it. We use the conservative end, 150 deg; it is a named constant and
+a keyword of :func:`inertia_flags`. Runs without a raw-phase channel (most
 RheoCompass and LIMS exports) are *not testable*; they are never flagged on other evidence.
 
 Torque resolution. Only when it is declared: ``dataset.yaml`` ``instrument: {torque_resolution_nm: 1e-8}``
