@@ -107,7 +107,8 @@ def test_a_changed_pipeline_setting_fails_the_check(repo_root, reference_dir, mo
     assert all(f" {p} " in message for p in moved["parameter"])
 
 
-def test_update_of_one_dataset_leaves_the_other_table(reference_copy, fresh):
+def test_update_of_one_dataset_leaves_the_other_table(platform_reference, fresh):
+    reference_copy = platform_reference
     brain = (reference_copy / "porcine_brain_thesis.csv").read_text()
     (reference_copy / "porcine_brain_thesis.csv").write_text(brain.replace("0.1 x standard error", "edited"))
     written, diff = REG.update(reference_copy, fresh=fresh, datasets=["agar_3pct_thesis"])
@@ -116,7 +117,16 @@ def test_update_of_one_dataset_leaves_the_other_table(reference_copy, fresh):
     assert "edited" in (reference_copy / "porcine_brain_thesis.csv").read_text()
 
 
-def test_update_rewrites_the_tables_and_prints_the_diff(reference_copy, fresh, monkeypatch, capsys):
+@pytest.fixture
+def platform_reference(reference_copy, fresh):
+    """The committed tables rewritten with this machine's fits: the last bits of a refit differ between
+    processors (far inside the tolerance, see above), and the update tests are about the diff they print."""
+    REG.update(reference_copy, fresh=fresh)
+    return reference_copy
+
+
+def test_update_rewrites_the_tables_and_prints_the_diff(platform_reference, fresh, monkeypatch, capsys):
+    reference_copy = platform_reference
     old, _ = _perturb(reference_copy, "porcine_brain_thesis", "frequency_sweep", "springpot", "alpha", 3.0)
     monkeypatch.setattr(REG, "fresh_table", lambda *a, **k: fresh)
     assert REG.main(["--update", "--reference-dir", str(reference_copy)]) == 0
