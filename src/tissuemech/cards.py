@@ -6,7 +6,8 @@ Card shape (JSON, SI units)::
      "elastic_law": law key, "elastic_parameters": {...}, "initial_shear_modulus": Pa,
      "prony": {"g": [...], "tau": [...], "g_inf": ..., "normalisation": ..., "source": ...} | null,
      "poisson_ratio": 0.49, "bulk_modulus": Pa, "validity": {...}, "provenance": {...},
-     "fit_quality": {...}, "abaqus_form": ..., "febio_form": ..., "notes": [...]}
+     "fit_quality": {...}, "abaqus_form": ..., "febio_form": type | null, "febio_parameters": {...} | null,
+     "febio_reason": str | null, "valid_range": {...}, "uncertainty": {...}, "notes": [...]}
 
 ``elastic_law``/``elastic_parameters`` are the (instantaneous) hyperelastic law a FE code needs -- for a
 QLV model the instantaneous law, for a linear viscoelastic model a linear law with the instantaneous
@@ -41,25 +42,37 @@ forms, against the fitted model):
 * The Nunes law has an infinite initial tangent modulus (W2 ~ (I2-3)^(-1/4)); its card's
   ``initial_shear_modulus`` (and the bulk modulus derived from it) is the secant modulus at gamma_max/20 (any
   law whose tangent keeps growing as gamma -> 0 is treated so) and the notes say so.
-* FEBio (uncoupled materials, nearly incompressible ``k`` = bulk modulus): ``Mooney-Rivlin`` c1 = C10,
-  c2 = C01 (neo-Hooke: c2 = 0); ``Ogden`` W = sum c_i/m_i^2 (...) so c_i = 2 mu_i, m_i = alpha_i;
-  viscoelasticity as ``uncoupled viscoelastic`` with S = g0 S_e + sum g_i H_i (FEBio's own update, see
-  FEUncoupledViscoElasticMaterial.cpp) where the elastic base is the instantaneous law: g0 = g_inf,
-  g_i = Prony g_i, t_i = tau_i (at most 6 terms). FEBio's Arruda-Boyce uses a different series
-  (W1 = mu (1/2 + 0.2 I1/N + ...)) than Arruda-Boyce/Abaqus, so no FEBio block is written for it; polynomial
-  forms have no native FEBio material either -- the card says so instead of writing an approximation.
+* FEBio: :mod:`tissuemech.cards_febio` (type strings, parameter names and stress forms checked against the FEBio
+  source and manual, cited there). Native blocks: ``Mooney-Rivlin`` (neo-Hooke, Mooney-Rivlin), ``Ogden`` (<= 6
+  terms, c_i = 2 mu_i, m_i = alpha_i), ``Gent`` (G = mu, Jm), ``polynomial`` (full/reduced polynomial of order 2,
+  coupled, D1 = K/2), each uncoupled one with ``k`` = the card's bulk modulus, and the ``uncoupled viscoelastic``
+  wrapper (g0 = g_inf, g_i, t_i = tau_i, <= 6 terms) around the instantaneous law. Yeoh/reduced polynomial of
+  order >= 3, Arruda-Boyce, Lopez-Pamies, Nunes, Amin, higher polynomials and beyond-QLV laws get no block and
+  ``febio_reason`` says why. Every block is checked in simple shear against the fitted law (1 %).
+  ``febio_block`` gives the ``<material>`` element, ``febio_file_text`` the ``febio_spec`` 4.0 document written
+  as ``<stem>.feb.xml``.
+
+Valid range and uncertainty (every card): ``valid_range`` = the fitted data selection's shear strain, shear rate,
+time and angular-frequency spans (``None`` and listed in ``not_given`` when the data carry none), its tests and
+conditions; ``uncertainty`` = lmfit standard errors, relative standard errors, parameters without a finite
+standard error, and the initial shear modulus's standard error (delta method). The Poisson ratio (hence ``k``)
+is the configuration's ``fem.poisson_ratio`` passed in by ``fit_scope``; ``DEFAULT_POISSON`` only serves direct
+calls.
 """
 from __future__ import annotations
 
 import json
 import math
 import re
+import xml.etree.ElementTree as ET
 from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 
 from .canonical import write_text
+from .cards_febio import (FEBIO_SOURCE_COMMIT, febio_card_material, febio_document, febio_material_element,
+                          febio_simple_shear_stress)
 from .fitting import FitResult, _jsonable
 from .models.base import ConstitutiveModel
 
@@ -250,6 +263,81 @@ def marlow_uniaxial_table(law: ConstitutiveModel, lp: Mapping[str, float], strai
 # ------------------------------------------------------------------------------------------------
 # the card
 # ------------------------------------------------------------------------------------------------
+def _span(lo: float, hi: float) -> list[float] | None:
+    lo, hi = float(lo), float(hi)
+    return [lo, hi] if np.isfinite(lo) and np.isfinite(hi) else None
+
+
+def _range_text(vr: Mapping) -> str:
+    parts = []
+    for key, label in (("shear_strain", "shear strain"), ("shear_rate_1_per_s", "shear rate 1/s"),
+                       ("time_s", "time s"), ("angular_frequency_rad_per_s", "angular frequency rad/s")):
+        span = vr.get(key)
+        parts.append(f"{label} {span[0]:.4g}..{span[1]:.4g}" if span else f"{label} not given by the data")
+    return "; ".join(parts)
+
+
+def valid_range(result: FitResult) -> dict:
+    """Range of the fitted data selection in which a card is valid (from ``result.ranges``/``result.selection``).
+
+    Returns ``{"shear_strain": [min, max] | None, "shear_rate_1_per_s": [...] | None, "time_s": [...] | None,
+    "angular_frequency_rad_per_s": [...] | None, "tests": [...], "conditions": [...], "not_given": [...]}``:
+    strain is the shear strain amount gamma (``|stretch - 1|`` for uniaxial curves, the creep strain for creep
+    curves); the shear rate is the nominal rate of the fitted ramps or the measured rates of flow curves. A
+    quantity the fitted data do not carry is ``None`` and listed in ``not_given``, never filled in.
+    """
+    r = result.ranges
+    out = {"shear_strain": _span(r.get("strain_min", np.nan), r.get("strain_max", np.nan)),
+           "shear_rate_1_per_s": _span(r.get("rate_min_1_per_s", np.nan), r.get("rate_max_1_per_s", np.nan)),
+           "time_s": _span(r.get("time_min_s", np.nan), r.get("time_max_s", np.nan)),
+           "angular_frequency_rad_per_s": _span(r.get("omega_min_rad_per_s", np.nan),
+                                                r.get("omega_max_rad_per_s", np.nan))}
+    out["not_given"] = [k for k, v in out.items() if v is None]
+    sel = result.selection or []
+    out["tests"] = sorted({str(s.get("test")) for s in sel if s.get("test")})
+    out["conditions"] = [str(s.get("label", s.get("condition", ""))) for s in sel]
+    return out
+
+
+def parameter_uncertainty(result: FitResult, law: ConstitutiveModel | None = None,
+                          lp: Mapping[str, float] | None = None) -> dict:
+    """Uncertainty of a card's parameters from the fit (lmfit's linearised covariance).
+
+    Returns ``{"method", "standard_errors", "relative_standard_errors", "not_determined",
+    "initial_shear_modulus_stderr"}``: standard errors in the parameters' units; ``not_determined`` lists the
+    varied parameters without a finite standard error (covariance not estimable); the initial shear modulus's
+    standard error (Pa) is propagated from the covariance (delta method, central differences) when the elastic
+    law's parameters all have one, else ``None``.
+    """
+    se = {k: float(v) for k, v in result.stderr.items()}
+    rel = {k: (abs(se[k] / result.params[k]) if k in result.params and result.params[k] != 0 and np.isfinite(se[k])
+               else float("nan")) for k in se}
+    varying = list(result.varying)
+    not_det = [k for k in varying if not np.isfinite(se.get(k, np.nan))]
+    out = {"method": "lmfit covariance at the optimum (linearised; see fit_quality.flags for poorly determined fits)",
+           "standard_errors": se, "relative_standard_errors": rel, "not_determined": not_det,
+           "initial_shear_modulus_stderr": None}
+    if law is None or lp is None:
+        return out
+    names = [k for k in varying if k in lp]
+    corr = np.asarray(result.correlation, float)
+    if (not names or any(k in not_det for k in names) or corr.shape != (len(varying), len(varying))
+            or not np.all(np.isfinite(corr))):
+        return out
+    idx = [varying.index(k) for k in names]
+    sd = np.array([se[k] for k in names])
+    cov = corr[np.ix_(idx, idx)] * np.outer(sd, sd)
+    grad = np.zeros(len(names))
+    for j, k in enumerate(names):
+        h = 1e-4 * max(abs(lp[k]), sd[j], 1e-12)
+        up, dn = dict(lp), dict(lp)
+        up[k], dn[k] = lp[k] + h, lp[k] - h
+        grad[j] = (initial_shear_modulus(law, up) - initial_shear_modulus(law, dn)) / (2 * h)
+    var = float(grad @ cov @ grad)
+    out["initial_shear_modulus_stderr"] = math.sqrt(var) if np.isfinite(var) and var >= 0 else None
+    return out
+
+
 def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float = DEFAULT_POISSON,
               dataset: str = "", fit_file: str = "", strain_margin: float = 1.2) -> dict:
     """Canonical card of a fitted model (see the module docstring for the shape and conventions)."""
@@ -372,9 +460,18 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float 
             notes.append(f"native {form} constants do not reproduce the law ({100 * err:.2g} % off); not used")
         if card["abaqus_form"] == "MARLOW":
             notes.append("no native Abaqus form: MARLOW with uniaxial data equivalent in simple shear (I1-only)")
-    card["febio_form"] = _febio_form(card)
-    if card["febio_form"] is None and card.get("abaqus_form") is not None:
-        notes.append(f"no FEBio block: no verified FEBio material equivalent to Abaqus {card['abaqus_form']}")
+    if law is None:
+        card.update(febio_form=None, febio_parameters=None, febio_check_max_rel_error=None,
+                    febio_reason=notes[-1] if notes else "no solid elastic law")
+    else:
+        ogden = card["abaqus_constants"] if str(card["abaqus_form"]).startswith("OGDEN") else None
+        card.update(febio_card_material(card["elastic_law"], card["elastic_parameters"], card["bulk_modulus"],
+                                        prony, lambda g: law.elastic_shear_stress(lp, g), strain_max,
+                                        ogden_constants=ogden))
+        if card["febio_form"] is None:
+            notes.append(f"no FEBio block: {card['febio_reason']}")
+    card["valid_range"] = valid_range(result)
+    card["uncertainty"] = parameter_uncertainty(result, law, lp)
     card["notes"] = notes
     card["_law"] = law  # runtime only (not serialised)
     return card
@@ -489,94 +586,39 @@ def abaqus_simple_shear_stress(block: str, strain: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------------------------
-# FEBio
+# FEBio (forms and checks in :mod:`tissuemech.cards_febio`)
 # ------------------------------------------------------------------------------------------------
-def _febio_form(card: Mapping) -> str | None:
-    form = card.get("abaqus_form")
-    if form is None:
-        return None
-    if form in ("NEO HOOKE", "MOONEY-RIVLIN"):
-        return "Mooney-Rivlin"
-    if form.startswith("OGDEN") and int(re.search(r"N=(\d+)", form).group(1)) <= 6:
-        return "Ogden"
-    return None
-
-
 def febio_block(card: Mapping, material_id: int = 1, material_name: str | None = None) -> str | None:
-    """FEBio ``<material>`` XML element (FEBio 3/4 spec) or ``None`` when FEBio has no native form."""
-    import xml.etree.ElementTree as ET
-
-    form = card.get("febio_form")
-    if form is None:
+    """FEBio ``<material>`` XML element (FEBio 4 spec) or ``None`` when the card has no verified FEBio form
+    (``card["febio_reason"]`` says why)."""
+    if card.get("febio_form") is None:
         return None
-    prony = card.get("prony")
-    if prony and len(prony["g"]) > 6:
-        return None
-    name = material_name or str(card["model"])
-    k = float(card["bulk_modulus"])
-    consts = list(card["abaqus_constants"])
-
-    def elastic(parent, tag, attrs):
-        el = ET.SubElement(parent, tag, attrs)
-        if form == "Mooney-Rivlin":
-            c1, c2 = (consts[0], 0.0) if len(consts) == 1 else (consts[0], consts[1])
-            for pname, v in (("c1", c1), ("c2", c2), ("k", k)):
-                ET.SubElement(el, pname).text = f"{v:.10g}"
-        else:  # Ogden: c_i = 2 mu_i, m_i = alpha_i
-            for i in range(len(consts) // 2):
-                ET.SubElement(el, f"c{i + 1}").text = f"{2.0 * consts[2 * i]:.10g}"
-                ET.SubElement(el, f"m{i + 1}").text = f"{consts[2 * i + 1]:.10g}"
-            ET.SubElement(el, "k").text = f"{k:.10g}"
-        return el
-
-    if prony:
-        mat = ET.Element("material", {"id": str(material_id), "name": name, "type": "uncoupled viscoelastic"})
-        ET.SubElement(mat, "k").text = "0"
-        ET.SubElement(mat, "g0").text = f"{prony['g_inf']:.10g}"
-        for i, (g, tau) in enumerate(zip(prony["g"], prony["tau"])):
-            ET.SubElement(mat, f"g{i + 1}").text = f"{g:.10g}"
-            ET.SubElement(mat, f"t{i + 1}").text = f"{tau:.10g}"
-        elastic(mat, "elastic", {"type": form})
-    else:
-        mat = ET.Element("material", {"id": str(material_id), "name": name, "type": form})
-        tmp = elastic(ET.Element("tmp"), "x", {})
-        for child in list(tmp):
-            mat.append(child)
+    mat = febio_material_element(card["febio_form"], card["febio_parameters"], card.get("prony"),
+                                 material_id=material_id, name=material_name or str(card["model"]))
     ET.indent(mat)
     return ET.tostring(mat, encoding="unicode") + "\n"
 
 
-def febio_simple_shear_stress(xml_text: str, strain: np.ndarray) -> np.ndarray:
-    """Instantaneous incompressible simple-shear stress of a FEBio block (Mooney-Rivlin or Ogden), from
-    FEBio's energy forms; the viscoelastic wrapper scales by g0 + sum g_i at t = 0+ (= 1 for QLV cards)."""
-    import xml.etree.ElementTree as ET
-
-    root = ET.fromstring(xml_text)
-    scale = 1.0
-    el = root
-    if root.get("type") == "uncoupled viscoelastic":
-        scale = float(root.findtext("g0")) + sum(float(c.text) for c in root if re.fullmatch(r"g[1-9]", c.tag))
-        el = root.find("elastic")
-    g = np.asarray(strain, float)
-    if el.get("type") == "Mooney-Rivlin":
-        return scale * 2.0 * g * (float(el.findtext("c1")) + float(el.findtext("c2")))
-    if el.get("type") == "Ogden":
-        lam = g / 2.0 + np.sqrt(1.0 + g ** 2 / 4.0)
-        out = np.zeros_like(g)
-        i = 1
-        while el.find(f"c{i}") is not None:
-            c, m = float(el.findtext(f"c{i}")), float(el.findtext(f"m{i}"))
-            out += (c / m) * (lam ** m - lam ** -m) / (lam + 1.0 / lam)
-            i += 1
-        return scale * out
-    raise ValueError(f"cannot evaluate FEBio material type {el.get('type')!r}")
+def febio_file_text(card: Mapping, material_id: int = 1, material_name: str | None = None) -> str | None:
+    """A FEBio input document (``febio_spec`` 4.0, ``Material`` section) of the card, with its valid range and
+    provenance as XML comments; ``None`` when the card has no FEBio form."""
+    if card.get("febio_form") is None:
+        return None
+    mat = febio_material_element(card["febio_form"], card["febio_parameters"], card.get("prony"),
+                                 material_id=material_id, name=material_name or str(card["model"]))
+    vr = card.get("valid_range") or {}
+    comments = [f"tissuemech material card: model {card['model']} ({card['family']}), units N, m, s, Pa",
+                f"valid range (fitted data): {_range_text(vr)}",
+                f"Poisson ratio {card['poisson_ratio']} (configuration) -> k = {card['bulk_modulus']:.6g} Pa",
+                f"FEBio forms checked against febiosoftware/FEBio {FEBIO_SOURCE_COMMIT[:7]}"]
+    return febio_document(mat, comments)
 
 
 # ------------------------------------------------------------------------------------------------
 # files
 # ------------------------------------------------------------------------------------------------
 def write_card_files(card: Mapping, folder, stem: str | None = None) -> dict[str, Path]:
-    """Write ``<stem>.json``, ``<stem>.inp`` (Abaqus) and ``<stem>.feb.xml`` (FEBio) where they exist.
+    """Write ``<stem>.json``, ``<stem>.inp`` (Abaqus) and ``<stem>.feb.xml`` (FEBio document) where they exist.
 
     Returns the written paths by kind (``json``, ``abaqus``, ``febio``).
     """
@@ -586,12 +628,13 @@ def write_card_files(card: Mapping, folder, stem: str | None = None) -> dict[str
     ab = abaqus_block(card)
     if ab is not None:
         out["abaqus"] = write_text(ab, folder / f"{stem}.inp")
-    fb = febio_block(card)
+    fb = febio_file_text(card)
     if fb is not None:
         out["febio"] = write_text(fb, folder / f"{stem}.feb.xml")
     return out
 
 
 __all__ = ["make_card", "card_json", "abaqus_block", "parse_abaqus_block", "abaqus_simple_shear_stress",
-           "abaqus_hyperelastic_form", "marlow_uniaxial_table", "febio_block", "febio_simple_shear_stress",
+           "abaqus_hyperelastic_form", "marlow_uniaxial_table", "febio_block", "febio_file_text",
+           "febio_simple_shear_stress", "valid_range", "parameter_uncertainty",
            "prony_from_step_response", "prony_from_complex_modulus", "initial_shear_modulus", "write_card_files", "DEFAULT_POISSON"]
