@@ -20,6 +20,7 @@ import yaml
 
 from tissuemech import cards as C
 from tissuemech import fitting as F
+from tissuemech.cards_febio import febio_card_material
 from tissuemech.models.registry import get_model
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -252,8 +253,6 @@ def test_laws_without_a_faithful_febio_form_get_a_reason(key, truth, reason, tmp
 
 
 def test_more_than_six_prony_terms_are_refused():
-    from tissuemech.cards_febio import febio_card_material
-
     prony = {"g": [0.1] * 7, "tau": list(np.geomspace(0.01, 100, 7)), "g_inf": 0.3}
     out = febio_card_material("neo_hookean", {"mu": 100.0}, 1e4, prony, lambda g: 100.0 * g, 0.5)
     assert out["febio_form"] is None and "at most 6" in out["febio_reason"]
