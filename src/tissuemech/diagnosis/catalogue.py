@@ -526,7 +526,12 @@ def detect_instrument_inertia(ctx: DiagnosisContext) -> dict:
     fs = ctx.table[(ctx.table["test"] == "frequency_sweep") & (ctx.table["quantity"] == "storage_modulus")]
     if fs.empty or fs["frequency_sq"].nunique() < 4:
         return _untested(eff, "no frequency sweep")
-    gap = (1.0 / fs["inverse_gap"]).fillna(2e-3)
+    # the inertial term needs the true gap and plate radius of every sweep: never a default
+    fs = fs[np.isfinite(fs["inverse_gap"]) & np.isfinite(fs["radius_m"])]
+    if fs.empty or fs["frequency_sq"].nunique() < 4:
+        return _untested(eff, "not testable here: the frequency sweeps record no gap or no plate radius "
+                              "(the inertial term omega^2 2h/(pi R^4) needs both)")
+    gap = 1.0 / fs["inverse_gap"]
     b_inv = 2.0 * gap / (np.pi * fs["radius_m"] ** 4)          # 1/b = 2h/(pi R^4), 1/m^3
     x_inertia = fs["frequency_sq"] * b_inv                      # Pa per (kg m^2)
     logw = 0.5 * np.log(fs["frequency_sq"])

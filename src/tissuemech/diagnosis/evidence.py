@@ -124,20 +124,29 @@ def robust_noise_sd(values: np.ndarray) -> float:
 
 
 def _second_differences(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(|y| at the centre point, second difference of ln|y|) of consecutive finite nonzero points."""
+    """(|y| at the centre point, relative second difference) of consecutive finite nonzero points.
+
+    Two detrendings are computed: second differences of ln|y| (exact for exponential and power-law trends)
+    and second differences of y over |y| (exact for linear trends, e.g. a ramp from zero). A smooth trend can
+    only add to either, so the one with the smaller median magnitude is kept for the curve.
+    """
     y = np.asarray(y, float)
     y = y[np.isfinite(y) & (y != 0)]
     if y.size < 3:
         return np.empty(0), np.empty(0)
     z = np.log(np.abs(y))
-    return np.abs(y[1:-1]), z[2:] - 2.0 * z[1:-1] + z[:-2]
+    d_log = z[2:] - 2.0 * z[1:-1] + z[:-2]
+    d_lin = (y[2:] - 2.0 * y[1:-1] + y[:-2]) / np.abs(y[1:-1])
+    d2 = d_log if np.median(np.abs(d_log)) <= np.median(np.abs(d_lin)) else d_lin
+    return np.abs(y[1:-1]), d2
 
 
 def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
     """Noise model of the measured quantities, from the data themselves (no instrument constant).
 
-    Within every curve the second differences of ln|y| (acquisition order) measure the point-to-point
-    scatter; smooth trends (power laws in frequency, exponential decays, ramps) contribute little to them.
+    Within every curve the relative second differences (acquisition order; of ln|y| or of y/|y|, whichever
+    is smaller for that curve, see :func:`_second_differences`) measure the point-to-point scatter; smooth
+    trends (power laws in frequency, exponential decays, linear ramps) contribute little to them.
     Per (test, quantity) block the points are pooled over curves, binned by |y| (quantiles), and the
     robust variance per bin, s_b^2 = (1.4826 MAD / sqrt 6)^2 (relative units), is fitted by NNLS as
     ``relative^2 + absolute^2 / |y|^2`` -- i.e. SD(y) = sqrt(absolute^2 + (relative |y|)^2). With too few
@@ -166,7 +175,7 @@ def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
         d2 = np.concatenate([d for _, d in parts])
         rel_all = 1.4826 * np.median(np.abs(d2)) / np.sqrt(6.0)
         entry = {"relative": float(rel_all), "absolute": 0.0, "n_points": int(mag.size), "n_curves": len(parts),
-                 "source": "within-curve scatter (second differences of ln|y|), relative only"}
+                 "source": "within-curve scatter (relative second differences), relative only"}
         n_bins = min(8, mag.size // _MIN_BIN_POINTS)
         if n_bins >= 3:
             edges = np.quantile(mag, np.linspace(0, 1, n_bins + 1))
@@ -181,7 +190,7 @@ def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
             if len(rows) >= 3:
                 coef, _ = nnls(np.asarray(rows), np.asarray(rhs))
                 entry.update(relative=float(np.sqrt(coef[0])), absolute=float(np.sqrt(coef[1])),
-                             source="within-curve scatter (second differences of ln|y|), binned by |y|: "
+                             source="within-curve scatter (relative second differences), binned by |y|: "
                                     "SD = sqrt(absolute^2 + (relative |y|)^2)")
         blocks[key] = entry
     declared = {float(r.attrs["torque_resolution_nm"]) for r in runs if "torque_resolution_nm" in r.attrs}
