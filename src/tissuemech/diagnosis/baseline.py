@@ -9,14 +9,19 @@
   :func:`tissuemech.fitting.fit` on the training runs of each fold and scored with
   :func:`tissuemech.fitting.evaluate` on the held-out runs (NRMSE), plus the full-data ΔAICc.
 * :func:`read_fit_record` -- a ``results/<dataset>/fits/<model>.nc`` record back into parameters.
+* :func:`baseline_adequacy` -- whether a fitted baseline describes the data well enough to blame anything on
+  an effect: no varying parameter at a bound, a covariance (finite standard errors), no gross misfit.
+* :func:`ranked_candidates` -- the fit records in the order of the dataset's ``ranking.csv``.
 """
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import xarray as xr
 
 from .. import fitting
@@ -30,7 +35,7 @@ def read_fit_record(path: str | Path) -> dict:
     """Parameters and metadata of a fit netCDF written by :func:`tissuemech.fitting.write_fit_netcdf`.
 
     Returns ``{"model_key", "target", "params", "aicc", "family", "correlations", "scope", "tests",
-    "relaxation"}``;
+    "relaxation", "stderr", "varying", "flags", "converged"}``;
     ``correlations`` maps ``"a|b"`` to the fitted correlation of every varying pair.
     """
     ds = read_netcdf(path)
@@ -49,7 +54,92 @@ def read_fit_record(path: str | Path) -> dict:
             # relaxation strain-history treatment of the fit (fitting.relaxation_history); "measured" when
             # the record does not say
             "relaxation": str(ds.attrs.get("relaxation", "measured")),
-            "tests": sorted({s.get("test", "") for s in selection})}
+            "tests": sorted({s.get("test", "") for s in selection}),
+            "stderr": ({n: float(v) for n, v in zip(names, ds["stderr"].values)} if "stderr" in ds else {}),
+            "varying": ([n for n, v in zip(names, ds["varying"].values) if int(v)] if "varying" in ds else names),
+            "flags": list(json.loads(ds.attrs.get("flags", "[]"))),
+            "converged": bool(int(ds.attrs.get("success", 1)))}
+
+
+#: a baseline whose typical point (median over rows) is off by more than this factor misfits grossly: the
+#: error is the model's level, not an effect of the catalogue (a definition, stated in README "Reading a
+#: diagnosis")
+GROSS_MISFIT_FACTOR = 2.0
+
+
+def baseline_adequacy(record: Mapping, table: pd.DataFrame) -> dict:
+    """Is a fitted baseline adequate to diagnose with?
+
+    Parameters
+    ----------
+    record : :func:`read_fit_record` output (``flags``, ``stderr``, ``varying``, ``converged``)
+    table : the residual table of that model (:func:`tissuemech.diagnosis.evidence.residual_table`)
+
+    Returns
+    -------
+    dict ``{"model", "adequate", "at_bound" (parameter names), "no_covariance" (bool),
+    "not_converged" (bool), "median_abs_log_ratio" [1], "misfit_factor" (exp of it),
+    "misfit_noise_units" (RMS of residual/sigma over rows with a noise estimate), "reasons" (sentences)}``.
+    Inadequate when a varying parameter sits at a bound, no parameter has a finite standard error (no
+    covariance), the fit did not converge, or the typical point is off by more than
+    :data:`GROSS_MISFIT_FACTOR`.
+    """
+    flags = [str(f) for f in record.get("flags", [])]
+    at_bound = sorted({m.group(1) for f in flags for m in [re.match(r"at_bound: (\S+)", f)] if m})
+    varying = list(record.get("varying", []))
+    se = record.get("stderr", {})
+    no_cov = bool(varying) and bool(se) and not any(np.isfinite(se.get(n, np.nan)) for n in varying)
+    lr = table["log_ratio"].to_numpy(float) if "log_ratio" in table else np.array([])
+    lr = lr[np.isfinite(lr)]
+    med = float(np.median(np.abs(lr))) if lr.size else np.nan
+    if "std_residual" in table:
+        z = table["std_residual"].to_numpy(float)
+        z = z[np.isfinite(z)]
+    else:
+        z = np.array([])
+    noise_units = float(np.sqrt(np.mean(z ** 2))) if z.size else np.nan
+    reasons = []
+    if at_bound:
+        reasons.append(f"parameters at a bound: {', '.join(at_bound)}")
+    if no_cov:
+        reasons.append("no covariance (no finite standard error of any varying parameter)")
+    if not record.get("converged", True):
+        reasons.append("the fit did not converge")
+    gross = np.isfinite(med) and med > np.log(GROSS_MISFIT_FACTOR)
+    if gross:
+        reasons.append(f"gross misfit: the typical point is off by a factor {np.exp(med):.3g} "
+                       f"(median |ln(observed/predicted)| = {med:.3g}; RMS misfit {noise_units:.3g} noise SDs)")
+    if not lr.size:
+        reasons.append("no residual of this model on the data")
+    return {"model": str(record.get("model_key", "")), "adequate": not reasons, "at_bound": at_bound,
+            "no_covariance": no_cov, "not_converged": not record.get("converged", True),
+            "median_abs_log_ratio": med, "misfit_factor": float(np.exp(med)) if np.isfinite(med) else np.nan,
+            "misfit_noise_units": noise_units, "reasons": reasons}
+
+
+def ranked_candidates(records: Sequence[Mapping], ranking: pd.DataFrame | None) -> tuple[list[Mapping], str]:
+    """Fit records in baseline-preference order and the source of that order.
+
+    The diagnosis explains departures from a separable (QLV-family) reference, so QLV-family records come
+    first; within each group the order is the dataset's ranking (``ranking.csv`` rows of the records'
+    scope, column ``rank``), which chooses the instantaneous law. Without a usable ranking the order is AICc.
+    """
+    order: dict[str, float] = {}
+    source = "aicc (no ranking.csv rows for these fits)"
+    if ranking is not None and not ranking.empty and {"model", "rank"} <= set(ranking.columns):
+        scopes = {str(r.get("scope", "")) for r in records}
+        rows = ranking[ranking["scope"].astype(str).isin(scopes)] if "scope" in ranking else ranking
+        keys = {str(r["model_key"]) for r in records}
+        rows = rows[rows["model"].astype(str).isin(keys)]
+        if not rows.empty:
+            order = {str(m): float(k) for m, k in zip(rows["model"], rows["rank"])}
+            source = "ranking.csv (rank within scope " + ", ".join(sorted(scopes)) + ")"
+
+    def key(r):
+        aicc = r.get("aicc", np.nan)
+        return (r.get("family") != "qlv", order.get(str(r["model_key"]), np.inf),
+                aicc if np.isfinite(aicc) else np.inf)
+    return sorted(records, key=key), source
 
 
 def _stress_from_prediction(pred: Mapping[str, np.ndarray], radius_m: float) -> dict[str, np.ndarray]:
@@ -137,11 +227,13 @@ def extension_gain(runs: Sequence[xr.Dataset], baseline_key: str, extension_key:
         ones (fitting.evaluate NRMSE)
     Returns
     -------
-    ``{model, metric, before, after, gain, cv, parameters: {delta_aicc, folds}}`` in the shape of a
-    catalogue ``fix`` (before/after = mean held-out NRMSE of baseline/extension).
+    ``{model, metric, before, after, gain, cv, parameters: {delta_aicc, baseline_aicc, extension_aicc,
+    n_held_out_points}, folds: [{label, before, after}]}`` in the shape of a catalogue ``fix``
+    (before/after = mean held-out NRMSE of baseline/extension). The baseline is refitted on the training
+    runs of every fold (never reused from the full-data fit), exactly like the extension.
     """
     base_model, ext_model = get_model(baseline_key), get_model(extension_key)
-    before, after, labels = [], [], []
+    before, after, labels, n_held = [], [], [], []
     for label, held in folds:
         train = [r for r in runs if not held(r)]
         test = [r for r in runs if held(r)]
@@ -153,11 +245,15 @@ def extension_gain(runs: Sequence[xr.Dataset], baseline_key: str, extension_key:
         before.append(fitting.evaluate(base_model, fb.params, test_curves, target)["nrmse"])
         after.append(fitting.evaluate(ext_model, fe.params, test_curves, target)["nrmse"])
         labels.append(label)
+        n_held.append(int(sum(min(np.size(v) for v in c.observed.values()) for c in test_curves if c.observed)))
     fb = fit_runs(baseline_key, runs, target, relaxation, n_points, seed=seed)
     fe = fit_runs(extension_key, runs, target, relaxation, n_points, seed=seed)
     b, a = float(np.mean(before)) if before else np.nan, float(np.mean(after)) if after else np.nan
     return {"model": extension_key, "metric": "held_out_nrmse", "before": b, "after": a,
             "gain": (b - a) / b if b > 0 else np.nan, "cv": "leave-one-condition-out (" + ", ".join(labels) + ")",
             "parameters": {"delta_aicc": float(fe.aicc - fb.aicc), "baseline_aicc": float(fb.aicc),
-                           "extension_aicc": float(fe.aicc)},
+                           "extension_aicc": float(fe.aicc),
+                           # per fold, for the noise-calibrated margin of report.diagnose
+                           "n_held_out_points": float(min(n_held)) if n_held and min(n_held) > 0 else np.nan},
+            "folds": [{"label": lab, "before": b_, "after": a_} for lab, b_, a_ in zip(labels, before, after)],
             "extension_params": {k: float(v) for k, v in fe.params.items()}}
