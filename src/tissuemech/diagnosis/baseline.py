@@ -12,6 +12,10 @@
 * :func:`baseline_adequacy` -- whether a fitted baseline describes the data well enough to blame anything on
   an effect: no varying parameter at a bound, a covariance (finite standard errors), no gross misfit.
 * :func:`ranked_candidates` -- the fit records in the order of the dataset's ``ranking.csv``.
+* :func:`resolved_window_s` / :func:`window_taus` / :func:`spectrum_model` -- the relaxation-time window the
+  tests resolve (sweep frequencies, relaxation rise and hold times, ramp durations), a log grid spanning it,
+  and a registered QLV/Pipkin-Rogers model rebuilt on that grid (instead of the registry's fixed 0.1-100 s
+  times); :func:`fit_runs` and :func:`extension_gain` use it when given ``taus_s``.
 """
 from __future__ import annotations
 
@@ -27,7 +31,9 @@ import xarray as xr
 from .. import fitting
 from ..canonical import read_netcdf
 from ..models.base import ConstitutiveModel, ResponseNotSupported
+from ..models.beyond_qlv import PipkinRogersModel
 from ..models.plate import oscillation_moduli
+from ..models.qlv import QLVModel, instantaneous_law
 from ..models.registry import get_model
 
 
@@ -195,6 +201,78 @@ def predict_runs(model: ConstitutiveModel, params: Mapping[str, float], runs: Se
     return [predict_run(model, params, r, target, relaxation) for r in runs]
 
 
+def resolved_window_s(runs: Sequence[xr.Dataset]) -> dict:
+    """Relaxation-time window [s] the tests resolve, from the runs' own channels.
+
+    * frequency/amplitude sweeps: 1/omega_max .. 1/omega_min (rad/s);
+    * relaxation and creep: the rise time (first time the strain reaches 98 % of its hold value; the first
+      sampling interval for an ideal step) .. the hold duration;
+    * constant-rate ramps: the first sampling interval .. the ramp duration.
+
+    Returns ``{"t_min_s", "t_max_s", "sources": [sentences]}``; NaN bounds when no run gives a time scale.
+    """
+    lo, hi, src = [], [], []
+    for r in runs:
+        test = str(r.attrs.get("test", ""))
+        if test in ("frequency_sweep", "amplitude_sweep"):
+            w = r["angular_frequency"].values if "angular_frequency" in r else (
+                2 * np.pi * r["frequency"].values if "frequency" in r else
+                np.array([2 * np.pi * float(r.attrs["frequency_hz"])]) if "frequency_hz" in r.attrs else np.array([]))
+            w = np.abs(np.asarray(w, float))
+            w = w[np.isfinite(w) & (w > 0)]
+            if w.size:
+                lo.append(1.0 / w.max())
+                hi.append(1.0 / w.min())
+                src.append(f"{test}: 1/omega {1 / w.max():.3g}-{1 / w.min():.3g} s")
+        elif "time" in r and r["time"].size >= 2:
+            t = np.asarray(r["time"].values, float)
+            t = t[np.isfinite(t)]
+            if t.size < 2:
+                continue
+            dt = np.diff(np.sort(t))
+            dt = dt[dt > 0]
+            span = float(t.max() - t.min())
+            first = float(dt.min()) if dt.size else np.nan
+            if test in ("stress_relaxation", "creep_recovery") and "shear_strain" in r:
+                g = np.abs(np.asarray(r["shear_strain"].values, float))
+                if np.isfinite(g).any() and np.nanmax(g) > 0:
+                    rise = float(r["time"].values[np.argmax(g >= 0.98 * np.nanmax(g))] - t.min())
+                    first = rise if rise > 0 else first
+            if np.isfinite(first) and first > 0 and span > 0:
+                lo.append(first)
+                hi.append(span)
+                src.append(f"{test}: {first:.3g}-{span:.3g} s")
+    return {"t_min_s": float(min(lo)) if lo else np.nan, "t_max_s": float(max(hi)) if hi else np.nan,
+            "sources": sorted(set(src))}
+
+
+def window_taus(window: Mapping, per_decade: float = 1.0) -> np.ndarray:
+    """Log-spaced relaxation times [s] spanning ``window`` (:func:`resolved_window_s`), ``per_decade`` per
+    decade, from the decade at or below ``t_min_s`` to the one at or above ``t_max_s``; empty without a window."""
+    t0, t1 = window.get("t_min_s", np.nan), window.get("t_max_s", np.nan)
+    if not (np.isfinite(t0) and np.isfinite(t1) and 0 < t0 <= t1):
+        return np.array([])
+    lo, hi = np.floor(np.log10(t0)), np.ceil(np.log10(t1))
+    return 10.0 ** np.arange(lo, max(hi, lo + 1.0) + 1e-9, 1.0 / per_decade)
+
+
+def spectrum_model(model_key: str, taus_s: Sequence[float]) -> ConstitutiveModel:
+    """The registered model ``model_key`` rebuilt on the relaxation times ``taus_s`` [s].
+
+    Only fixed-time QLV (``qlv_<law>_prony<n>``) and Pipkin-Rogers (``pr_<law>_prony<n>``) models are
+    rebuilt (same instantaneous law, one branch per time, same key); every other model is returned as
+    registered (free times, fractional or flow models choose their own time scales).
+    """
+    m = re.fullmatch(r"(qlv|pr)_(.+)_prony\d+", model_key)
+    taus = np.asarray(taus_s, float)
+    if m is None or taus.size == 0:
+        return get_model(model_key)
+    law = instantaneous_law(m.group(2))
+    if m.group(1) == "qlv":
+        return QLVModel(law, n_prony=taus.size, taus_s=taus, name=model_key)
+    return PipkinRogersModel(law, taus.size, taus_s=taus, name=model_key)
+
+
 def _curves(runs: Sequence[xr.Dataset], relaxation: str, n_points: int) -> list[fitting.Curve]:
     out = []
     for r in runs:
@@ -207,9 +285,13 @@ def _curves(runs: Sequence[xr.Dataset], relaxation: str, n_points: int) -> list[
 
 
 def fit_runs(model_key: str, runs: Sequence[xr.Dataset], target: str, relaxation: str = "measured",
-             n_points: int = 25, n_random: int = 1, seed: int = 0, start: Mapping[str, float] | None = None):
-    """Fit a registered model jointly to the runs (thinned per curve); returns the ``FitResult``."""
-    model = get_model(model_key)
+             n_points: int = 25, n_random: int = 1, seed: int = 0, start: Mapping[str, float] | None = None,
+             taus_s: Sequence[float] | None = None):
+    """Fit a registered model jointly to the runs (thinned per curve); returns the ``FitResult``.
+
+    ``taus_s``: relaxation times [s] to rebuild a fixed-time QLV/Pipkin-Rogers model on
+    (:func:`spectrum_model`); None keeps the registered model."""
+    model = get_model(model_key) if taus_s is None else spectrum_model(model_key, taus_s)
     curves = _curves(runs, relaxation, n_points)
     problem = fitting.FitProblem(model=model, curves=curves, target=target, model_key=model_key, scope="diagnosis")
     return fitting.fit(problem, starts=[start] if start else (), n_random=n_random, seed=seed)
@@ -217,7 +299,7 @@ def fit_runs(model_key: str, runs: Sequence[xr.Dataset], target: str, relaxation
 
 def extension_gain(runs: Sequence[xr.Dataset], baseline_key: str, extension_key: str, target: str,
                    folds: Sequence[tuple[str, Callable[[xr.Dataset], bool]]], relaxation: str = "measured",
-                   n_points: int = 25, seed: int = 0) -> dict:
+                   n_points: int = 25, seed: int = 0, taus_s: Sequence[float] | None = None) -> dict:
     """Held-out gain of ``extension_key`` over ``baseline_key``.
 
     Parameters
@@ -225,6 +307,8 @@ def extension_gain(runs: Sequence[xr.Dataset], baseline_key: str, extension_key:
     runs : the runs both models are fitted to (only the test kinds both describe)
     folds : ``(label, is_held_out(run))`` pairs; each fold fits on the other runs and scores the held-out
         ones (fitting.evaluate NRMSE)
+    taus_s : relaxation times [s] both models are rebuilt on (:func:`spectrum_model`), e.g.
+        ``window_taus(resolved_window_s(runs))``; None keeps the registered models
     Returns
     -------
     ``{model, metric, before, after, gain, cv, parameters: {delta_aicc, baseline_aicc, extension_aicc,
@@ -232,7 +316,10 @@ def extension_gain(runs: Sequence[xr.Dataset], baseline_key: str, extension_key:
     (before/after = mean held-out NRMSE of baseline/extension). The baseline is refitted on the training
     runs of every fold (never reused from the full-data fit), exactly like the extension.
     """
-    base_model, ext_model = get_model(baseline_key), get_model(extension_key)
+    if taus_s is None:
+        base_model, ext_model = get_model(baseline_key), get_model(extension_key)
+    else:
+        base_model, ext_model = spectrum_model(baseline_key, taus_s), spectrum_model(extension_key, taus_s)
     before, after, labels, n_held = [], [], [], []
     for label, held in folds:
         train = [r for r in runs if not held(r)]
@@ -240,14 +327,14 @@ def extension_gain(runs: Sequence[xr.Dataset], baseline_key: str, extension_key:
         test_curves = _curves(test, relaxation, n_points)
         if not train or not test_curves:
             continue
-        fb = fit_runs(baseline_key, train, target, relaxation, n_points, seed=seed)
-        fe = fit_runs(extension_key, train, target, relaxation, n_points, seed=seed)
+        fb = fit_runs(baseline_key, train, target, relaxation, n_points, seed=seed, taus_s=taus_s)
+        fe = fit_runs(extension_key, train, target, relaxation, n_points, seed=seed, taus_s=taus_s)
         before.append(fitting.evaluate(base_model, fb.params, test_curves, target)["nrmse"])
         after.append(fitting.evaluate(ext_model, fe.params, test_curves, target)["nrmse"])
         labels.append(label)
         n_held.append(int(sum(min(np.size(v) for v in c.observed.values()) for c in test_curves if c.observed)))
-    fb = fit_runs(baseline_key, runs, target, relaxation, n_points, seed=seed)
-    fe = fit_runs(extension_key, runs, target, relaxation, n_points, seed=seed)
+    fb = fit_runs(baseline_key, runs, target, relaxation, n_points, seed=seed, taus_s=taus_s)
+    fe = fit_runs(extension_key, runs, target, relaxation, n_points, seed=seed, taus_s=taus_s)
     b, a = float(np.mean(before)) if before else np.nan, float(np.mean(after)) if after else np.nan
     return {"model": extension_key, "metric": "held_out_nrmse", "before": b, "after": a,
             "gain": (b - a) / b if b > 0 else np.nan, "cv": "leave-one-condition-out (" + ", ".join(labels) + ")",
@@ -255,5 +342,6 @@ def extension_gain(runs: Sequence[xr.Dataset], baseline_key: str, extension_key:
                            "extension_aicc": float(fe.aicc),
                            # per fold, for the noise-calibrated margin of report.diagnose
                            "n_held_out_points": float(min(n_held)) if n_held and min(n_held) > 0 else np.nan},
+            "relaxation_times_s": None if taus_s is None else [float(x) for x in taus_s],
             "folds": [{"label": lab, "before": b_, "after": a_} for lab, b_, a_ in zip(labels, before, after)],
             "extension_params": {k: float(v) for k, v in fe.params.items()}}

@@ -49,7 +49,8 @@ from statsmodels.tools.sm_exceptions import MissingDataError
 from ..canonical import read_netcdf, write_netcdf, write_text
 from ..models.registry import available_models, get_model
 from . import stats as st
-from .baseline import (baseline_adequacy, extension_gain, predict_runs, ranked_candidates, read_fit_record)
+from .baseline import (baseline_adequacy, extension_gain, predict_runs, ranked_candidates, read_fit_record,
+                       resolved_window_s, window_taus)
 from .catalogue import CATALOGUE_IDS, DETECTORS, DiagnosisContext, curve_levels, explains
 from .evidence import estimate_noise, residual_table, residual_table_to_xarray
 from .generic import serial_structure, structure_tests
@@ -324,7 +325,8 @@ def _read_runs(runs_dir: str | Path) -> list[xr.Dataset]:
 
 
 def _nonseparable_fix(runs, baseline_key: str, target: str) -> dict | None:
-    """Pipkin-Rogers counterpart of a QLV baseline, scored leaving out the extreme CSR rates."""
+    """Pipkin-Rogers counterpart of a QLV baseline, scored leaving out the extreme CSR rates; both refitted in
+    every fold on a one-per-decade relaxation-time grid spanning the window the tests resolve."""
     if not baseline_key.startswith("qlv_"):
         return None
     ext = "pr_" + baseline_key[len("qlv_"):]
@@ -338,7 +340,13 @@ def _nonseparable_fix(runs, baseline_key: str, target: str) -> dict | None:
     folds = [(f"CSR {rate:g} 1/s", (lambda r, rate=rate: r.attrs.get("test") == "constant_shear_rate"
                                     and float(r.attrs.get("shear_rate_1_per_s", -1)) == rate))
              for rate in (rates[0], rates[-1])]
-    return extension_gain(use, baseline_key, ext, target, folds)
+    # both models on the relaxation times these tests resolve (never the registry's fixed 0.1-100 s)
+    window = resolved_window_s(use)
+    taus = window_taus(window)
+    fix = extension_gain(use, baseline_key, ext, target, folds, taus_s=taus if taus.size else None)
+    fix["parameters"]["window_t_min_s"] = window["t_min_s"]
+    fix["parameters"]["window_t_max_s"] = window["t_max_s"]
+    return fix
 
 
 def _read_ranking(path: str | Path | None) -> pd.DataFrame | None:
