@@ -86,12 +86,16 @@ def baseline_adequacy(record: Mapping, table: pd.DataFrame) -> dict:
     dict ``{"model", "adequate", "at_bound" (parameter names), "no_covariance" (bool),
     "not_converged" (bool), "median_abs_log_ratio" [1], "misfit_factor" (exp of it),
     "misfit_noise_units" (RMS of residual/sigma over rows with a noise estimate), "reasons" (sentences)}``.
-    Inadequate when a varying parameter sits at a bound, no parameter has a finite standard error (no
+    Inadequate when a varying parameter sits at a bound (a Prony weight ``beta_i`` at its lower bound 0 is
+    exempt: that relaxation mode is simply absent), no parameter has a finite standard error (no
     covariance), the fit did not converge, or the typical point is off by more than
     :data:`GROSS_MISFIT_FACTOR`.
     """
     flags = [str(f) for f in record.get("flags", [])]
-    at_bound = sorted({m.group(1) for f in flags for m in [re.match(r"at_bound: (\S+)", f)] if m})
+    # a non-negative relaxation weight at zero is the NNLS answer "this mode is not needed", not a collapse
+    at_bound = sorted({m.group(1) for f in flags for m in [re.match(r"at_bound: (\S+) at its (\w+) bound (\S+)", f)]
+                       if m and not (re.fullmatch(r"beta_\d+", m.group(1)) and m.group(2) == "lower"
+                                     and float(m.group(3)) == 0.0)})
     varying = list(record.get("varying", []))
     se = record.get("stderr", {})
     no_cov = bool(varying) and bool(se) and not any(np.isfinite(se.get(n, np.nan)) for n in varying)
