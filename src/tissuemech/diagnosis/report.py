@@ -6,28 +6,39 @@ Entry points
     runs every catalogue detector (:mod:`.catalogue`) and every generic structure test (:mod:`.generic`)
     on the residual table of the baseline model, controls the family-wise false-alarm rate at
     :data:`tissuemech.diagnosis.stats.ALPHA` (0.01) across *all* of them (alpha/2 to the catalogue and
-    alpha/2 to the generic scan, Holm within each; ``p_holm`` is reported on the alpha scale), and names a cause only when it is
-    statistically significant after Holm, practically relevant (its effect size exceeds the cause's
-    threshold) and -- when a fix was scored -- its fix improves the held-out metric.
+    alpha/2 to the generic scan, Holm within each; ``p_holm`` is reported on the alpha scale), and names a cause
+    by :data:`DECISION_RULE`: significant after Holm, practically relevant, and its fix scored on held-out data
+    beats the noise-calibrated margin of :func:`fix_margin`. Significant, relevant causes without a scored fix
+    go to ``significant_fix_not_evaluated``. An inadequate baseline (``adequacy``) is the first finding,
+    ``baseline_inadequate``, and blocks every other name when no adequate model is left.
 
 :func:`run_diagnosis` ``(runs_dir, fits_dir, out_json, out_nc, fig_dir, baseline=None, extensions=True,
-dataset=None) -> dict``
+dataset=None, alpha=ALPHA, ranking=None) -> dict``
     the Snakemake ``diagnose`` rule's call. Homogeneous-specimen datasets (simple shear + uniaxial
     compression/tension, e.g. Budday) go to :func:`tissuemech.diagnosis.homogeneous.run_homogeneous_diagnosis`
     (cross-mode diagnosis; same JSON contract plus ``cross_mode``). Otherwise: ``runs_dir``: folder of canonical run netCDFs (searched
     recursively, ``*.nc``); ``fits_dir``: folder of fit records ``<model>.nc``
-    (:func:`tissuemech.fitting.write_fit_netcdf`); ``baseline``: model key to diagnose (default: the
-    QLV-family fit with the lowest AICc, else the lowest AICc overall). Every fit's predictions on every
+    (:func:`tissuemech.fitting.write_fit_netcdf`); ``ranking``: the dataset's ``ranking.csv``, which orders the
+    candidate baselines (QLV family first, :func:`tissuemech.diagnosis.baseline.ranked_candidates`); the first
+    candidate that passes :func:`tissuemech.diagnosis.baseline.baseline_adequacy` is diagnosed (``baseline``:
+    a requested model key instead). Every fit's predictions on every
     run go into the residual netCDF ``out_nc`` (dimension ``row``, column ``model``); the findings of the
     baseline go to ``out_json``; figures (PNG) to ``fig_dir``. ``extensions``: fit the extended models
-    (e.g. QLV -> Pipkin-Rogers) for the held-out gain of model-level fixes (costs a few fits).
+    (e.g. QLV -> Pipkin-Rogers, on the relaxation times the tests resolve) for the held-out gain of
+    model-level fixes (costs a few fits).
 
 Output JSON (``diagnosis.json``)
 --------------------------------
-``findings``: one entry per catalogue id, detected first (strongest first): ``effect``, ``detected``,
+``decision_rule`` (the sentence of :data:`DECISION_RULE`); ``noise_model`` (:func:`estimate_noise` plus
+``relative_level`` eps); ``baseline`` {``model``, ``adequate``, ``tried``: adequacy of every candidate};
+``findings``: ``baseline_inadequate`` first when a candidate was rejected (``models``, ``evidence``), then one
+entry per catalogue id, detected first (strongest first): ``effect``, ``detected``,
 ``tested``, ``statistic`` (+ ``statistic_name``), ``p_value`` (uncorrected), ``p_holm``, ``effect_size``
 (+ unit), ``practical``, ``evidence`` (sentence naming tests/conditions/covariates), ``fix`` {``model``,
-``metric``, ``before``, ``after``, ``gain``, ``cv``, ``parameters``} or null.
+``metric``, ``before``, ``after``, ``gain``, ``cv``, ``parameters``, ``margin``, ``improvement``,
+``beats_margin``} or null.
+``significant_fix_not_evaluated``: ``effect``, ``p_holm``, ``effect_size`` (+ unit), ``evidence`` of causes that
+pass Holm and practical relevance but whose fix was not scored (not named).
 ``unexplained``: structured residual not named by a detected cause: ``covariate``, ``test``,
 ``quantity``, ``statistic``, ``p_value``, ``p_holm``, ``effect_size`` (log-residual change over the
 covariate's range), ``candidates`` (catalogue causes whose signature involves that covariate).
