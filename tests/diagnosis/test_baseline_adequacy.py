@@ -119,3 +119,10 @@ def test_inadequate_baseline_is_the_first_finding_and_blocks_blame(diagnosed):
     assert [f["effect"] for f in none_ok["findings"] if f["detected"]] == ["baseline_inadequate"]
     assert none_ok["unexplained"] == [] and none_ok["significant_fix_not_evaluated"] == []
     assert "no cause is named" in none_ok["findings"][0]["evidence"]
+
+
+def test_noise_level_ignores_imposed_inputs_and_reads_the_floor_at_the_typical_magnitude():
+    noise = {"blocks": {"a|shear_strain": {"relative": 0.0, "absolute": 0.0, "median_abs": 0.1},
+                        "a|shear_stress": {"relative": 0.0, "absolute": 0.5, "median_abs": 25.0},
+                        "b|storage_modulus": {"relative": 0.03, "absolute": 0.0, "median_abs": 100.0}}}
+    assert report.relative_noise_level(noise) == pytest.approx(np.median([0.02, 0.03]))

@@ -157,7 +157,7 @@ def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
     Returns
     -------
     dict ``{"method", "blocks": {"<test>|<quantity>": {"relative" [1], "absolute" [quantity units],
-    "n_points", "n_curves", "source"}}}``; a block with fewer than 3 points per curve is absent (its
+    "median_abs" [quantity units], "n_points", "n_curves", "source"}}}``; a block with fewer than 3 points per curve is absent (its
     rows get NaN sigma and are excluded from noise-scaled tests).
     """
     pooled: dict[str, list] = {}
@@ -175,6 +175,7 @@ def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
         d2 = np.concatenate([d for _, d in parts])
         rel_all = 1.4826 * np.median(np.abs(d2)) / np.sqrt(6.0)
         entry = {"relative": float(rel_all), "absolute": 0.0, "n_points": int(mag.size), "n_curves": len(parts),
+                 "median_abs": float(np.median(mag)),
                  "source": "within-curve scatter (relative second differences), relative only"}
         n_bins = min(8, mag.size // _MIN_BIN_POINTS)
         if n_bins >= 3:

@@ -120,9 +120,26 @@ def run_detectors(ctx: DiagnosisContext) -> list[dict]:
     return out
 
 
+#: imposed inputs, not responses: their scatter does not set the noise of a fix's metric
+INPUT_QUANTITIES = ("shear_strain",)
+
+
 def relative_noise_level(noise: dict) -> float:
-    """Median relative noise SD eps [1] over the (test, quantity) blocks of an :func:`estimate_noise` model."""
-    rel = [b["relative"] for b in noise.get("blocks", {}).values() if np.isfinite(b.get("relative", np.nan))]
+    """Typical relative noise SD eps [1] of the measured responses.
+
+    Per (test, quantity) block of an :func:`estimate_noise` model, the relative SD at the block's median
+    magnitude, sqrt(relative^2 + (absolute / median|y|)^2); eps is the median over the response blocks
+    (imposed inputs of :data:`INPUT_QUANTITIES` excluded). NaN without such a block.
+    """
+    rel = []
+    for key, b in noise.get("blocks", {}).items():
+        if key.split("|")[-1] in INPUT_QUANTITIES:
+            continue
+        med = b.get("median_abs", np.nan)
+        a = b.get("absolute", 0.0) / med if np.isfinite(med) and med > 0 else 0.0
+        r = float(np.hypot(b.get("relative", np.nan), a))
+        if np.isfinite(r):
+            rel.append(r)
     return float(np.median(rel)) if rel else np.nan
 
 
