@@ -377,6 +377,27 @@ def _nonseparable_fix(runs, baseline_key: str, target: str) -> dict | None:
     return fix
 
 
+def with_model_fixes(result: dict, runs: Sequence[xr.Dataset], table: pd.DataFrame, fit_info: dict,
+                     alpha: float = st.ALPHA, noise: dict | None = None, adequacy: Sequence[dict] = ()) -> dict:
+    """Score the model-level fixes (refits) of the causes that pass Holm and practical relevance, then
+    diagnose again, so that such a cause is named only when its fix beats the margin on held-out data.
+
+    Model-level fixes cost fits, so they are scored only when needed. Today: ``nonseparable_relaxation``
+    (QLV -> Pipkin-Rogers, :func:`_nonseparable_fix`). ``result`` and ``fit_info`` are those of
+    :func:`diagnose` (``fit_info["fixes"]`` receives the scored fixes); returns the new result.
+    """
+    if not result["baseline"]["adequate"]:
+        return result
+    nonsep = next((f for f in result["findings"] if f["effect"] == "nonseparable_relaxation"), None)
+    if nonsep is None or not (nonsep["significant"] and nonsep["practical"]):
+        return result
+    fix = _nonseparable_fix(runs, result["model"], fit_info.get("target", "apparent_stress"))
+    if fix is None:
+        return result
+    fit_info.setdefault("fixes", {})["nonseparable_relaxation"] = fix
+    return diagnose(runs, table, result["model"], fit_info, alpha=alpha, noise=noise, adequacy=adequacy)
+
+
 def _read_ranking(path: str | Path | None) -> pd.DataFrame | None:
     if path is None or not Path(path).is_file() or Path(path).stat().st_size == 0:
         return None
@@ -440,16 +461,8 @@ def run_diagnosis(runs_dir: str | Path, fits_dir: str | Path, out_json: str | Pa
                 "fitted_tests": chosen["tests"], "baseline_order": order_source,
                 "correlations": chosen["correlations"], "fixes": {}}
     result = diagnose(runs, base_table, chosen["model_key"], fit_info, alpha=alpha, noise=noise, adequacy=adequacy)
-    if extensions and result["baseline"]["adequate"]:
-        # model-level fixes cost fits: score them only for causes that pass Holm and practical relevance,
-        # then diagnose again so that a fix without held-out gain withdraws the name
-        nonsep = next(f for f in result["findings"] if f["effect"] == "nonseparable_relaxation")
-        if nonsep["significant"] and nonsep["practical"]:
-            fix = _nonseparable_fix(runs, chosen["model_key"], fit_info["target"])
-            if fix is not None:
-                fit_info["fixes"]["nonseparable_relaxation"] = fix
-                result = diagnose(runs, base_table, chosen["model_key"], fit_info, alpha=alpha, noise=noise,
-                                  adequacy=adequacy)
+    if extensions:
+        result = with_model_fixes(result, runs, base_table, fit_info, alpha=alpha, noise=noise, adequacy=adequacy)
     name = dataset or (runs[0].attrs.get("dataset") if runs else "")
     write_diagnosis_json(result, out_json, dataset=str(name))
     if len(table):
