@@ -46,8 +46,8 @@ import xarray as xr
 from scipy.optimize import least_squares
 
 from . import stats as st
-from .evidence import (booij_thoone, fit_prony_relaxation, log_spaced_taus, nominal_strain,
-                       prony_complex_modulus, run_id)
+from .evidence import (booij_thoone, estimate_noise, fit_prony_relaxation, log_spaced_taus, noise_sd,
+                       nominal_strain, prony_complex_modulus, run_id)
 
 CATALOGUE_IDS: tuple[str, ...] = (
     "nonseparable_relaxation", "rim_stress_nonlinearity", "wall_slip", "elapsed_time_drift",
@@ -1055,13 +1055,16 @@ def detect_finite_rise_time(ctx: DiagnosisContext) -> dict:
     parts, texts, fix = [], [], None
     sweep = _measured_sweep(ctx)
     tmax = max(float(r["time"].values.max()) for r in small)
-    taus = log_spaced_taus(max(t_r / 10.0, 1e-2), tmax)
+    taus = log_spaced_taus(t_r / 10.0, tmax)
+    # weights from the noise of these relaxations themselves (evidence.estimate_noise), not an instrument constant
+    relax_noise = estimate_noise(small)
     fits = []
     for r in small:
         g = np.abs(r["shear_strain"].values)
         s_ = np.abs(r["shear_stress"].values)
         t_ = r["time"].values - r["time"].values[0]
-        w = 1.0 / np.sqrt((0.01 * s_) ** 2 + 0.03 ** 2)
+        sd = noise_sd(relax_noise, "stress_relaxation", "shear_stress", s_)
+        w = np.where(np.isfinite(sd) & (sd > 0), 1.0 / sd, 0.0) if np.isfinite(sd).any() else np.ones_like(s_)
         fits.append((fit_prony_relaxation(t_, s_, g, taus, ramp_aware=False, weights=w),
                      fit_prony_relaxation(t_, s_, g, taus, ramp_aware=True, weights=w)))
     g_fast = [np.mean([p[k]["g_pa"][p[k]["taus_s"] <= 10 * t_r].sum() for p in fits]) for k in (0, 1)]
