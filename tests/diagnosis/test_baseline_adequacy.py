@@ -89,8 +89,9 @@ def test_fix_margin_is_the_noise_standard_error_of_the_metric():
     eps = 0.02
     m = report.fix_margin({"parameters": {"n_held_out_points": 50}}, eps, alpha=0.01)
     assert m == pytest.approx(sps.norm.ppf(0.99) * eps / np.sqrt(100))
-    assert report.fix_margin(None, eps) == pytest.approx(sps.norm.ppf(0.99) * eps / np.sqrt(16))
-    assert np.isnan(report.fix_margin(None, np.nan))
+    # a curve-level fix that reports no count: one held-out level per curve
+    assert report.fix_margin(None, eps, 0.01, n_default=12) == pytest.approx(sps.norm.ppf(0.99) * eps / np.sqrt(24))
+    assert np.isnan(report.fix_margin(None, np.nan, n_default=12)) and np.isnan(report.fix_margin(None, eps))
 
 
 def test_a_detector_missing_a_quantity_is_not_testable(monkeypatch):
@@ -114,7 +115,7 @@ def test_inadequate_baseline_is_the_first_finding_and_blocks_blame(diagnosed):
     res = report.diagnose(runs, table, "qlv_constructed", fit_info, adequacy=[bad, good])
     assert res["findings"][0]["effect"] == "baseline_inadequate" and "qlv_bad" in res["findings"][0]["evidence"]
     assert res["baseline"]["adequate"] and "torque_offset" in [f["effect"] for f in res["findings"] if f["detected"]]
-    assert res["noise_model"]["relative_level"] > 0 and "second differences" in res["noise_model"]["method"]
+    assert res["noise_model"]["relative_level"] > 0 and "differences of order 2-4" in res["noise_model"]["method"]
     none_ok = report.diagnose(runs, table, "qlv_bad", fit_info, adequacy=[bad])
     assert [f["effect"] for f in none_ok["findings"] if f["detected"]] == ["baseline_inadequate"]
     assert none_ok["unexplained"] == [] and none_ok["significant_fix_not_evaluated"] == []

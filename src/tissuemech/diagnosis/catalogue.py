@@ -587,7 +587,7 @@ def detect_instrument_inertia(ctx: DiagnosisContext) -> dict:
                 f"clustered by sweep, log-omega control): an inertial error of {artefact_at_fmax:+.3g} Pa at "
                 f"{f_max:.3g} Hz where |G'| ~ {gmax:.3g} Pa.{kk_txt}{raw_txt}")
     fix = _fix("fitted inertia term G'_app = G' - dI omega^2 2h/(pi R^4)", "rms_rel_residual_storage_modulus",
-               before, after, f"leave-one-{group}-out", delta_inertia_kg_m2=delta_i)
+               before, after, f"leave-one-{group}-out", delta_inertia_kg_m2=delta_i, n_held_out_points=len(frame))
     practical = abs(artefact_at_fmax) >= 0.05 * gmax
     return _finding(eff, t, "t", delta_i, "kg m^2", practical, evidence, fix)
 
@@ -674,7 +674,8 @@ def detect_torque_offset(ctx: DiagnosisContext) -> dict:
                 f"have a common additive intercept of {offset_pa:+.3g} Pa ({where}; t = {tval:.2f} across curves), "
                 f"i.e. {size}: G(t, gamma0) = sigma/gamma0 diverges as 1/gamma0.")
     fix = _fix("torque offset M0 as a nuisance parameter (stress + 2 M0/(pi R^3))", "rms_rel_residual_small_strain",
-               before, after, f"leave-one-{group}-out", offset_pa=offset_pa, offset_uNm=offset_unm)
+               before, after, f"leave-one-{group}-out", offset_pa=offset_pa, offset_uNm=offset_unm,
+               n_held_out_points=len(small))
     practical = bool(late_level > 0 and abs(offset_pa) >= 0.02 * late_level)
     return _finding(eff, t, "t", offset_unm, "uN m", practical, evidence, fix)
 
@@ -738,7 +739,7 @@ def detect_amplitude_softening(ctx: DiagnosisContext) -> dict:
                 f"{full[0]:.2f}, gamma_c = {100 * 10 ** full[1]:.2g} %, m = {full[2]:.2f}.")
     fix = _fix("Kraus amplitude softening G'(g0) = G'inf + (G'0 - G'inf)/(1 + (g0/gc)^(2m))",
                "rms_log_residual_amplitude_sweep_shape", before, after, f"leave-one-{group}-out",
-               ratio_inf=full[0], gamma_c=10 ** full[1], m=full[2])
+               ratio_inf=full[0], gamma_c=10 ** full[1], m=full[2], n_held_out_points=len(a))
     return _finding(eff, t, "t", change, "relative change of G' over the sweep", change <= -0.05, evidence, fix)
 
 
@@ -1010,7 +1011,7 @@ def detect_wall_slip(ctx: DiagnosisContext) -> dict:
                 f"max(0, sigma - sigma_c)/(h gamma), t = {t['statistic']:.2f}, controls strain^2 and "
                 f"strain^2 x log-rate, Bonferroni over {k} thresholds){gap_txt}.")
     fix = _fix("slip-corrected strain gamma = gamma_app - 2 beta_s max(0, sigma - sigma_c)/h",
-               "rms_log_residual", before, after, f"leave-one-{group}-out", sigma_c_pa=sigma_c)
+               "rms_log_residual", before, after, f"leave-one-{group}-out", sigma_c_pa=sigma_c, n_held_out_points=len(c))
     return _finding(eff, t, "t", sigma_c, "Pa (critical stress)", loss <= -0.03, evidence, fix)
 
 

@@ -39,6 +39,7 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 from scipy.optimize import nnls
+from scipy.special import comb
 
 from ..models.recursion import prony_branch_histories
 
@@ -124,31 +125,38 @@ def robust_noise_sd(values: np.ndarray) -> float:
 
 
 def _second_differences(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(|y| at the centre point, relative second difference) of consecutive finite nonzero points.
+    """(|y| at the centre points, relative k-th differences scaled to the noise SD) of one curve.
 
-    Two detrendings are computed: second differences of ln|y| (exact for exponential and power-law trends)
-    and second differences of y over |y| (exact for linear trends, e.g. a ramp from zero). A smooth trend can
-    only add to either, so the one with the smaller median magnitude is kept for the curve.
+    Six detrendings are computed: k-th differences (k = 2, 3, 4) of ln|y| (exact for exponential and
+    power-law trends) and of y over |y| (exact for polynomial trends, e.g. a ramp from zero), each divided
+    by sqrt(C(2k, k)) so that white noise of relative SD s gives differences of SD s. A smooth trend can only
+    add to them, so the detrending with the smallest median magnitude is kept for the curve.
     """
     y = np.asarray(y, float)
     y = y[np.isfinite(y) & (y != 0)]
-    if y.size < 3:
+    if y.size < 5:
         return np.empty(0), np.empty(0)
     z = np.log(np.abs(y))
-    d_log = z[2:] - 2.0 * z[1:-1] + z[:-2]
-    d_lin = (y[2:] - 2.0 * y[1:-1] + y[:-2]) / np.abs(y[1:-1])
-    d2 = d_log if np.median(np.abs(d_log)) <= np.median(np.abs(d_lin)) else d_lin
-    return np.abs(y[1:-1]), d2
+    best, best_scale, centre = None, np.inf, None
+    for k in (2, 3, 4):
+        norm = np.sqrt(float(comb(2 * k, k)))
+        lo = k // 2
+        mag = np.abs(y[lo:y.size - (k - lo)])
+        for d in (np.diff(z, k) / norm, np.diff(y, k) / norm / mag):
+            scale = float(np.median(np.abs(d)))
+            if scale < best_scale:
+                best, best_scale, centre = d, scale, mag
+    return centre, best
 
 
 def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
     """Noise model of the measured quantities, from the data themselves (no instrument constant).
 
-    Within every curve the relative second differences (acquisition order; of ln|y| or of y/|y|, whichever
-    is smaller for that curve, see :func:`_second_differences`) measure the point-to-point scatter; smooth
-    trends (power laws in frequency, exponential decays, linear ramps) contribute little to them.
+    Within every curve the relative differences of order 2-4 (acquisition order; of ln|y| or of y/|y|,
+    whichever is smallest for that curve, see :func:`_second_differences`) measure the point-to-point
+    scatter; smooth trends (power laws in frequency, exponential decays, polynomial ramps) contribute little.
     Per (test, quantity) block the points are pooled over curves, binned by |y| (quantiles), and the
-    robust variance per bin, s_b^2 = (1.4826 MAD / sqrt 6)^2 (relative units), is fitted by NNLS as
+    robust variance per bin, s_b^2 = (1.4826 MAD)^2 (relative units), is fitted by NNLS as
     ``relative^2 + absolute^2 / |y|^2`` -- i.e. SD(y) = sqrt(absolute^2 + (relative |y|)^2). With too few
     points for bins only ``relative`` is estimated. A torque resolution declared for the instrument
     (run attribute ``torque_resolution_nm``, from ``dataset.yaml``) replaces the absolute part of stress
@@ -173,10 +181,10 @@ def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
     for key, parts in pooled.items():
         mag = np.concatenate([m for m, _ in parts])
         d2 = np.concatenate([d for _, d in parts])
-        rel_all = 1.4826 * np.median(np.abs(d2)) / np.sqrt(6.0)
+        rel_all = 1.4826 * np.median(np.abs(d2))
         entry = {"relative": float(rel_all), "absolute": 0.0, "n_points": int(mag.size), "n_curves": len(parts),
                  "median_abs": float(np.median(mag)),
-                 "source": "within-curve scatter (relative second differences), relative only"}
+                 "source": "within-curve scatter (relative differences of order 2-4), relative only"}
         n_bins = min(8, mag.size // _MIN_BIN_POINTS)
         if n_bins >= 3:
             edges = np.quantile(mag, np.linspace(0, 1, n_bins + 1))
@@ -185,17 +193,17 @@ def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
             for b in range(n_bins):
                 sel = idx == b
                 if sel.sum() >= _MIN_BIN_POINTS:
-                    s_b = 1.4826 * np.median(np.abs(d2[sel])) / np.sqrt(6.0)
+                    s_b = 1.4826 * np.median(np.abs(d2[sel]))
                     rows.append([1.0, 1.0 / np.median(mag[sel]) ** 2])
                     rhs.append(s_b ** 2)
             if len(rows) >= 3:
                 coef, _ = nnls(np.asarray(rows), np.asarray(rhs))
                 entry.update(relative=float(np.sqrt(coef[0])), absolute=float(np.sqrt(coef[1])),
-                             source="within-curve scatter (relative second differences), binned by |y|: "
+                             source="within-curve scatter (relative differences of order 2-4), binned by |y|: "
                                     "SD = sqrt(absolute^2 + (relative |y|)^2)")
         blocks[key] = entry
     declared = {float(r.attrs["torque_resolution_nm"]) for r in runs if "torque_resolution_nm" in r.attrs}
-    method = "within-curve residual scale (second differences), per test and quantity"
+    method = "within-curve residual scale (differences of order 2-4, per curve the smallest), per test and quantity"
     if declared:
         method += f"; declared torque resolution {sorted(declared)} N m used as the stress floor where R is known"
     return {"method": method, "blocks": blocks}

@@ -67,17 +67,14 @@ from .evidence import estimate_noise, residual_table, residual_table_to_xarray
 from .generic import serial_structure, structure_tests
 from .homogeneous import is_homogeneous, run_homogeneous_diagnosis
 
-#: held-out points per fold assumed by the fix margin when a fix does not report its own count; a small
-#: count gives a wide margin (conservative)
-MARGIN_POINTS_DEFAULT = 8
-
 DECISION_RULE = (
     "A cause is named (detected) only when (1) its test is significant after Holm at the family-wise alpha, "
     "(2) its effect size passes the cause's practical threshold, and (3) its fix, scored on held-out data with "
     "the baseline refitted or re-estimated inside every fold, lowers the held-out error (before - after, in the "
     "fix's relative metric) by more than the noise-calibrated margin z_(1-alpha) * eps / sqrt(2 n), where eps "
-    "is the median relative noise SD of the data (noise_model) and n the held-out points per fold (8 when the "
-    "fix does not report it): the standard error of an RMS of n noise values of SD eps is eps / sqrt(2 n). "
+    "is the typical relative noise SD of the measured responses (noise_model.relative_level) and n the held-out "
+    "values the fix's metric pools (the number of curves for curve-level fixes that do not report it): the "
+    "standard error of an RMS of n noise values of SD eps is eps / sqrt(2 n). "
     "Significant, practically relevant causes whose fix was not scored are listed in "
     "significant_fix_not_evaluated, not named. An inadequate baseline (parameters at a bound, no covariance, "
     "no convergence, or the typical point off by more than a factor 2) is the first finding, "
@@ -143,16 +140,19 @@ def relative_noise_level(noise: dict) -> float:
     return float(np.median(rel)) if rel else np.nan
 
 
-def fix_margin(fix: dict | None, eps: float, alpha: float = st.ALPHA) -> float:
+def fix_margin(fix: dict | None, eps: float, alpha: float = st.ALPHA, n_default: float = np.nan) -> float:
     """Noise-calibrated margin [metric units, relative] that a fix's held-out improvement must exceed.
 
-    ``z_(1-alpha) eps / sqrt(2 n)``: eps the relative noise SD of the data, n the held-out points per fold
-    (``fix["parameters"]["n_held_out_points"]``, else :data:`MARGIN_POINTS_DEFAULT`). NaN without a noise
-    estimate (the fix is then not credited).
+    ``z_(1-alpha) eps / sqrt(2 n)``: eps the relative noise SD of the data, n the held-out values the fix's
+    metric pools (``fix["parameters"]["n_held_out_points"]``), else ``n_default`` (the number of curves: a
+    curve-level fix holds out about one level per curve, and the per-point eps overstates a level's noise,
+    so this is conservative). NaN without a noise estimate or a count (the fix is then not credited).
     """
     n = (fix or {}).get("parameters", {}).get("n_held_out_points", np.nan)
-    n = float(n) if n is not None and np.isfinite(n) and n > 0 else float(MARGIN_POINTS_DEFAULT)
-    return float(sps.norm.ppf(1.0 - alpha) * eps / np.sqrt(2.0 * n)) if np.isfinite(eps) else np.nan
+    n = float(n) if n is not None and np.isfinite(n) and n > 0 else float(n_default)
+    if not (np.isfinite(eps) and np.isfinite(n) and n > 0):
+        return np.nan
+    return float(sps.norm.ppf(1.0 - alpha) * eps / np.sqrt(2.0 * n))
 
 
 def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "model", fit_info: dict | None = None,
@@ -167,6 +167,7 @@ def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "mode
     fit_info = dict(fit_info or {})
     noise = estimate_noise(runs) if noise is None else noise
     eps = relative_noise_level(noise)
+    n_curves = float(table["curve"].nunique()) if "curve" in table and len(table) else np.nan
     rejected = [a for a in adequacy if not a["adequate"]]
     usable = not adequacy or bool(adequacy[-1]["adequate"])
     ctx = DiagnosisContext(runs=list(runs), table=table, model=model, fit_info=fit_info)
@@ -185,7 +186,7 @@ def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "mode
         fix = f.get("fix") or {}
         before, after = fix.get("before", np.nan), fix.get("after", np.nan)
         scored = fix and before is not None and after is not None and np.isfinite(before) and np.isfinite(after)
-        margin = fix_margin(fix, eps, alpha) if scored else np.nan
+        margin = fix_margin(fix, eps, alpha, n_curves) if scored else np.nan
         if scored:
             fix["margin"] = margin
             fix["improvement"] = float(before - after)
