@@ -169,7 +169,10 @@ def predict_run(model: ConstitutiveModel, params: Mapping[str, float], run: xr.D
     try:
         if test == "amplitude_sweep":
             strain = np.abs(run["shear_strain"].values)
-            f_hz = float(run.attrs.get("frequency_hz", np.nanmedian(run["frequency"].values) if "frequency" in run else 1.0))
+            f_hz = float(run.attrs.get("frequency_hz", np.nanmedian(run["frequency"].values) if "frequency" in run
+                                       else np.nan))
+            if not np.isfinite(f_hz):
+                return {}  # no frequency in the export or sample sheet: not predictable (never a default 1 Hz)
             if model.supports("shear_history") and np.isfinite(radius):
                 mode = "apparent_stress" if target == "torque" else "corrected_stress"
                 g1, g2 = oscillation_moduli(model, params, f_hz, strain, radius, target=mode)

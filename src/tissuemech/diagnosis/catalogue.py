@@ -1011,7 +1011,8 @@ def detect_wall_slip(ctx: DiagnosisContext) -> dict:
                 f"max(0, sigma - sigma_c)/(h gamma), t = {t['statistic']:.2f}, controls strain^2 and "
                 f"strain^2 x log-rate, Bonferroni over {k} thresholds){gap_txt}.")
     fix = _fix("slip-corrected strain gamma = gamma_app - 2 beta_s max(0, sigma - sigma_c)/h",
-               "rms_log_residual", before, after, f"leave-one-{group}-out", sigma_c_pa=sigma_c, n_held_out_points=len(c))
+               "rms_log_residual", before, after, f"leave-one-{group}-out", sigma_c_pa=sigma_c,
+               n_held_out_points=len(c))
     return _finding(eff, t, "t", sigma_c, "Pa (critical stress)", loss <= -0.03, evidence, fix)
 
 

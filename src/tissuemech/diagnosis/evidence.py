@@ -10,13 +10,14 @@ them into one row per (run, point, quantity) with
   condition), ``quantity`` (canonical variable compared: ``shear_stress``, ``storage_modulus`` ...);
 * ``observed``, ``predicted``, ``residual`` = observed - predicted (quantity units), ``sigma`` (noise SD of the
   observed value from :func:`estimate_noise`: the within-curve scatter of the data, never an instrument
-  constant; a torque resolution is used only where declared), ``std_residual`` = residual / sigma, ``rel_residual`` = residual / |predicted|, ``log_ratio`` =
-  ln(observed / predicted) where both are positive;
+  constant; a torque resolution is used only where declared), ``std_residual`` = residual / sigma,
+  ``rel_residual`` = residual / |predicted|, ``log_ratio`` = ln(observed / predicted) where both are positive;
 * covariates: ``strain`` [1], ``strain_sq``, ``log_rate`` (log10 of the nominal rate in 1/s),
   ``strain_x_log_rate``, ``strain_sq_x_log_rate``, ``time_in_test`` [s], ``log_time`` (log10 s),
   ``elapsed_time`` [s since the session start: the ``total_time`` channel, else the run's ``started_at``
   relative to the first run of its specimen plus ``time``], ``test_order``, ``first_load`` (1 on the first run of a
-  sample), ``frequency_sq`` [(rad/s)^2], ``inverse_gap`` [1/m], ``radius_m`` [m; NaN when neither the export nor the sample sheet gives it],
+  sample), ``frequency_sq`` [(rad/s)^2], ``inverse_gap`` [1/m], ``radius_m`` [m; NaN when neither the export
+  nor the sample sheet gives it],
   ``predicted_abs`` / ``observed_abs`` [quantity units], ``above_noise`` (|observed| > :data:`ABOVE_NOISE_SIGMAS`
   sigma: the row filter of level and structure tests), every
   logged channel of :data:`LOGGED_CHANNELS` present in the run, and every numeric ``covariate_*`` attribute.
@@ -165,8 +166,8 @@ def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
     Returns
     -------
     dict ``{"method", "blocks": {"<test>|<quantity>": {"relative" [1], "absolute" [quantity units],
-    "median_abs" [quantity units], "n_points", "n_curves", "source"}}}``; a block with fewer than 3 points per curve is absent (its
-    rows get NaN sigma and are excluded from noise-scaled tests).
+    "median_abs" [quantity units], "n_points", "n_curves", "source"}}}``; a block with fewer than 5 points
+    per curve is absent (its rows get NaN sigma and are excluded from noise-scaled tests).
     """
     pooled: dict[str, list] = {}
     for run in runs:
