@@ -755,7 +755,8 @@ def _csr_frame(ctx: DiagnosisContext) -> pd.DataFrame:
 
 
 def _slip_covariate(c: pd.DataFrame, sigma_c: float) -> np.ndarray:
-    gap = (1.0 / c["inverse_gap"]).fillna(2e-3).to_numpy()
+    # no gap recorded -> NaN covariate (the detector is then not testable), never a default gap
+    gap = (1.0 / c["inverse_gap"]).to_numpy()
     return np.maximum(0.0, c["observed"].to_numpy() - sigma_c) / (gap * 1e3) / c["strain"].to_numpy()
 
 

@@ -236,15 +236,19 @@ def noise_sd(noise: Mapping, test: str, quantity: str, observed: np.ndarray, str
     return np.where(sd > 0, sd, np.nan)
 
 
-def first_load_flags(runs: Sequence[xr.Dataset]) -> list[int]:
-    """1 for the run with the smallest ``order`` of each (specimen, sample), else 0."""
+def first_load_flags(runs: Sequence[xr.Dataset]) -> list[float]:
+    """1 for the run with the smallest ``order`` of each (specimen, sample), else 0; NaN for a run whose test
+    order the export and sample sheet do not give (never a default order)."""
     first: dict[tuple, float] = {}
+    keys, orders = [], []
     for r in runs:
         key = (str(r.attrs.get("specimen")), str(r.attrs.get("sample")))
-        o = float(r.attrs.get("order", 0))
-        first[key] = min(first.get(key, np.inf), o)
-    return [int(float(r.attrs.get("order", 0)) == first[(str(r.attrs.get("specimen")), str(r.attrs.get("sample")))])
-            for r in runs]
+        o = float(r.attrs.get("order", np.nan))
+        keys.append(key)
+        orders.append(o)
+        if np.isfinite(o):
+            first[key] = min(first.get(key, np.inf), o)
+    return [float(o == first[k]) if np.isfinite(o) else np.nan for k, o in zip(keys, orders)]
 
 
 def session_offsets_s(runs: Sequence[xr.Dataset]) -> list[float]:
