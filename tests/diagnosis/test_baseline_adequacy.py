@@ -127,3 +127,13 @@ def test_noise_level_ignores_imposed_inputs_and_reads_the_floor_at_the_typical_m
                         "a|shear_stress": {"relative": 0.0, "absolute": 0.5, "median_abs": 25.0},
                         "b|storage_modulus": {"relative": 0.03, "absolute": 0.0, "median_abs": 100.0}}}
     assert report.relative_noise_level(noise) == pytest.approx(np.median([0.02, 0.03]))
+
+
+def test_a_model_without_residuals_is_inadequate_and_the_diagnosis_still_returns():
+    empty = pd.DataFrame(columns=["model", "curve", "test", "quantity", "observed", "predicted", "residual",
+                                  "log_ratio", "sigma"])
+    a = baseline_adequacy(_record("qlv_none"), empty)
+    assert not a["adequate"] and "no residual" in a["reasons"][-1]
+    res = report.diagnose([], empty, "qlv_none", {}, noise={"blocks": {}}, adequacy=[a])
+    assert [f["effect"] for f in res["findings"] if f["detected"]] == ["baseline_inadequate"]
+    assert res["baseline"]["adequate"] is False and res["unexplained"] == []

@@ -172,7 +172,9 @@ def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "mode
     usable = not adequacy or bool(adequacy[-1]["adequate"])
     ctx = DiagnosisContext(runs=list(runs), table=table, model=model, fit_info=fit_info)
     findings = run_detectors(ctx)
-    generic = structure_tests(table)
+    # a baseline without residuals on these runs (e.g. an inadequate model that predicts none of them) has
+    # no structure to scan
+    generic = structure_tests(table) if len(table) else []
     tested = [f for f in findings if f.get("tested") and np.isfinite(f.get("p_value", np.nan))]
     pvals = [f["p_value"] for f in tested] + [g["p_value"] for g in generic]
     # family-wise error <= alpha over every test: alpha/2 to the catalogue and alpha/2 to the generic scan
@@ -252,7 +254,8 @@ def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "mode
             "baseline": {"model": model, "adequate": usable, "tried": list(adequacy)},
             "n_tests": len(pvals), "findings": head + detected + rest, "unexplained": unexplained,
             "significant_fix_not_evaluated": not_evaluated,
-            "not_identifiable": not_identifiable, "structure_tests": generic, "serial": serial_structure(table)}
+            "not_identifiable": not_identifiable, "structure_tests": generic,
+            "serial": serial_structure(table) if len(table) else []}
 
 
 def top_finding(result: dict) -> str | None:
