@@ -333,8 +333,10 @@ def paired_first_load_test(ctx: DiagnosisContext) -> dict | None:
     frequency; the sweep is interpolated in log f). One-sample t-test over samples."""
     by_sample: dict[tuple, dict] = {}
     for r in ctx.runs:
+        if "order" not in r.attrs:
+            continue  # no test order in the data: this run cannot be placed first or later
         key = (str(r.attrs.get("specimen")), str(r.attrs.get("sample")))
-        by_sample.setdefault(key, {})[int(r.attrs.get("order", 0))] = r
+        by_sample.setdefault(key, {})[int(r.attrs["order"])] = r
     logs = []
     for runs in by_sample.values():
         first = runs[min(runs)]
