@@ -646,9 +646,11 @@ def detect_torque_offset(ctx: DiagnosisContext) -> dict:
     offset_unm = offset_pa * np.pi * radius ** 3 / 2.0 * 1e6
     small = td[td["curve"].isin(curves)]
     sr = small[small["test"] == "stress_relaxation"]
-    # scale the offset against the median OBSERVED stress of the curves used (a model that collapses to a
-    # near-zero prediction must not turn a small offset into an absurd percentage)
-    late_level = float(small["observed"].abs().median())
+    # scale the offset against the lowest curve level, read from the OBSERVED stresses (median |observed| per
+    # curve, relaxation holds when there are any): a model that collapses to a near-zero prediction must not
+    # turn a small offset into an absurd percentage
+    lowest = sr if not sr.empty else small
+    late_level = float(lowest.groupby("curve")["observed"].apply(lambda v: np.median(np.abs(v))).min())
 
     def fit(train):
         vals, lv = [], []
@@ -670,7 +672,8 @@ def detect_torque_offset(ctx: DiagnosisContext) -> dict:
     before, after = _group_cv(small, group, fit, error)
     where = (f"torque offset M0 = {offset_unm:+.3g} uN m at R = {1e3 * radius:.1f} mm" if np.isfinite(radius)
              else "no plate radius in the data: not convertible to a torque")
-    size = (f"{100 * abs(offset_pa) / late_level:.3g} % of the median observed stress ({late_level:.3g} Pa)"
+    size = (f"{100 * abs(offset_pa) / late_level:.3g} % of the lowest curve level (median observed stress of "
+            f"that curve, {late_level:.3g} Pa)"
             if late_level > 0 else "the observed stresses of these curves have no positive median level")
     evidence = (f"Stress residuals of {ctx.model} on {len(curves)} relaxation holds and ramp starts (<= 20 %) "
                 f"have a common additive intercept of {offset_pa:+.3g} Pa ({where}; t = {tval:.2f} across curves), "
