@@ -14,7 +14,7 @@ import numpy as np
 from tissuemech.canonical import make_run_dataset
 from tissuemech.diagnosis.baseline import fit_runs, predict_runs
 from tissuemech.diagnosis.evidence import residual_table
-from tissuemech.diagnosis.report import diagnose
+from tissuemech.diagnosis.report import diagnose, with_model_fixes
 from tissuemech.synth.generator import generate_dataset
 
 TAUS = [0.1, 1.0, 10.0, 100.0]
@@ -89,7 +89,9 @@ def diagnose_synthetic(effect: str | None, seed: int, out_dir, magnitude: float 
         preds = predict_runs(get_model(baseline), fit.params, runs, target, relaxation)
         keep = [i for i, p in enumerate(preds) if p]
         table = residual_table([runs[i] for i in keep], [preds[i] for i in keep], baseline)
-        result = diagnose([runs[i] for i in keep], table, baseline,
-                          {"target": target, "relaxation": relaxation, "correlations": {},
-                           "fitted_tests": ["constant_shear_rate", "stress_relaxation"]})
+        fit_info = {"target": target, "relaxation": relaxation, "correlations": {},
+                    "fitted_tests": ["constant_shear_rate", "stress_relaxation"]}
+        result = diagnose([runs[i] for i in keep], table, baseline, fit_info)
+        # model-level fixes (refits) are scored as run_diagnosis does, so the decision rule is the pipeline's
+        result = with_model_fixes(result, [runs[i] for i in keep], table, fit_info)
     return runs, table, result, fit

@@ -47,10 +47,14 @@ def test_null_synthetic_dataset_raises_nothing(tmp_path):
 @pytest.mark.parametrize("effect", list(SUITE))
 def test_injected_effect_is_named_and_fixed(effect, tmp_path):
     _, _, res, _ = diagnose_synthetic(effect, 0, tmp_path, **DESIGN, **ANALYSIS.get(effect, {}))
+    if effect == "unidentified_i2_dependence":
+        # no fix is scored for it (C01 is read from the normal force): significant, never named
+        assert [e["effect"] for e in res["significant_fix_not_evaluated"]][:1] == [effect]
+        return
     assert top_finding(res) == effect, [(f["effect"], f["log10_p"], f["detected"]) for f in res["findings"][:3]]
     top = res["findings"][0]
-    if top["fix"] is not None:
-        assert top["fix"]["gain"] > 0, top["fix"]
+    # named only with a fix whose held-out improvement beats the noise-calibrated margin
+    assert top["fix"]["before"] - top["fix"]["after"] > top["fix"]["margin"] > 0, top["fix"]
 
 
 def test_elapsed_time_drift_rate_is_recovered(tmp_path):

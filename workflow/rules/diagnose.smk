@@ -1,4 +1,5 @@
-# What the model gets wrong, why, the extension that fixes it and the held-out gain.
+# What the model gets wrong, why, the extension that fixes it and the held-out gain. The baseline is the first
+# adequate fit in the order of ranking.csv (QLV family first); see README "Reading a diagnosis".
 # Homogeneous multi-mode datasets (simple shear + compression + tension, e.g. Budday) are dispatched to the
 # cross-mode diagnosis, which refits its I1/I2 laws per mode combination; their fits input only orders the job.
 

@@ -9,20 +9,31 @@
   :func:`tissuemech.fitting.fit` on the training runs of each fold and scored with
   :func:`tissuemech.fitting.evaluate` on the held-out runs (NRMSE), plus the full-data ΔAICc.
 * :func:`read_fit_record` -- a ``results/<dataset>/fits/<model>.nc`` record back into parameters.
+* :func:`baseline_adequacy` -- whether a fitted baseline describes the data well enough to blame anything on
+  an effect: no varying parameter at a bound, a covariance (finite standard errors), no gross misfit.
+* :func:`ranked_candidates` -- the fit records in the order of the dataset's ``ranking.csv``.
+* :func:`resolved_window_s` / :func:`window_taus` / :func:`spectrum_model` -- the relaxation-time window the
+  tests resolve (sweep frequencies, relaxation rise and hold times, ramp durations), a log grid spanning it,
+  and a registered QLV/Pipkin-Rogers model rebuilt on that grid (instead of the registry's fixed 0.1-100 s
+  times); :func:`fit_runs` and :func:`extension_gain` use it when given ``taus_s``.
 """
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import xarray as xr
 
 from .. import fitting
 from ..canonical import read_netcdf
 from ..models.base import ConstitutiveModel, ResponseNotSupported
+from ..models.beyond_qlv import PipkinRogersModel
 from ..models.plate import oscillation_moduli
+from ..models.qlv import QLVModel, instantaneous_law
 from ..models.registry import get_model
 
 
@@ -30,7 +41,7 @@ def read_fit_record(path: str | Path) -> dict:
     """Parameters and metadata of a fit netCDF written by :func:`tissuemech.fitting.write_fit_netcdf`.
 
     Returns ``{"model_key", "target", "params", "aicc", "family", "correlations", "scope", "tests",
-    "relaxation"}``;
+    "relaxation", "stderr", "varying", "flags", "converged"}``;
     ``correlations`` maps ``"a|b"`` to the fitted correlation of every varying pair.
     """
     ds = read_netcdf(path)
@@ -49,7 +60,96 @@ def read_fit_record(path: str | Path) -> dict:
             # relaxation strain-history treatment of the fit (fitting.relaxation_history); "measured" when
             # the record does not say
             "relaxation": str(ds.attrs.get("relaxation", "measured")),
-            "tests": sorted({s.get("test", "") for s in selection})}
+            "tests": sorted({s.get("test", "") for s in selection}),
+            "stderr": ({n: float(v) for n, v in zip(names, ds["stderr"].values)} if "stderr" in ds else {}),
+            "varying": ([n for n, v in zip(names, ds["varying"].values) if int(v)] if "varying" in ds else names),
+            "flags": list(json.loads(ds.attrs.get("flags", "[]"))),
+            "converged": bool(int(ds.attrs.get("success", 1)))}
+
+
+#: a baseline whose typical point (median over rows) is off by more than this factor misfits grossly: the
+#: error is the model's level, not an effect of the catalogue (a definition, stated in README "Reading a
+#: diagnosis")
+GROSS_MISFIT_FACTOR = 2.0
+
+
+def baseline_adequacy(record: Mapping, table: pd.DataFrame) -> dict:
+    """Is a fitted baseline adequate to diagnose with?
+
+    Parameters
+    ----------
+    record : :func:`read_fit_record` output (``flags``, ``stderr``, ``varying``, ``converged``)
+    table : the residual table of that model (:func:`tissuemech.diagnosis.evidence.residual_table`)
+
+    Returns
+    -------
+    dict ``{"model", "adequate", "at_bound" (parameter names), "no_covariance" (bool),
+    "not_converged" (bool), "median_abs_log_ratio" [1], "misfit_factor" (exp of it),
+    "misfit_noise_units" (RMS of residual/sigma over rows with a noise estimate), "reasons" (sentences)}``.
+    Inadequate when a varying parameter sits at a bound (a Prony weight ``beta_i`` at its lower bound 0 is
+    exempt: that relaxation mode is simply absent), no parameter has a finite standard error (no
+    covariance), the fit did not converge, or the typical point is off by more than
+    :data:`GROSS_MISFIT_FACTOR`.
+    """
+    flags = [str(f) for f in record.get("flags", [])]
+    # a non-negative relaxation weight at zero is the NNLS answer "this mode is not needed", not a collapse
+    at_bound = sorted({m.group(1) for f in flags for m in [re.match(r"at_bound: (\S+) at its (\w+) bound (\S+)", f)]
+                       if m and not (re.fullmatch(r"beta_\d+", m.group(1)) and m.group(2) == "lower"
+                                     and float(m.group(3)) == 0.0)})
+    varying = list(record.get("varying", []))
+    se = record.get("stderr", {})
+    no_cov = bool(varying) and bool(se) and not any(np.isfinite(se.get(n, np.nan)) for n in varying)
+    lr = table["log_ratio"].to_numpy(float) if "log_ratio" in table else np.array([])
+    lr = lr[np.isfinite(lr)]
+    med = float(np.median(np.abs(lr))) if lr.size else np.nan
+    if "std_residual" in table:
+        z = table["std_residual"].to_numpy(float)
+        z = z[np.isfinite(z)]
+    else:
+        z = np.array([])
+    noise_units = float(np.sqrt(np.mean(z ** 2))) if z.size else np.nan
+    reasons = []
+    if at_bound:
+        reasons.append(f"parameters at a bound: {', '.join(at_bound)}")
+    if no_cov:
+        reasons.append("no covariance (no finite standard error of any varying parameter)")
+    if not record.get("converged", True):
+        reasons.append("the fit did not converge")
+    gross = np.isfinite(med) and med > np.log(GROSS_MISFIT_FACTOR)
+    if gross:
+        reasons.append(f"gross misfit: the typical point is off by a factor {np.exp(med):.3g} "
+                       f"(median |ln(observed/predicted)| = {med:.3g}; RMS misfit {noise_units:.3g} noise SDs)")
+    if not lr.size:
+        reasons.append("no residual of this model on the data")
+    return {"model": str(record.get("model_key", "")), "adequate": not reasons, "at_bound": at_bound,
+            "no_covariance": no_cov, "not_converged": not record.get("converged", True),
+            "median_abs_log_ratio": med, "misfit_factor": float(np.exp(med)) if np.isfinite(med) else np.nan,
+            "misfit_noise_units": noise_units, "reasons": reasons}
+
+
+def ranked_candidates(records: Sequence[Mapping], ranking: pd.DataFrame | None) -> tuple[list[Mapping], str]:
+    """Fit records in baseline-preference order and the source of that order.
+
+    The diagnosis explains departures from a separable (QLV-family) reference, so QLV-family records come
+    first; within each group the order is the dataset's ranking (``ranking.csv`` rows of the records'
+    scope, column ``rank``), which chooses the instantaneous law. Without a usable ranking the order is AICc.
+    """
+    order: dict[str, float] = {}
+    source = "aicc (no ranking.csv rows for these fits)"
+    if ranking is not None and not ranking.empty and {"model", "rank"} <= set(ranking.columns):
+        scopes = {str(r.get("scope", "")) for r in records}
+        rows = ranking[ranking["scope"].astype(str).isin(scopes)] if "scope" in ranking else ranking
+        keys = {str(r["model_key"]) for r in records}
+        rows = rows[rows["model"].astype(str).isin(keys)]
+        if not rows.empty:
+            order = {str(m): float(k) for m, k in zip(rows["model"], rows["rank"])}
+            source = "ranking.csv (rank within scope " + ", ".join(sorted(scopes)) + ")"
+
+    def key(r):
+        aicc = r.get("aicc", np.nan)
+        return (r.get("family") != "qlv", order.get(str(r["model_key"]), np.inf),
+                aicc if np.isfinite(aicc) else np.inf)
+    return sorted(records, key=key), source
 
 
 def _stress_from_prediction(pred: Mapping[str, np.ndarray], radius_m: float) -> dict[str, np.ndarray]:
@@ -69,7 +169,10 @@ def predict_run(model: ConstitutiveModel, params: Mapping[str, float], run: xr.D
     try:
         if test == "amplitude_sweep":
             strain = np.abs(run["shear_strain"].values)
-            f_hz = float(run.attrs.get("frequency_hz", np.nanmedian(run["frequency"].values) if "frequency" in run else 1.0))
+            f_hz = float(run.attrs.get("frequency_hz", np.nanmedian(run["frequency"].values) if "frequency" in run
+                                       else np.nan))
+            if not np.isfinite(f_hz):
+                return {}  # no frequency in the export or sample sheet: not predictable (never a default 1 Hz)
             if model.supports("shear_history") and np.isfinite(radius):
                 mode = "apparent_stress" if target == "torque" else "corrected_stress"
                 g1, g2 = oscillation_moduli(model, params, f_hz, strain, radius, target=mode)
@@ -105,6 +208,78 @@ def predict_runs(model: ConstitutiveModel, params: Mapping[str, float], runs: Se
     return [predict_run(model, params, r, target, relaxation) for r in runs]
 
 
+def resolved_window_s(runs: Sequence[xr.Dataset]) -> dict:
+    """Relaxation-time window [s] the tests resolve, from the runs' own channels.
+
+    * frequency/amplitude sweeps: 1/omega_max .. 1/omega_min (rad/s);
+    * relaxation and creep: the rise time (first time the strain reaches 98 % of its hold value; the first
+      sampling interval for an ideal step) .. the hold duration;
+    * constant-rate ramps: the first sampling interval .. the ramp duration.
+
+    Returns ``{"t_min_s", "t_max_s", "sources": [sentences]}``; NaN bounds when no run gives a time scale.
+    """
+    lo, hi, src = [], [], []
+    for r in runs:
+        test = str(r.attrs.get("test", ""))
+        if test in ("frequency_sweep", "amplitude_sweep"):
+            w = r["angular_frequency"].values if "angular_frequency" in r else (
+                2 * np.pi * r["frequency"].values if "frequency" in r else
+                np.array([2 * np.pi * float(r.attrs["frequency_hz"])]) if "frequency_hz" in r.attrs else np.array([]))
+            w = np.abs(np.asarray(w, float))
+            w = w[np.isfinite(w) & (w > 0)]
+            if w.size:
+                lo.append(1.0 / w.max())
+                hi.append(1.0 / w.min())
+                src.append(f"{test}: 1/omega {1 / w.max():.3g}-{1 / w.min():.3g} s")
+        elif "time" in r and r["time"].size >= 2:
+            t = np.asarray(r["time"].values, float)
+            t = t[np.isfinite(t)]
+            if t.size < 2:
+                continue
+            dt = np.diff(np.sort(t))
+            dt = dt[dt > 0]
+            span = float(t.max() - t.min())
+            first = float(dt.min()) if dt.size else np.nan
+            if test in ("stress_relaxation", "creep_recovery") and "shear_strain" in r:
+                g = np.abs(np.asarray(r["shear_strain"].values, float))
+                if np.isfinite(g).any() and np.nanmax(g) > 0:
+                    rise = float(r["time"].values[np.argmax(g >= 0.98 * np.nanmax(g))] - t.min())
+                    first = rise if rise > 0 else first
+            if np.isfinite(first) and first > 0 and span > 0:
+                lo.append(first)
+                hi.append(span)
+                src.append(f"{test}: {first:.3g}-{span:.3g} s")
+    return {"t_min_s": float(min(lo)) if lo else np.nan, "t_max_s": float(max(hi)) if hi else np.nan,
+            "sources": sorted(set(src))}
+
+
+def window_taus(window: Mapping, per_decade: float = 1.0) -> np.ndarray:
+    """Log-spaced relaxation times [s] spanning ``window`` (:func:`resolved_window_s`), ``per_decade`` per
+    decade, from the decade at or below ``t_min_s`` to the one at or above ``t_max_s``; empty without a window."""
+    t0, t1 = window.get("t_min_s", np.nan), window.get("t_max_s", np.nan)
+    if not (np.isfinite(t0) and np.isfinite(t1) and 0 < t0 <= t1):
+        return np.array([])
+    lo, hi = np.floor(np.log10(t0)), np.ceil(np.log10(t1))
+    return 10.0 ** np.arange(lo, max(hi, lo + 1.0) + 1e-9, 1.0 / per_decade)
+
+
+def spectrum_model(model_key: str, taus_s: Sequence[float]) -> ConstitutiveModel:
+    """The registered model ``model_key`` rebuilt on the relaxation times ``taus_s`` [s].
+
+    Only fixed-time QLV (``qlv_<law>_prony<n>``) and Pipkin-Rogers (``pr_<law>_prony<n>``) models are
+    rebuilt (same instantaneous law, one branch per time, same key); every other model is returned as
+    registered (free times, fractional or flow models choose their own time scales).
+    """
+    m = re.fullmatch(r"(qlv|pr)_(.+)_prony\d+", model_key)
+    taus = np.asarray(taus_s, float)
+    if m is None or taus.size == 0:
+        return get_model(model_key)
+    law = instantaneous_law(m.group(2))
+    if m.group(1) == "qlv":
+        return QLVModel(law, n_prony=taus.size, taus_s=taus, name=model_key)
+    return PipkinRogersModel(law, taus.size, taus_s=taus, name=model_key)
+
+
 def _curves(runs: Sequence[xr.Dataset], relaxation: str, n_points: int) -> list[fitting.Curve]:
     out = []
     for r in runs:
@@ -117,9 +292,13 @@ def _curves(runs: Sequence[xr.Dataset], relaxation: str, n_points: int) -> list[
 
 
 def fit_runs(model_key: str, runs: Sequence[xr.Dataset], target: str, relaxation: str = "measured",
-             n_points: int = 25, n_random: int = 1, seed: int = 0, start: Mapping[str, float] | None = None):
-    """Fit a registered model jointly to the runs (thinned per curve); returns the ``FitResult``."""
-    model = get_model(model_key)
+             n_points: int = 25, n_random: int = 1, seed: int = 0, start: Mapping[str, float] | None = None,
+             taus_s: Sequence[float] | None = None):
+    """Fit a registered model jointly to the runs (thinned per curve); returns the ``FitResult``.
+
+    ``taus_s``: relaxation times [s] to rebuild a fixed-time QLV/Pipkin-Rogers model on
+    (:func:`spectrum_model`); None keeps the registered model."""
+    model = get_model(model_key) if taus_s is None else spectrum_model(model_key, taus_s)
     curves = _curves(runs, relaxation, n_points)
     problem = fitting.FitProblem(model=model, curves=curves, target=target, model_key=model_key, scope="diagnosis")
     return fitting.fit(problem, starts=[start] if start else (), n_random=n_random, seed=seed)
@@ -127,7 +306,7 @@ def fit_runs(model_key: str, runs: Sequence[xr.Dataset], target: str, relaxation
 
 def extension_gain(runs: Sequence[xr.Dataset], baseline_key: str, extension_key: str, target: str,
                    folds: Sequence[tuple[str, Callable[[xr.Dataset], bool]]], relaxation: str = "measured",
-                   n_points: int = 25, seed: int = 0) -> dict:
+                   n_points: int = 25, seed: int = 0, taus_s: Sequence[float] | None = None) -> dict:
     """Held-out gain of ``extension_key`` over ``baseline_key``.
 
     Parameters
@@ -135,29 +314,41 @@ def extension_gain(runs: Sequence[xr.Dataset], baseline_key: str, extension_key:
     runs : the runs both models are fitted to (only the test kinds both describe)
     folds : ``(label, is_held_out(run))`` pairs; each fold fits on the other runs and scores the held-out
         ones (fitting.evaluate NRMSE)
+    taus_s : relaxation times [s] both models are rebuilt on (:func:`spectrum_model`), e.g.
+        ``window_taus(resolved_window_s(runs))``; None keeps the registered models
     Returns
     -------
-    ``{model, metric, before, after, gain, cv, parameters: {delta_aicc, folds}}`` in the shape of a
-    catalogue ``fix`` (before/after = mean held-out NRMSE of baseline/extension).
+    ``{model, metric, before, after, gain, cv, parameters: {delta_aicc, baseline_aicc, extension_aicc,
+    n_held_out_points}, folds: [{label, before, after}]}`` in the shape of a catalogue ``fix``
+    (before/after = mean held-out NRMSE of baseline/extension). The baseline is refitted on the training
+    runs of every fold (never reused from the full-data fit), exactly like the extension.
     """
-    base_model, ext_model = get_model(baseline_key), get_model(extension_key)
-    before, after, labels = [], [], []
+    if taus_s is None:
+        base_model, ext_model = get_model(baseline_key), get_model(extension_key)
+    else:
+        base_model, ext_model = spectrum_model(baseline_key, taus_s), spectrum_model(extension_key, taus_s)
+    before, after, labels, n_held = [], [], [], []
     for label, held in folds:
         train = [r for r in runs if not held(r)]
         test = [r for r in runs if held(r)]
         test_curves = _curves(test, relaxation, n_points)
         if not train or not test_curves:
             continue
-        fb = fit_runs(baseline_key, train, target, relaxation, n_points, seed=seed)
-        fe = fit_runs(extension_key, train, target, relaxation, n_points, seed=seed)
+        fb = fit_runs(baseline_key, train, target, relaxation, n_points, seed=seed, taus_s=taus_s)
+        fe = fit_runs(extension_key, train, target, relaxation, n_points, seed=seed, taus_s=taus_s)
         before.append(fitting.evaluate(base_model, fb.params, test_curves, target)["nrmse"])
         after.append(fitting.evaluate(ext_model, fe.params, test_curves, target)["nrmse"])
         labels.append(label)
-    fb = fit_runs(baseline_key, runs, target, relaxation, n_points, seed=seed)
-    fe = fit_runs(extension_key, runs, target, relaxation, n_points, seed=seed)
+        n_held.append(int(sum(min(np.size(v) for v in c.observed.values()) for c in test_curves if c.observed)))
+    fb = fit_runs(baseline_key, runs, target, relaxation, n_points, seed=seed, taus_s=taus_s)
+    fe = fit_runs(extension_key, runs, target, relaxation, n_points, seed=seed, taus_s=taus_s)
     b, a = float(np.mean(before)) if before else np.nan, float(np.mean(after)) if after else np.nan
     return {"model": extension_key, "metric": "held_out_nrmse", "before": b, "after": a,
             "gain": (b - a) / b if b > 0 else np.nan, "cv": "leave-one-condition-out (" + ", ".join(labels) + ")",
             "parameters": {"delta_aicc": float(fe.aicc - fb.aicc), "baseline_aicc": float(fb.aicc),
-                           "extension_aicc": float(fe.aicc)},
+                           "extension_aicc": float(fe.aicc),
+                           # per fold, for the noise-calibrated margin of report.diagnose
+                           "n_held_out_points": float(min(n_held)) if n_held and min(n_held) > 0 else np.nan},
+            "relaxation_times_s": None if taus_s is None else [float(x) for x in taus_s],
+            "folds": [{"label": lab, "before": b_, "after": a_} for lab, b_, a_ in zip(labels, before, after)],
             "extension_params": {k: float(v) for k, v in fe.params.items()}}

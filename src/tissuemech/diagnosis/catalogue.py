@@ -46,8 +46,8 @@ import xarray as xr
 from scipy.optimize import least_squares
 
 from . import stats as st
-from .evidence import (booij_thoone, fit_prony_relaxation, log_spaced_taus, nominal_strain,
-                       prony_complex_modulus, run_id)
+from .evidence import (booij_thoone, estimate_noise, fit_prony_relaxation, log_spaced_taus, noise_sd,
+                       nominal_strain, prony_complex_modulus, run_id)
 
 CATALOGUE_IDS: tuple[str, ...] = (
     "nonseparable_relaxation", "rim_stress_nonlinearity", "wall_slip", "elapsed_time_drift",
@@ -163,7 +163,7 @@ def primary_rows(table: pd.DataFrame) -> pd.DataFrame:
     q = np.where(table["test"].isin(("amplitude_sweep", "frequency_sweep")), "storage_modulus", "shear_stress")
     rows = table[(table["quantity"] == q) & np.isfinite(table["log_ratio"])]
     # the first points of a ramp carry no level information and amplify noise in the log ratio
-    return rows[rows["predicted_abs"] > 5.0 * rows["sigma"]]
+    return rows[rows["above_noise"]] if "above_noise" in rows else rows
 
 
 def curve_levels(table: pd.DataFrame) -> pd.DataFrame:
@@ -333,8 +333,10 @@ def paired_first_load_test(ctx: DiagnosisContext) -> dict | None:
     frequency; the sweep is interpolated in log f). One-sample t-test over samples."""
     by_sample: dict[tuple, dict] = {}
     for r in ctx.runs:
+        if "order" not in r.attrs:
+            continue  # no test order in the data: this run cannot be placed first or later
         key = (str(r.attrs.get("specimen")), str(r.attrs.get("sample")))
-        by_sample.setdefault(key, {})[int(r.attrs.get("order", 0))] = r
+        by_sample.setdefault(key, {})[int(r.attrs["order"])] = r
     logs = []
     for runs in by_sample.values():
         first = runs[min(runs)]
@@ -526,7 +528,12 @@ def detect_instrument_inertia(ctx: DiagnosisContext) -> dict:
     fs = ctx.table[(ctx.table["test"] == "frequency_sweep") & (ctx.table["quantity"] == "storage_modulus")]
     if fs.empty or fs["frequency_sq"].nunique() < 4:
         return _untested(eff, "no frequency sweep")
-    gap = (1.0 / fs["inverse_gap"]).fillna(2e-3)
+    # the inertial term needs the true gap and plate radius of every sweep: never a default
+    fs = fs[np.isfinite(fs["inverse_gap"]) & np.isfinite(fs["radius_m"])]
+    if fs.empty or fs["frequency_sq"].nunique() < 4:
+        return _untested(eff, "not testable here: the frequency sweeps record no gap or no plate radius "
+                              "(the inertial term omega^2 2h/(pi R^4) needs both)")
+    gap = 1.0 / fs["inverse_gap"]
     b_inv = 2.0 * gap / (np.pi * fs["radius_m"] ** 4)          # 1/b = 2h/(pi R^4), 1/m^3
     x_inertia = fs["frequency_sq"] * b_inv                      # Pa per (kg m^2)
     logw = 0.5 * np.log(fs["frequency_sq"])
@@ -582,7 +589,7 @@ def detect_instrument_inertia(ctx: DiagnosisContext) -> dict:
                 f"clustered by sweep, log-omega control): an inertial error of {artefact_at_fmax:+.3g} Pa at "
                 f"{f_max:.3g} Hz where |G'| ~ {gmax:.3g} Pa.{kk_txt}{raw_txt}")
     fix = _fix("fitted inertia term G'_app = G' - dI omega^2 2h/(pi R^4)", "rms_rel_residual_storage_modulus",
-               before, after, f"leave-one-{group}-out", delta_inertia_kg_m2=delta_i)
+               before, after, f"leave-one-{group}-out", delta_inertia_kg_m2=delta_i, n_held_out_points=len(frame))
     practical = abs(artefact_at_fmax) >= 0.05 * gmax
     return _finding(eff, t, "t", delta_i, "kg m^2", practical, evidence, fix)
 
@@ -639,7 +646,11 @@ def detect_torque_offset(ctx: DiagnosisContext) -> dict:
     offset_unm = offset_pa * np.pi * radius ** 3 / 2.0 * 1e6
     small = td[td["curve"].isin(curves)]
     sr = small[small["test"] == "stress_relaxation"]
-    late_level = float(sr["predicted_abs"].min()) if not sr.empty else float(small["predicted_abs"].median())
+    # scale the offset against the lowest curve level, read from the OBSERVED stresses (median |observed| per
+    # curve, relaxation holds when there are any): a model that collapses to a near-zero prediction must not
+    # turn a small offset into an absurd percentage
+    lowest = sr if not sr.empty else small
+    late_level = float(lowest.groupby("curve")["observed"].apply(lambda v: np.median(np.abs(v))).min())
 
     def fit(train):
         vals, lv = [], []
@@ -659,14 +670,18 @@ def detect_torque_offset(ctx: DiagnosisContext) -> dict:
 
     group = "condition" if small["condition"].nunique() >= 3 else _cv_group_column(small)
     before, after = _group_cv(small, group, fit, error)
+    where = (f"torque offset M0 = {offset_unm:+.3g} uN m at R = {1e3 * radius:.1f} mm" if np.isfinite(radius)
+             else "no plate radius in the data: not convertible to a torque")
+    size = (f"{100 * abs(offset_pa) / late_level:.3g} % of the lowest curve level (median observed stress of "
+            f"that curve, {late_level:.3g} Pa)"
+            if late_level > 0 else "the observed stresses of these curves have no positive median level")
     evidence = (f"Stress residuals of {ctx.model} on {len(curves)} relaxation holds and ramp starts (<= 20 %) "
-                f"have a common additive intercept of {offset_pa:+.3g} Pa (torque offset M0 = {offset_unm:+.3g} "
-                f"uN m at R = {1e3 * radius:.1f} mm; t = {tval:.2f} across curves), i.e. "
-                f"{100 * abs(offset_pa) / max(late_level, 1e-12):.0f} % of the smallest predicted stress "
-                f"({late_level:.3g} Pa): G(t, gamma0) = sigma/gamma0 diverges as 1/gamma0.")
+                f"have a common additive intercept of {offset_pa:+.3g} Pa ({where}; t = {tval:.2f} across curves), "
+                f"i.e. {size}: G(t, gamma0) = sigma/gamma0 diverges as 1/gamma0.")
     fix = _fix("torque offset M0 as a nuisance parameter (stress + 2 M0/(pi R^3))", "rms_rel_residual_small_strain",
-               before, after, f"leave-one-{group}-out", offset_pa=offset_pa, offset_uNm=offset_unm)
-    practical = abs(offset_pa) >= 0.02 * late_level
+               before, after, f"leave-one-{group}-out", offset_pa=offset_pa, offset_uNm=offset_unm,
+               n_held_out_points=len(small))
+    practical = bool(late_level > 0 and abs(offset_pa) >= 0.02 * late_level)
     return _finding(eff, t, "t", offset_unm, "uN m", practical, evidence, fix)
 
 
@@ -683,7 +698,7 @@ def detect_amplitude_softening(ctx: DiagnosisContext) -> dict:
     """Slope of the amplitude-sweep G' log-residual against log strain amplitude (cluster by sweep)."""
     eff = "amplitude_softening"
     a = ctx.table[(ctx.table["test"] == "amplitude_sweep") & (ctx.table["quantity"] == "storage_modulus")]
-    a = a[np.isfinite(a["log_ratio"]) & (a["strain"] > 0) & (a["predicted_abs"] > 5.0 * a["sigma"])]
+    a = a[np.isfinite(a["log_ratio"]) & (a["strain"] > 0) & a.get("above_noise", True)]
     if a.empty or a["strain"].nunique() < 4:
         return _untested(eff, "no amplitude sweep above the torque noise floor")
     a = a.assign(log_g0=np.log10(a["strain"]), y=_demean_by(a, "log_ratio", "curve"))
@@ -729,7 +744,7 @@ def detect_amplitude_softening(ctx: DiagnosisContext) -> dict:
                 f"{full[0]:.2f}, gamma_c = {100 * 10 ** full[1]:.2g} %, m = {full[2]:.2f}.")
     fix = _fix("Kraus amplitude softening G'(g0) = G'inf + (G'0 - G'inf)/(1 + (g0/gc)^(2m))",
                "rms_log_residual_amplitude_sweep_shape", before, after, f"leave-one-{group}-out",
-               ratio_inf=full[0], gamma_c=10 ** full[1], m=full[2])
+               ratio_inf=full[0], gamma_c=10 ** full[1], m=full[2], n_held_out_points=len(a))
     return _finding(eff, t, "t", change, "relative change of G' over the sweep", change <= -0.05, evidence, fix)
 
 
@@ -745,7 +760,8 @@ def _csr_frame(ctx: DiagnosisContext) -> pd.DataFrame:
 
 
 def _slip_covariate(c: pd.DataFrame, sigma_c: float) -> np.ndarray:
-    gap = (1.0 / c["inverse_gap"]).fillna(2e-3).to_numpy()
+    # no gap recorded -> NaN covariate (the detector is then not testable), never a default gap
+    gap = (1.0 / c["inverse_gap"]).to_numpy()
     return np.maximum(0.0, c["observed"].to_numpy() - sigma_c) / (gap * 1e3) / c["strain"].to_numpy()
 
 
@@ -1001,7 +1017,8 @@ def detect_wall_slip(ctx: DiagnosisContext) -> dict:
                 f"max(0, sigma - sigma_c)/(h gamma), t = {t['statistic']:.2f}, controls strain^2 and "
                 f"strain^2 x log-rate, Bonferroni over {k} thresholds){gap_txt}.")
     fix = _fix("slip-corrected strain gamma = gamma_app - 2 beta_s max(0, sigma - sigma_c)/h",
-               "rms_log_residual", before, after, f"leave-one-{group}-out", sigma_c_pa=sigma_c)
+               "rms_log_residual", before, after, f"leave-one-{group}-out", sigma_c_pa=sigma_c,
+               n_held_out_points=len(c))
     return _finding(eff, t, "t", sigma_c, "Pa (critical stress)", loss <= -0.03, evidence, fix)
 
 
@@ -1046,13 +1063,16 @@ def detect_finite_rise_time(ctx: DiagnosisContext) -> dict:
     parts, texts, fix = [], [], None
     sweep = _measured_sweep(ctx)
     tmax = max(float(r["time"].values.max()) for r in small)
-    taus = log_spaced_taus(max(t_r / 10.0, 1e-2), tmax)
+    taus = log_spaced_taus(t_r / 10.0, tmax)
+    # weights from the noise of these relaxations themselves (evidence.estimate_noise), not an instrument constant
+    relax_noise = estimate_noise(small)
     fits = []
     for r in small:
         g = np.abs(r["shear_strain"].values)
         s_ = np.abs(r["shear_stress"].values)
         t_ = r["time"].values - r["time"].values[0]
-        w = 1.0 / np.sqrt((0.01 * s_) ** 2 + 0.03 ** 2)
+        sd = noise_sd(relax_noise, "stress_relaxation", "shear_stress", s_)
+        w = np.where(np.isfinite(sd) & (sd > 0), 1.0 / sd, 0.0) if np.isfinite(sd).any() else np.ones_like(s_)
         fits.append((fit_prony_relaxation(t_, s_, g, taus, ramp_aware=False, weights=w),
                      fit_prony_relaxation(t_, s_, g, taus, ramp_aware=True, weights=w)))
     g_fast = [np.mean([p[k]["g_pa"][p[k]["taus_s"] <= 10 * t_r].sum() for p in fits]) for k in (0, 1)]

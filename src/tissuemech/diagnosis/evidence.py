@@ -8,15 +8,18 @@ them into one row per (run, point, quantity) with
 * identity: ``curve`` (run id), ``test``, ``specimen``, ``sample`` (``specimen/sample``, unique across
   specimens), ``condition`` (test + nominal
   condition), ``quantity`` (canonical variable compared: ``shear_stress``, ``storage_modulus`` ...);
-* ``observed``, ``predicted``, ``residual`` = observed - predicted (quantity units), ``sigma`` (noise model
-  of ``science.md`` section 3: torque floor 0.05 uN m as rim stress plus 1 % relative, in quantity units),
-  ``std_residual`` = residual / sigma, ``rel_residual`` = residual / |predicted|, ``log_ratio`` =
-  ln(observed / predicted) where both are positive;
+* ``observed``, ``predicted``, ``residual`` = observed - predicted (quantity units), ``sigma`` (noise SD of the
+  observed value from :func:`estimate_noise`: the within-curve scatter of the data, never an instrument
+  constant; a torque resolution is used only where declared), ``std_residual`` = residual / sigma,
+  ``rel_residual`` = residual / |predicted|, ``log_ratio`` = ln(observed / predicted) where both are positive;
 * covariates: ``strain`` [1], ``strain_sq``, ``log_rate`` (log10 of the nominal rate in 1/s),
   ``strain_x_log_rate``, ``strain_sq_x_log_rate``, ``time_in_test`` [s], ``log_time`` (log10 s),
   ``elapsed_time`` [s since the session start: the ``total_time`` channel, else the run's ``started_at``
   relative to the first run of its specimen plus ``time``], ``test_order``, ``first_load`` (1 on the first run of a
-  sample), ``frequency_sq`` [(rad/s)^2], ``inverse_gap`` [1/m], ``predicted_abs`` [quantity units], every
+  sample), ``frequency_sq`` [(rad/s)^2], ``inverse_gap`` [1/m], ``radius_m`` [m; NaN when neither the export
+  nor the sample sheet gives it],
+  ``predicted_abs`` / ``observed_abs`` [quantity units], ``above_noise`` (|observed| > :data:`ABOVE_NOISE_SIGMAS`
+  sigma: the row filter of level and structure tests), every
   logged channel of :data:`LOGGED_CHANNELS` present in the run, and every numeric ``covariate_*`` attribute.
 
 Predictions are a mapping ``{canonical variable: array aligned with the run's points}`` per run; the
@@ -37,14 +40,15 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 from scipy.optimize import nnls
+from scipy.special import comb
 
 from ..models.recursion import prony_branch_histories
 
-#: torque noise floor of the reference instrument (N m) and relative torque noise (science.md section 3)
-TORQUE_FLOOR_NM = 0.05e-6
-RELATIVE_NOISE = 0.01
-#: plate radius assumed when a run does not record ``radius_m`` (m)
-DEFAULT_RADIUS_M = 12.5e-3
+#: a row enters the level and structure tests only where its OBSERVED magnitude exceeds this many noise SDs
+#: (a detection convention, not an instrument property)
+ABOVE_NOISE_SIGMAS = 5.0
+#: fewest second differences a noise block needs for the binned variance fit; fewer -> relative scale only
+_MIN_BIN_POINTS = 10
 
 #: logged channels carried into the residual table as covariates when a run has them
 LOGGED_CHANNELS = ("temperature", "gap", "normal_force", "raw_phase", "deflection_angle")
@@ -106,34 +110,145 @@ def condition_label(run: xr.Dataset) -> str:
     return test
 
 
-def rim_stress_floor_pa(radius_m: float) -> float:
-    """Rim-stress equivalent 2 M_floor / (pi R^3) of the torque noise floor (Pa)."""
-    return 2.0 * TORQUE_FLOOR_NM / (np.pi * radius_m ** 3)
+def robust_noise_sd(values: np.ndarray) -> float:
+    """White-noise SD of a smooth sequence from its second differences: 1.4826 MAD(d2) / sqrt(6).
+
+    For y_i = f_i + e_i with slowly varying f and independent e_i of SD s, var(e_{i+1} - 2 e_i + e_{i-1})
+    = 6 s^2; the median absolute value makes the estimate robust to steps and outliers. Units of ``values``;
+    NaN for fewer than 3 finite values.
+    """
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v)]
+    if v.size < 3:
+        return np.nan
+    d2 = v[2:] - 2.0 * v[1:-1] + v[:-2]
+    return float(1.4826 * np.median(np.abs(d2)) / np.sqrt(6.0))
 
 
-def _noise_sigma(quantity: str, predicted: np.ndarray, strain: np.ndarray, radius_m: float) -> np.ndarray:
-    floor = rim_stress_floor_pa(radius_m)
-    if quantity in ("storage_modulus", "loss_modulus", "relaxation_modulus"):
-        # a modulus is stress / strain amplitude, so the absolute floor scales with 1/strain
-        floor = floor / np.clip(np.abs(strain), 1e-6, None)
-    elif quantity == "torque":
-        floor = TORQUE_FLOOR_NM
-    elif quantity == "normal_force":
-        floor = 1e-4  # N, typical normal-force resolution of a rotational rheometer
-    elif quantity == "shear_strain":
-        floor = 1e-5
-    return np.sqrt(floor ** 2 + (RELATIVE_NOISE * np.abs(predicted)) ** 2)
+def _second_differences(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(|y| at the centre points, relative k-th differences scaled to the noise SD) of one curve.
+
+    Six detrendings are computed: k-th differences (k = 2, 3, 4) of ln|y| (exact for exponential and
+    power-law trends) and of y over |y| (exact for polynomial trends, e.g. a ramp from zero), each divided
+    by sqrt(C(2k, k)) so that white noise of relative SD s gives differences of SD s. A smooth trend can only
+    add to them, so the detrending with the smallest median magnitude is kept for the curve.
+    """
+    y = np.asarray(y, float)
+    y = y[np.isfinite(y) & (y != 0)]
+    if y.size < 5:
+        return np.empty(0), np.empty(0)
+    z = np.log(np.abs(y))
+    best, best_scale, centre = None, np.inf, None
+    for k in (2, 3, 4):
+        norm = np.sqrt(float(comb(2 * k, k)))
+        lo = k // 2
+        mag = np.abs(y[lo:y.size - (k - lo)])
+        for d in (np.diff(z, k) / norm, np.diff(y, k) / norm / mag):
+            scale = float(np.median(np.abs(d)))
+            if scale < best_scale:
+                best, best_scale, centre = d, scale, mag
+    return centre, best
 
 
-def first_load_flags(runs: Sequence[xr.Dataset]) -> list[int]:
-    """1 for the run with the smallest ``order`` of each (specimen, sample), else 0."""
+def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
+    """Noise model of the measured quantities, from the data themselves (no instrument constant).
+
+    Within every curve the relative differences of order 2-4 (acquisition order; of ln|y| or of y/|y|,
+    whichever is smallest for that curve, see :func:`_second_differences`) measure the point-to-point
+    scatter; smooth trends (power laws in frequency, exponential decays, polynomial ramps) contribute little.
+    Per (test, quantity) block the points are pooled over curves, binned by |y| (quantiles), and the
+    robust variance per bin, s_b^2 = (1.4826 MAD)^2 (relative units), is fitted by NNLS as
+    ``relative^2 + absolute^2 / |y|^2`` -- i.e. SD(y) = sqrt(absolute^2 + (relative |y|)^2). With too few
+    points for bins only ``relative`` is estimated. A torque resolution declared for the instrument
+    (run attribute ``torque_resolution_nm``, from ``dataset.yaml``) replaces the absolute part of stress
+    quantities when the run also records its plate radius (rim stress 2 M / (pi R^3)).
+
+    Returns
+    -------
+    dict ``{"method", "blocks": {"<test>|<quantity>": {"relative" [1], "absolute" [quantity units],
+    "median_abs" [quantity units], "n_points", "n_curves", "source"}}}``; a block with fewer than 5 points
+    per curve is absent (its rows get NaN sigma and are excluded from noise-scaled tests).
+    """
+    pooled: dict[str, list] = {}
+    for run in runs:
+        test = str(run.attrs.get("test", "unknown"))
+        for q in COMPARED_QUANTITIES:
+            if q not in run or run[q].ndim != 1:
+                continue
+            mag, d2 = _second_differences(run[q].values)
+            if mag.size:
+                pooled.setdefault(f"{test}|{q}", []).append((mag, d2))
+    blocks = {}
+    for key, parts in pooled.items():
+        mag = np.concatenate([m for m, _ in parts])
+        d2 = np.concatenate([d for _, d in parts])
+        rel_all = 1.4826 * np.median(np.abs(d2))
+        entry = {"relative": float(rel_all), "absolute": 0.0, "n_points": int(mag.size), "n_curves": len(parts),
+                 "median_abs": float(np.median(mag)),
+                 "source": "within-curve scatter (relative differences of order 2-4), relative only"}
+        n_bins = min(8, mag.size // _MIN_BIN_POINTS)
+        if n_bins >= 3:
+            edges = np.quantile(mag, np.linspace(0, 1, n_bins + 1))
+            idx = np.clip(np.searchsorted(edges, mag, side="right") - 1, 0, n_bins - 1)
+            rows, rhs = [], []
+            for b in range(n_bins):
+                sel = idx == b
+                if sel.sum() >= _MIN_BIN_POINTS:
+                    s_b = 1.4826 * np.median(np.abs(d2[sel]))
+                    rows.append([1.0, 1.0 / np.median(mag[sel]) ** 2])
+                    rhs.append(s_b ** 2)
+            if len(rows) >= 3:
+                coef, _ = nnls(np.asarray(rows), np.asarray(rhs))
+                entry.update(relative=float(np.sqrt(coef[0])), absolute=float(np.sqrt(coef[1])),
+                             source="within-curve scatter (relative differences of order 2-4), binned by |y|: "
+                                    "SD = sqrt(absolute^2 + (relative |y|)^2)")
+        blocks[key] = entry
+    declared = {float(r.attrs["torque_resolution_nm"]) for r in runs if "torque_resolution_nm" in r.attrs}
+    method = "within-curve residual scale (differences of order 2-4, per curve the smallest), per test and quantity"
+    if declared:
+        method += f"; declared torque resolution {sorted(declared)} N m used as the stress floor where R is known"
+    return {"method": method, "blocks": blocks}
+
+
+def noise_sd(noise: Mapping, test: str, quantity: str, observed: np.ndarray, strain: np.ndarray | None = None,
+             radius_m: float = np.nan, torque_resolution_nm: float = np.nan) -> np.ndarray:
+    """Per-point noise SD (quantity units) of observed values under :func:`estimate_noise`'s model.
+
+    A declared torque resolution (N m) with a known radius R (m) gives the absolute floor of a stress as
+    2 M / (pi R^3) and of a modulus as that over the strain amplitude; it is used when larger than the
+    estimated floor. NaN where the block has no estimate.
+    """
+    obs = np.abs(np.asarray(observed, float))
+    b = noise.get("blocks", {}).get(f"{test}|{quantity}")
+    if b is None:
+        return np.full(obs.shape, np.nan)
+    floor = np.full(obs.shape, float(b["absolute"]))
+    if np.isfinite(torque_resolution_nm) and np.isfinite(radius_m) and radius_m > 0:
+        declared = 2.0 * torque_resolution_nm / (np.pi * radius_m ** 3)
+        if quantity in ("storage_modulus", "loss_modulus", "relaxation_modulus") and strain is not None:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                declared = declared / np.abs(np.asarray(strain, float))
+        if quantity == "torque":
+            declared = torque_resolution_nm
+        if quantity in ("shear_stress", "torque", "storage_modulus", "loss_modulus", "relaxation_modulus"):
+            floor = np.fmax(floor, declared)
+    sd = np.sqrt(floor ** 2 + (float(b["relative"]) * obs) ** 2)
+    return np.where(sd > 0, sd, np.nan)
+
+
+def first_load_flags(runs: Sequence[xr.Dataset]) -> list[float]:
+    """1 for the run with the smallest ``order`` of each (specimen, sample), else 0; NaN for a run whose test
+    order the export and sample sheet do not give (never a default order)."""
     first: dict[tuple, float] = {}
+    keys, orders = [], []
     for r in runs:
         key = (str(r.attrs.get("specimen")), str(r.attrs.get("sample")))
-        o = float(r.attrs.get("order", 0))
-        first[key] = min(first.get(key, np.inf), o)
-    return [int(float(r.attrs.get("order", 0)) == first[(str(r.attrs.get("specimen")), str(r.attrs.get("sample")))])
-            for r in runs]
+        o = float(r.attrs.get("order", np.nan))
+        keys.append(key)
+        orders.append(o)
+        if np.isfinite(o):
+            first[key] = min(first.get(key, np.inf), o)
+    return [float(o == first[k]) if np.isfinite(o) else np.nan for k, o in zip(keys, orders)]
 
 
 def session_offsets_s(runs: Sequence[xr.Dataset]) -> list[float]:
@@ -163,7 +278,7 @@ def _point_array(run: xr.Dataset, name: str, n: int) -> np.ndarray:
 
 
 def residual_table(runs: Sequence[xr.Dataset], predictions: Sequence[Mapping[str, np.ndarray]],
-                   model: str = "model") -> pd.DataFrame:
+                   model: str = "model", noise: Mapping | None = None) -> pd.DataFrame:
     """Tidy residual table of a model's predictions against measured runs (columns: module docstring).
 
     Parameters
@@ -172,6 +287,7 @@ def residual_table(runs: Sequence[xr.Dataset], predictions: Sequence[Mapping[str
     predictions : per run, ``{canonical variable: predicted array}`` aligned with the run's points;
         variables the run did not measure are ignored
     model : model key recorded in the ``model`` column
+    noise : noise model of :func:`estimate_noise` (estimated from ``runs`` when None)
 
     Returns
     -------
@@ -180,6 +296,7 @@ def residual_table(runs: Sequence[xr.Dataset], predictions: Sequence[Mapping[str
     """
     if len(runs) != len(predictions):
         raise ValueError(f"{len(runs)} runs but {len(predictions)} prediction sets")
+    noise = estimate_noise(runs) if noise is None else noise
     firsts = first_load_flags(runs)
     offsets = session_offsets_s(runs)
     blocks = []
@@ -188,7 +305,9 @@ def residual_table(runs: Sequence[xr.Dataset], predictions: Sequence[Mapping[str
         n = run.sizes.get("point", 0)
         if n == 0:
             continue
-        radius = float(a.get("radius_m", DEFAULT_RADIUS_M))
+        # no plate radius in the export/sample sheet -> NaN (never a default): radius-based quantities
+        # (torque offset in N m, rim-stress floor) are then not computable
+        radius = float(a.get("radius_m", np.nan))
         strain = np.abs(_point_array(run, "shear_strain", n))
         if not np.isfinite(strain).any() and "strain_pct" in a:
             strain = np.full(n, float(a["strain_pct"]) / 100.0)
@@ -235,13 +354,17 @@ def residual_table(runs: Sequence[xr.Dataset], predictions: Sequence[Mapping[str
             block["observed"] = obs
             block["predicted"] = prd
             block["residual"] = obs - prd
-            sigma = _noise_sigma(q, prd, strain, radius)
+            sigma = noise_sd(noise, base["test"], q, obs, strain, radius,
+                             float(a.get("torque_resolution_nm", np.nan)))
             block["sigma"] = sigma
             block["std_residual"] = (obs - prd) / sigma
             block["rel_residual"] = (obs - prd) / np.where(np.abs(prd) > 0, np.abs(prd), np.nan)
             with np.errstate(divide="ignore", invalid="ignore"):
                 block["log_ratio"] = np.where((obs > 0) & (prd > 0), np.log(obs / prd), np.nan)
             block["predicted_abs"] = np.abs(prd)
+            block["observed_abs"] = np.abs(obs)
+            # the row filter of the level/structure tests reads the OBSERVED magnitude against the noise
+            block["above_noise"] = np.abs(obs) > ABOVE_NOISE_SIGMAS * sigma
             blocks.append(block[np.isfinite(obs) & np.isfinite(prd)])
     if not blocks:
         return pd.DataFrame(columns=["model", "curve", "test", "quantity", "observed", "predicted", "residual"])

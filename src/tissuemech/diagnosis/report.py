@@ -6,28 +6,39 @@ Entry points
     runs every catalogue detector (:mod:`.catalogue`) and every generic structure test (:mod:`.generic`)
     on the residual table of the baseline model, controls the family-wise false-alarm rate at
     :data:`tissuemech.diagnosis.stats.ALPHA` (0.01) across *all* of them (alpha/2 to the catalogue and
-    alpha/2 to the generic scan, Holm within each; ``p_holm`` is reported on the alpha scale), and names a cause only when it is
-    statistically significant after Holm, practically relevant (its effect size exceeds the cause's
-    threshold) and -- when a fix was scored -- its fix improves the held-out metric.
+    alpha/2 to the generic scan, Holm within each; ``p_holm`` is reported on the alpha scale), and names a cause
+    by :data:`DECISION_RULE`: significant after Holm, practically relevant, and its fix scored on held-out data
+    beats the noise-calibrated margin of :func:`fix_margin`. Significant, relevant causes without a scored fix
+    go to ``significant_fix_not_evaluated``. An inadequate baseline (``adequacy``) is the first finding,
+    ``baseline_inadequate``, and blocks every other name when no adequate model is left.
 
 :func:`run_diagnosis` ``(runs_dir, fits_dir, out_json, out_nc, fig_dir, baseline=None, extensions=True,
-dataset=None) -> dict``
+dataset=None, alpha=ALPHA, ranking=None) -> dict``
     the Snakemake ``diagnose`` rule's call. Homogeneous-specimen datasets (simple shear + uniaxial
     compression/tension, e.g. Budday) go to :func:`tissuemech.diagnosis.homogeneous.run_homogeneous_diagnosis`
     (cross-mode diagnosis; same JSON contract plus ``cross_mode``). Otherwise: ``runs_dir``: folder of canonical run netCDFs (searched
     recursively, ``*.nc``); ``fits_dir``: folder of fit records ``<model>.nc``
-    (:func:`tissuemech.fitting.write_fit_netcdf`); ``baseline``: model key to diagnose (default: the
-    QLV-family fit with the lowest AICc, else the lowest AICc overall). Every fit's predictions on every
+    (:func:`tissuemech.fitting.write_fit_netcdf`); ``ranking``: the dataset's ``ranking.csv``, which orders the
+    candidate baselines (QLV family first, :func:`tissuemech.diagnosis.baseline.ranked_candidates`); the first
+    candidate that passes :func:`tissuemech.diagnosis.baseline.baseline_adequacy` is diagnosed (``baseline``:
+    a requested model key instead). Every fit's predictions on every
     run go into the residual netCDF ``out_nc`` (dimension ``row``, column ``model``); the findings of the
     baseline go to ``out_json``; figures (PNG) to ``fig_dir``. ``extensions``: fit the extended models
-    (e.g. QLV -> Pipkin-Rogers) for the held-out gain of model-level fixes (costs a few fits).
+    (e.g. QLV -> Pipkin-Rogers, on the relaxation times the tests resolve) for the held-out gain of
+    model-level fixes (costs a few fits).
 
 Output JSON (``diagnosis.json``)
 --------------------------------
-``findings``: one entry per catalogue id, detected first (strongest first): ``effect``, ``detected``,
+``decision_rule`` (the sentence of :data:`DECISION_RULE`); ``noise_model`` (:func:`estimate_noise` plus
+``relative_level`` eps); ``baseline`` {``model``, ``adequate``, ``tried``: adequacy of every candidate};
+``findings``: ``baseline_inadequate`` first when a candidate was rejected (``models``, ``evidence``), then one
+entry per catalogue id, detected first (strongest first): ``effect``, ``detected``,
 ``tested``, ``statistic`` (+ ``statistic_name``), ``p_value`` (uncorrected), ``p_holm``, ``effect_size``
 (+ unit), ``practical``, ``evidence`` (sentence naming tests/conditions/covariates), ``fix`` {``model``,
-``metric``, ``before``, ``after``, ``gain``, ``cv``, ``parameters``} or null.
+``metric``, ``before``, ``after``, ``gain``, ``cv``, ``parameters``, ``margin``, ``improvement``,
+``beats_margin``} or null.
+``significant_fix_not_evaluated``: ``effect``, ``p_holm``, ``effect_size`` (+ unit), ``evidence`` of causes that
+pass Holm and practical relevance but whose fix was not scored (not named).
 ``unexplained``: structured residual not named by a detected cause: ``covariate``, ``test``,
 ``quantity``, ``statistic``, ``p_value``, ``p_holm``, ``effect_size`` (log-residual change over the
 covariate's range), ``candidates`` (catalogue causes whose signature involves that covariate).
@@ -43,13 +54,31 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import xarray as xr
+from scipy import stats as sps
+from statsmodels.tools.sm_exceptions import MissingDataError
 
 from ..canonical import read_netcdf, write_netcdf, write_text
+from ..models.registry import available_models, get_model
 from . import stats as st
-from .catalogue import CATALOGUE_IDS, DETECTORS, DiagnosisContext, explains
-from .evidence import residual_table, residual_table_to_xarray
+from .baseline import (baseline_adequacy, extension_gain, predict_runs, ranked_candidates, read_fit_record,
+                       resolved_window_s, window_taus)
+from .catalogue import CATALOGUE_IDS, DETECTORS, DiagnosisContext, curve_levels, explains
+from .evidence import estimate_noise, residual_table, residual_table_to_xarray
 from .generic import serial_structure, structure_tests
 from .homogeneous import is_homogeneous, run_homogeneous_diagnosis
+
+DECISION_RULE = (
+    "A cause is named (detected) only when (1) its test is significant after Holm at the family-wise alpha, "
+    "(2) its effect size passes the cause's practical threshold, and (3) its fix, scored on held-out data with "
+    "the baseline refitted or re-estimated inside every fold, lowers the held-out error (before - after, in the "
+    "fix's relative metric) by more than the noise-calibrated margin z_(1-alpha) * eps / sqrt(2 n), where eps "
+    "is the typical relative noise SD of the measured responses (noise_model.relative_level) and n the held-out "
+    "values the fix's metric pools (the number of curves for curve-level fixes that do not report it): the "
+    "standard error of an RMS of n noise values of SD eps is eps / sqrt(2 n). "
+    "Significant, practically relevant causes whose fix was not scored are listed in "
+    "significant_fix_not_evaluated, not named. An inadequate baseline (parameters at a bound, no covariance, "
+    "no convergence, or the typical point off by more than a factor 2) is the first finding, "
+    "baseline_inadequate; the next adequate model is diagnosed, and when none is adequate no cause is named.")
 
 
 def _clean(obj):
@@ -75,6 +104,12 @@ def run_detectors(ctx: DiagnosisContext) -> list[dict]:
     for eff in CATALOGUE_IDS:
         try:
             out.append(DETECTORS[eff](ctx))
+        except (MissingDataError, KeyError) as exc:
+            # a quantity the detector needs is absent from these data (a NaN covariate, a missing channel)
+            out.append({"effect": eff, "tested": False, "statistic": np.nan, "p_value": np.nan, "log10_p": np.nan,
+                        "effect_size": np.nan, "practical": False, "fix": None,
+                        "evidence": f"not testable here: a quantity it needs is absent from these data "
+                                    f"({type(exc).__name__}: {exc})"})
         except Exception as exc:  # noqa: BLE001 -- one broken detector must not hide the others
             out.append({"effect": eff, "tested": False, "statistic": np.nan, "p_value": np.nan, "log10_p": np.nan,
                         "effect_size": np.nan, "practical": False, "fix": None,
@@ -82,13 +117,64 @@ def run_detectors(ctx: DiagnosisContext) -> list[dict]:
     return out
 
 
+#: imposed inputs, not responses: their scatter does not set the noise of a fix's metric
+INPUT_QUANTITIES = ("shear_strain",)
+
+
+def relative_noise_level(noise: dict) -> float:
+    """Typical relative noise SD eps [1] of the measured responses.
+
+    Per (test, quantity) block of an :func:`estimate_noise` model, the relative SD at the block's median
+    magnitude, sqrt(relative^2 + (absolute / median|y|)^2); eps is the median over the response blocks
+    (imposed inputs of :data:`INPUT_QUANTITIES` excluded). NaN without such a block.
+    """
+    rel = []
+    for key, b in noise.get("blocks", {}).items():
+        if key.split("|")[-1] in INPUT_QUANTITIES:
+            continue
+        med = b.get("median_abs", np.nan)
+        a = b.get("absolute", 0.0) / med if np.isfinite(med) and med > 0 else 0.0
+        r = float(np.hypot(b.get("relative", np.nan), a))
+        if np.isfinite(r):
+            rel.append(r)
+    return float(np.median(rel)) if rel else np.nan
+
+
+def fix_margin(fix: dict | None, eps: float, alpha: float = st.ALPHA, n_default: float = np.nan) -> float:
+    """Noise-calibrated margin [metric units, relative] that a fix's held-out improvement must exceed.
+
+    ``z_(1-alpha) eps / sqrt(2 n)``: eps the relative noise SD of the data, n the held-out values the fix's
+    metric pools (``fix["parameters"]["n_held_out_points"]``), else ``n_default`` (the number of curves: a
+    curve-level fix holds out about one level per curve, and the per-point eps overstates a level's noise,
+    so this is conservative). NaN without a noise estimate or a count (the fix is then not credited).
+    """
+    n = (fix or {}).get("parameters", {}).get("n_held_out_points", np.nan)
+    n = float(n) if n is not None and np.isfinite(n) and n > 0 else float(n_default)
+    if not (np.isfinite(eps) and np.isfinite(n) and n > 0):
+        return np.nan
+    return float(sps.norm.ppf(1.0 - alpha) * eps / np.sqrt(2.0 * n))
+
+
 def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "model", fit_info: dict | None = None,
-             alpha: float = st.ALPHA) -> dict:
-    """Named findings and unexplained structure of one baseline model (module docstring)."""
+             alpha: float = st.ALPHA, noise: dict | None = None, adequacy: Sequence[dict] = ()) -> dict:
+    """Named findings and unexplained structure of one baseline model (module docstring).
+
+    ``noise``: the :func:`tissuemech.diagnosis.evidence.estimate_noise` model of ``runs`` (estimated when
+    None); ``adequacy``: :func:`tissuemech.diagnosis.baseline.baseline_adequacy` of every model tried before
+    and including this one; an inadequate entry becomes the ``baseline_inadequate`` finding, and when the
+    last entry (this model) is inadequate no cause is named.
+    """
     fit_info = dict(fit_info or {})
+    noise = estimate_noise(runs) if noise is None else noise
+    eps = relative_noise_level(noise)
+    n_curves = float(table["curve"].nunique()) if "curve" in table and len(table) else np.nan
+    rejected = [a for a in adequacy if not a["adequate"]]
+    usable = not adequacy or bool(adequacy[-1]["adequate"])
     ctx = DiagnosisContext(runs=list(runs), table=table, model=model, fit_info=fit_info)
     findings = run_detectors(ctx)
-    generic = structure_tests(table)
+    # a baseline without residuals on these runs (e.g. an inadequate model that predicts none of them) has
+    # no structure to scan
+    generic = structure_tests(table) if len(table) else []
     tested = [f for f in findings if f.get("tested") and np.isfinite(f.get("p_value", np.nan))]
     pvals = [f["p_value"] for f in tested] + [g["p_value"] for g in generic]
     # family-wise error <= alpha over every test: alpha/2 to the catalogue and alpha/2 to the generic scan
@@ -97,12 +183,22 @@ def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "mode
     reject_g, adjusted_g = st.holm([g["p_value"] for g in generic], alpha / 2)
     reject = np.r_[reject_c, reject_g].astype(bool)
     adjusted = np.r_[np.minimum(2 * adjusted_c, 1.0), np.minimum(2 * adjusted_g, 1.0)]
+    not_evaluated = []
     for f, r, a in zip(tested, reject[:len(tested)], adjusted[:len(tested)]):
-        gain = (f.get("fix") or {}).get("gain", np.nan)
-        gain_ok = gain is None or not np.isfinite(gain) or gain > 0
+        fix = f.get("fix") or {}
+        before, after = fix.get("before", np.nan), fix.get("after", np.nan)
+        scored = fix and before is not None and after is not None and np.isfinite(before) and np.isfinite(after)
+        margin = fix_margin(fix, eps, alpha, n_curves) if scored else np.nan
+        if scored:
+            fix["margin"] = margin
+            fix["improvement"] = float(before - after)
+            fix["beats_margin"] = bool(np.isfinite(margin) and before - after > margin)
         f["p_holm"] = float(a)
         f["significant"] = bool(r)
-        f["detected"] = bool(r and f.get("practical") and gain_ok)
+        f["detected"] = bool(usable and r and f.get("practical") and scored and fix["beats_margin"])
+        if usable and r and f.get("practical") and not scored:
+            not_evaluated.append({"effect": f["effect"], "p_holm": float(a), "effect_size": f.get("effect_size"),
+                                  "effect_size_unit": f.get("effect_size_unit", ""), "evidence": f["evidence"]})
     for f in findings:
         f.setdefault("detected", False)
         f.setdefault("p_holm", np.nan)
@@ -140,9 +236,26 @@ def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "mode
     unexplained.sort(key=lambda u: u["p_value"])
     not_identifiable = [{"effect": f["effect"], "evidence": f["evidence"]} for f in findings
                         if f.get("identifiable") is False]
+    if not usable:
+        unexplained = []  # nothing is blamed on an effect while the baseline itself does not describe the data
+    head = []
+    if rejected:
+        head = [{"effect": "baseline_inadequate", "detected": True, "tested": True, "significant": True,
+                 "practical": True, "statistic": rejected[0]["misfit_noise_units"],
+                 "statistic_name": "RMS misfit in noise SDs", "p_value": np.nan, "p_holm": np.nan, "log10_p": np.nan,
+                 "effect_size": rejected[0]["misfit_factor"], "effect_size_unit": "x (typical point off by)",
+                 "fix": None, "models": [a["model"] for a in rejected],
+                 "evidence": " ".join(f"{a['model']}: " + "; ".join(a["reasons"]) + "." for a in rejected)
+                 + (f" Diagnosed with the next adequate model, {model}." if usable else
+                    " No fitted model is adequate: no cause is named.")}]
     return {"model": model, "fit_info": {k: v for k, v in fit_info.items() if k != "fixes"}, "alpha": alpha,
-            "n_tests": len(pvals), "findings": detected + rest, "unexplained": unexplained,
-            "not_identifiable": not_identifiable, "structure_tests": generic, "serial": serial_structure(table)}
+            "decision_rule": DECISION_RULE,
+            "noise_model": {**noise, "relative_level": eps},
+            "baseline": {"model": model, "adequate": usable, "tried": list(adequacy)},
+            "n_tests": len(pvals), "findings": head + detected + rest, "unexplained": unexplained,
+            "significant_fix_not_evaluated": not_evaluated,
+            "not_identifiable": not_identifiable, "structure_tests": generic,
+            "serial": serial_structure(table) if len(table) else []}
 
 
 def top_finding(result: dict) -> str | None:
@@ -171,8 +284,6 @@ def write_figures(table: pd.DataFrame, result: dict, fig_dir: str | Path) -> lis
     import matplotlib.pyplot as plt
 
     from ..plots import save_pyplot_figure
-
-    from .catalogue import curve_levels
 
     fig_dir = Path(fig_dir)
     fig_dir.mkdir(parents=True, exist_ok=True)
@@ -245,17 +356,9 @@ def _read_runs(runs_dir: str | Path) -> list[xr.Dataset]:
     return [r for r in runs if "test" in r.attrs]
 
 
-def _choose_baseline(records: list[dict]) -> dict:
-    shear = [r for r in records if r["family"] == "qlv" and np.isfinite(r["aicc"])]
-    pool = shear or [r for r in records if np.isfinite(r["aicc"])] or records
-    return min(pool, key=lambda r: r["aicc"] if np.isfinite(r["aicc"]) else np.inf)
-
-
 def _nonseparable_fix(runs, baseline_key: str, target: str) -> dict | None:
-    """Pipkin-Rogers counterpart of a QLV baseline, scored leaving out the extreme CSR rates."""
-    from ..models.registry import available_models
-    from .baseline import extension_gain
-
+    """Pipkin-Rogers counterpart of a QLV baseline, scored leaving out the extreme CSR rates; both refitted in
+    every fold on a one-per-decade relaxation-time grid spanning the window the tests resolve."""
     if not baseline_key.startswith("qlv_"):
         return None
     ext = "pr_" + baseline_key[len("qlv_"):]
@@ -269,19 +372,53 @@ def _nonseparable_fix(runs, baseline_key: str, target: str) -> dict | None:
     folds = [(f"CSR {rate:g} 1/s", (lambda r, rate=rate: r.attrs.get("test") == "constant_shear_rate"
                                     and float(r.attrs.get("shear_rate_1_per_s", -1)) == rate))
              for rate in (rates[0], rates[-1])]
-    return extension_gain(use, baseline_key, ext, target, folds)
+    # both models on the relaxation times these tests resolve (never the registry's fixed 0.1-100 s)
+    window = resolved_window_s(use)
+    taus = window_taus(window)
+    fix = extension_gain(use, baseline_key, ext, target, folds, taus_s=taus if taus.size else None)
+    fix["parameters"]["window_t_min_s"] = window["t_min_s"]
+    fix["parameters"]["window_t_max_s"] = window["t_max_s"]
+    return fix
+
+
+def with_model_fixes(result: dict, runs: Sequence[xr.Dataset], table: pd.DataFrame, fit_info: dict,
+                     alpha: float = st.ALPHA, noise: dict | None = None, adequacy: Sequence[dict] = ()) -> dict:
+    """Score the model-level fixes (refits) of the causes that pass Holm and practical relevance, then
+    diagnose again, so that such a cause is named only when its fix beats the margin on held-out data.
+
+    Model-level fixes cost fits, so they are scored only when needed. Today: ``nonseparable_relaxation``
+    (QLV -> Pipkin-Rogers, :func:`_nonseparable_fix`). ``result`` and ``fit_info`` are those of
+    :func:`diagnose` (``fit_info["fixes"]`` receives the scored fixes); returns the new result.
+    """
+    if not result["baseline"]["adequate"]:
+        return result
+    nonsep = next((f for f in result["findings"] if f["effect"] == "nonseparable_relaxation"), None)
+    if nonsep is None or not (nonsep["significant"] and nonsep["practical"]):
+        return result
+    fix = _nonseparable_fix(runs, result["model"], fit_info.get("target", "apparent_stress"))
+    if fix is None:
+        return result
+    fit_info.setdefault("fixes", {})["nonseparable_relaxation"] = fix
+    return diagnose(runs, table, result["model"], fit_info, alpha=alpha, noise=noise, adequacy=adequacy)
+
+
+def _read_ranking(path: str | Path | None) -> pd.DataFrame | None:
+    if path is None or not Path(path).is_file() or Path(path).stat().st_size == 0:
+        return None
+    return pd.read_csv(path)
 
 
 def run_diagnosis(runs_dir: str | Path, fits_dir: str | Path, out_json: str | Path, out_nc: str | Path,
                   fig_dir: str | Path, baseline: str | None = None, extensions: bool = True,
-                  dataset: str | None = None, alpha: float = st.ALPHA) -> dict:
+                  dataset: str | None = None, alpha: float = st.ALPHA, ranking: str | Path | None = None) -> dict:
     """Diagnose a dataset from its canonical runs and fit records (module docstring); writes the outputs.
 
     ``alpha`` is the family-wise false-alarm level (Holm) of every test of the dataset (config ``diagnosis.alpha``).
+    ``ranking``: the dataset's ``ranking.csv``; it orders the candidate baselines
+    (:func:`tissuemech.diagnosis.baseline.ranked_candidates`). Each candidate is checked with
+    :func:`tissuemech.diagnosis.baseline.baseline_adequacy`; the first adequate one is diagnosed (an explicit
+    ``baseline`` is checked too and reported inadequate if it is).
     """
-    from ..models.registry import get_model
-    from .baseline import predict_runs, read_fit_record
-
     runs = _read_runs(runs_dir)
     if not runs:
         raise FileNotFoundError(f"no canonical runs (*.nc) under {runs_dir}")
@@ -293,10 +430,15 @@ def run_diagnosis(runs_dir: str | Path, fits_dir: str | Path, out_json: str | Pa
     records = [read_fit_record(p) for p in sorted(Path(fits_dir).glob("*.nc"))]
     if not records:
         raise FileNotFoundError(f"no fit records (*.nc) under {fits_dir}")
-    chosen = next((r for r in records if r["model_key"] == baseline), None) if baseline else _choose_baseline(records)
-    if chosen is None:
-        raise KeyError(f"baseline {baseline!r} not among the fits: {[r['model_key'] for r in records]}")
-    tables = []
+    if baseline:
+        order = [r for r in records if r["model_key"] == baseline]
+        if not order:
+            raise KeyError(f"baseline {baseline!r} not among the fits: {[r['model_key'] for r in records]}")
+        order_source = "requested"
+    else:
+        order, order_source = ranked_candidates(records, _read_ranking(ranking))
+    noise = estimate_noise(runs)
+    tables = {}
     for rec in records:
         try:
             model = get_model(rec["model_key"])
@@ -305,22 +447,26 @@ def run_diagnosis(runs_dir: str | Path, fits_dir: str | Path, out_json: str | Pa
         preds = predict_runs(model, rec["params"], runs, rec["target"] or "apparent_stress", rec["relaxation"])
         keep = [i for i, p in enumerate(preds) if p]
         if keep:
-            tables.append(residual_table([runs[i] for i in keep], [preds[i] for i in keep], rec["model_key"]))
-    table = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
-    base_table = table[table["model"] == chosen["model_key"]].reset_index(drop=True)
+            tables[rec["model_key"]] = residual_table([runs[i] for i in keep], [preds[i] for i in keep],
+                                                      rec["model_key"], noise=noise)
+    table = pd.concat(list(tables.values()), ignore_index=True) if tables else pd.DataFrame()
+    adequacy = []
+    chosen = order[0]
+    for rec in order:
+        adequacy.append(baseline_adequacy(rec, tables.get(rec["model_key"], pd.DataFrame())))
+        chosen = rec
+        if adequacy[-1]["adequate"]:
+            break
+    base_table = tables.get(chosen["model_key"], pd.DataFrame(columns=["model", "curve", "test", "quantity",
+                                                                        "observed", "predicted", "residual",
+                                                                        "log_ratio", "sigma"]))
+    base_table = base_table.reset_index(drop=True)
     fit_info = {"target": chosen["target"] or "apparent_stress", "relaxation": chosen.get("relaxation", "measured"),
-                "fitted_tests": chosen["tests"],
+                "fitted_tests": chosen["tests"], "baseline_order": order_source,
                 "correlations": chosen["correlations"], "fixes": {}}
-    result = diagnose(runs, base_table, chosen["model_key"], fit_info, alpha=alpha)
+    result = diagnose(runs, base_table, chosen["model_key"], fit_info, alpha=alpha, noise=noise, adequacy=adequacy)
     if extensions:
-        # model-level fixes cost fits: score them only for causes that pass Holm and practical relevance,
-        # then diagnose again so that a fix without held-out gain withdraws the name
-        nonsep = next(f for f in result["findings"] if f["effect"] == "nonseparable_relaxation")
-        if nonsep["significant"] and nonsep["practical"]:
-            fix = _nonseparable_fix(runs, chosen["model_key"], fit_info["target"])
-            if fix is not None:
-                fit_info["fixes"]["nonseparable_relaxation"] = fix
-                result = diagnose(runs, base_table, chosen["model_key"], fit_info, alpha=alpha)
+        result = with_model_fixes(result, runs, base_table, fit_info, alpha=alpha, noise=noise, adequacy=adequacy)
     name = dataset or (runs[0].attrs.get("dataset") if runs else "")
     write_diagnosis_json(result, out_json, dataset=str(name))
     if len(table):
