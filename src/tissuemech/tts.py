@@ -163,10 +163,12 @@ def sweeps_from_runs(runs: Sequence[xr.Dataset]) -> list[Sweep]:
 # ------------------------------------------------------------------------------------------------
 # pairwise shift
 # ------------------------------------------------------------------------------------------------
-def _one_way(src: Sweep, dst: Sweep, shift: float, vshift: float) -> np.ndarray:
-    """Residuals (decades) of ``src`` shifted by (shift, vshift) against the interpolant of ``dst``."""
+def _one_way(src: Sweep, dst: Sweep, shift: float, vshift: float, inside: np.ndarray | None = None) -> np.ndarray:
+    """Residuals (decades) of ``src`` shifted by (shift, vshift) against the interpolant of ``dst``
+    (points of ``src`` inside ``dst``'s range, or the fixed point set ``inside``)."""
     x = src.log_w + shift
-    inside = (x >= dst.log_w[0]) & (x <= dst.log_w[-1])
+    if inside is None:
+        inside = (x >= dst.log_w[0]) & (x <= dst.log_w[-1])
     if inside.sum() == 0:
         return np.empty(0)
     y = src.log_g[inside] + vshift
@@ -174,14 +176,21 @@ def _one_way(src: Sweep, dst: Sweep, shift: float, vshift: float) -> np.ndarray:
     return (y - ref).ravel()
 
 
-def _pair_residuals(cold: Sweep, warm: Sweep, shift: float, vshift: float = 0.0) -> np.ndarray:
+def _overlap_masks(cold: Sweep, warm: Sweep, shift: float) -> tuple[np.ndarray, np.ndarray]:
+    xa = cold.log_w + shift
+    xb = warm.log_w - shift
+    return ((xa >= warm.log_w[0]) & (xa <= warm.log_w[-1]), (xb >= cold.log_w[0]) & (xb <= cold.log_w[-1]))
+
+
+def _pair_residuals(cold: Sweep, warm: Sweep, shift: float, vshift: float = 0.0, masks=None) -> np.ndarray:
     """Symmetric residuals of the cold sweep shifted by ``shift`` (decades of omega) and ``vshift``
-    (decades of modulus) onto the warm one; empty when either side overlaps in < MIN_OVERLAP points."""
-    a = _one_way(cold, warm, shift, vshift)
-    b = _one_way(warm, cold, -shift, -vshift)
-    if a.size < 2 * MIN_OVERLAP or b.size < 2 * MIN_OVERLAP:
+    (decades of modulus) onto the warm one; empty when either side overlaps in < MIN_OVERLAP points.
+    ``masks``: fixed overlapping point sets (for derivatives and the joint fit, so that the residual
+    vector keeps its length)."""
+    ma, mb = _overlap_masks(cold, warm, shift) if masks is None else masks
+    if ma.sum() < MIN_OVERLAP or mb.sum() < MIN_OVERLAP:
         return np.empty(0)
-    return np.concatenate([a, b])
+    return np.concatenate([_one_way(cold, warm, shift, vshift, ma), _one_way(warm, cold, -shift, -vshift, mb)])
 
 
 def _objective(cold, warm, shift, vshift=0.0) -> float:
@@ -198,9 +207,6 @@ def _stderr(fun, x: np.ndarray, h: float = 1e-4) -> tuple[np.ndarray, float]:
         dx = np.zeros(p)
         dx[j] = h
         rp, rm = fun(x + dx), fun(x - dx)
-        if rp.size != n or rm.size != n:  # overlap changed under the step: one-sided difference
-            rp = rp if rp.size == n else r0
-            rm = rm if rm.size == n else r0
         J[:, j] = (rp - rm) / (2 * h)
     dof = max(n - p, 1)
     s2 = float(r0 @ r0) / dof
@@ -234,20 +240,23 @@ def pair_shift(cold: Sweep, warm: Sweep, vertical: bool = False) -> dict:
     s0 = float(grid[int(np.argmin(vals))])
     best = minimize_scalar(lambda s: _objective(cold, warm, s), bounds=(s0 - step, s0 + step), method="bounded")
     s = float(best.x) if np.isfinite(best.fun) and best.fun <= vals.min() else s0
+    masks = _overlap_masks(cold, warm, s)
     if not vertical:
-        se, rms = _stderr(lambda x: _pair_residuals(cold, warm, float(x[0])), np.array([s]))
+        se, rms = _stderr(lambda x: _pair_residuals(cold, warm, float(x[0]), masks=masks), np.array([s]))
         return {"log_a": s, "log_a_stderr": float(se[0]), "log_b": 0.0, "log_b_stderr": 0.0, "rms": rms,
-                "n": int(_pair_residuals(cold, warm, s).size)}
-    n0 = _pair_residuals(cold, warm, s).size
-
-    def fun(x):
-        r = _pair_residuals(cold, warm, float(x[0]), float(x[1]))
-        return r if r.size == n0 else np.full(n0, 10.0)   # leaving the overlap set is penalised
-
-    fit = least_squares(fun, np.array([s, 0.0]), x_scale=np.array([step * 10, 0.1]))
-    se, rms = _stderr(lambda x: _pair_residuals(cold, warm, float(x[0]), float(x[1])), fit.x)
-    return {"log_a": float(fit.x[0]), "log_a_stderr": float(se[0]), "log_b": float(fit.x[1]),
-            "log_b_stderr": float(se[1]), "rms": rms, "n": int(n0)}
+                "n": int(_pair_residuals(cold, warm, s, masks=masks).size)}
+    # joint (log a, log b): alternate the overlap set and the least-squares fit on it until it is stable
+    x = np.array([s, 0.0])
+    for _ in range(5):
+        fit = least_squares(lambda v: _pair_residuals(cold, warm, float(v[0]), float(v[1]), masks), x)
+        x = fit.x
+        new_masks = _overlap_masks(cold, warm, float(x[0]))
+        if all(np.array_equal(a, b) for a, b in zip(new_masks, masks)):
+            break
+        masks = new_masks
+    se, rms = _stderr(lambda v: _pair_residuals(cold, warm, float(v[0]), float(v[1]), masks), x)
+    return {"log_a": float(x[0]), "log_a_stderr": float(se[0]), "log_b": float(x[1]),
+            "log_b_stderr": float(se[1]), "rms": rms, "n": int(_pair_residuals(cold, warm, *x, masks).size)}
 
 
 def shift_factors(sweeps: Sequence[Sweep], t_ref_c: float | None = None, vertical: bool = False) -> TTSResult:
