@@ -15,7 +15,7 @@ relative to the warmer one is the value that minimises the mean squared differen
 log10 G'' between the shifted points of one sweep and the piecewise-linear log-log interpolant of the other,
 on their overlapping log10-omega range, **symmetrically** (points of A on B's interpolant and points of B
 on A's interpolant; both must overlap in at least :data:`MIN_OVERLAP` points). The minimum is found by a
-grid over every shift that leaves the overlap (one grid point per tenth of the finer point spacing) and a
+grid over every shift that leaves the overlap (four grid points per finer point spacing) and a
 bounded scalar refinement (:func:`scipy.optimize.minimize_scalar`). Pairwise shifts are chained (summed)
 from the reference temperature outwards. With ``vertical=True`` the pair discrepancy is minimised over
 (log aT, log bT) jointly (same criterion, :func:`scipy.optimize.least_squares`).
@@ -229,7 +229,7 @@ def pair_shift(cold: Sweep, warm: Sweep, vertical: bool = False) -> dict:
     """
     dw = min(np.min(np.diff(cold.log_w)) if cold.omega.size > 1 else 0.1,
              np.min(np.diff(warm.log_w)) if warm.omega.size > 1 else 0.1)
-    step = max(dw / 10.0, 1e-3)
+    step = max(dw / 4.0, 1e-3)
     lo = warm.log_w[0] - cold.log_w[-1]
     hi = warm.log_w[-1] - cold.log_w[0]
     grid = np.arange(lo, hi + step, step)
@@ -259,7 +259,8 @@ def pair_shift(cold: Sweep, warm: Sweep, vertical: bool = False) -> dict:
             "log_b_stderr": float(se[1]), "rms": rms, "n": int(_pair_residuals(cold, warm, *x, masks).size)}
 
 
-def shift_factors(sweeps: Sequence[Sweep], t_ref_c: float | None = None, vertical: bool = False) -> TTSResult:
+def shift_factors(sweeps: Sequence[Sweep], t_ref_c: float | None = None, vertical: bool = False,
+                  cache: dict | None = None) -> TTSResult:
     """Automatic shift factors of sweeps at several temperatures (module docstring).
 
     Parameters
@@ -269,6 +270,8 @@ def shift_factors(sweeps: Sequence[Sweep], t_ref_c: float | None = None, vertica
     t_ref_c : reference temperature [degC]; must be one of the sweep temperatures. None: the measured
         temperature closest to the median of the measured temperatures.
     vertical : also fit vertical shifts log bT
+    cache : optional dict reused across calls (e.g. leave-one-temperature-out): pairwise shifts are stored
+        under (cold label, cold T, warm label, warm T, vertical) and not recomputed
 
     Returns
     -------
@@ -288,7 +291,16 @@ def shift_factors(sweeps: Sequence[Sweep], t_ref_c: float | None = None, vertica
                              f"{temps.round(1).tolist()}")
     # pair k: sweep k (colder) onto sweep k+1 (warmer); log a of the colder relative to the warmer
     # is *minus* the omega shift that moves it: omega_r = a_T omega -> log_w + log_aT(cold) - log_aT(warm)
-    pairs = [pair_shift(sw[k], sw[k + 1], vertical) for k in range(len(sw) - 1)]
+    pairs = []
+    for k in range(len(sw) - 1):
+        key = (sw[k].label, sw[k].temperature_c, sw[k + 1].label, sw[k + 1].temperature_c, vertical)
+        if cache is None or key not in cache:
+            p = pair_shift(sw[k], sw[k + 1], vertical)
+            if cache is None:
+                pairs.append(p)
+                continue
+            cache[key] = p
+        pairs.append(cache[key])
     n = len(sw)
     la, la_var = np.full(n, np.nan), np.full(n, np.nan)
     lb, lb_var = np.full(n, np.nan), np.full(n, np.nan)

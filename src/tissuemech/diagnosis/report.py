@@ -46,7 +46,8 @@ import xarray as xr
 
 from ..canonical import read_netcdf, write_netcdf, write_text
 from . import stats as st
-from .catalogue import CATALOGUE_IDS, DETECTORS, DiagnosisContext, explains
+from .catalogue import DiagnosisContext, explains
+from .causes import CAUSE_IDS, DETECTORS
 from .evidence import residual_table, residual_table_to_xarray
 from .generic import serial_structure, structure_tests
 from .homogeneous import is_homogeneous, run_homogeneous_diagnosis
@@ -72,7 +73,7 @@ def _clean(obj):
 def run_detectors(ctx: DiagnosisContext) -> list[dict]:
     """Every catalogue detector; a detector that fails is reported as untested with the error (never silent)."""
     out = []
-    for eff in CATALOGUE_IDS:
+    for eff in CAUSE_IDS:
         try:
             out.append(DETECTORS[eff](ctx))
         except Exception as exc:  # noqa: BLE001 -- one broken detector must not hide the others
@@ -127,7 +128,7 @@ def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "mode
 
     for g in generic:
         if g["significant"] and g["practical"] and not explained(g):
-            candidates = [e for e in CATALOGUE_IDS if explains(e, g["test"], g["covariate"], g["level"])]
+            candidates = [e for e in CAUSE_IDS if explains(e, g["test"], g["covariate"], g["level"])]
             unexplained.append({"effect": "unexplained_structure", **{k: g[k] for k in (
                 "covariate", "test", "quantity", "level", "statistic", "p_value", "p_holm", "effect_size",
                 "n_curves")}, "candidates": candidates,
