@@ -46,6 +46,7 @@ import xarray as xr
 from scipy.optimize import least_squares
 
 from . import stats as st
+from ..tts import run_temperature_c
 from .evidence import (booij_thoone, fit_prony_relaxation, log_spaced_taus, nominal_strain,
                        prony_complex_modulus, run_id)
 
@@ -420,12 +421,43 @@ def _scale_correction_cv(ctx: DiagnosisContext, levels: pd.DataFrame, column: st
     return _rms(np.concatenate(before)), _rms(np.concatenate(after)), held
 
 
+#: elapsed time and run temperature explaining this share of each other's variance across curves cannot be
+#: separated (R^2 >= 0.9: VIF >= 10; :data:`tissuemech.diagnosis.generic.CONFOUNDED_R2`)
+TIME_TEMPERATURE_R2 = 0.9
+
+
+def _temperature_confound(ctx: DiagnosisContext, levels: pd.DataFrame) -> str:
+    """Why a drift cannot be tested when the run temperature follows the clock ('' when it can)."""
+    temps = {}
+    for r in ctx.runs:
+        t = run_temperature_c(r)
+        if np.isfinite(t):
+            temps[run_id(r)] = t
+    lv = levels.assign(temperature_c=levels["curve"].map(temps))
+    x = lv["elapsed_h"] if lv["elapsed_h"].notna().all() and lv["elapsed_h"].nunique() > 2 else lv["test_order"]
+    ok = lv["temperature_c"].notna() & x.notna()
+    if ok.sum() < 3 or lv.loc[ok, "temperature_c"].std() == 0 or x[ok].std() == 0:
+        return ""
+    r2 = float(np.corrcoef(lv.loc[ok, "temperature_c"], x[ok])[0, 1] ** 2)
+    if r2 < TIME_TEMPERATURE_R2:
+        return ""
+    return (f"not testable here: the run temperature follows the elapsed time (R^2 = {r2:.3f} across "
+            f"{int(ok.sum())} curves, {lv.loc[ok, 'temperature_c'].min():.3g}..{lv.loc[ok, 'temperature_c'].max():.3g} "
+            f"degC), so a drift at constant conditions cannot be separated from the temperature change; the "
+            f"temperature, which has a physical model (time-temperature superposition scored on a held-out "
+            f"temperature), is tested as temperature_dependence. A reference temperature repeated at the start "
+            f"and the end of the session would separate them.")
+
+
 def detect_elapsed_time_drift(ctx: DiagnosisContext) -> dict:
     """Per-curve stiffness scale regressed on elapsed time (specimen fixed effects, first-load control)."""
     eff = "elapsed_time_drift"
     levels = curve_levels(ctx.table)
     if len(levels) < 6:
         return untested_finding(eff, "fewer than 6 curves: the per-curve scale cannot be regressed on elapsed time")
+    confound = _temperature_confound(ctx, levels)
+    if confound:
+        return untested_finding(eff, confound) | {"confounded_with": ["temperature"]}
     t, design = _level_tests(levels, "elapsed_h")
     if t is None:
         return untested_finding(eff, "elapsed time (total_time/started_at) and test order do not vary across curves "

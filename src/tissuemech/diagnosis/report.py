@@ -32,6 +32,8 @@ Output JSON (``diagnosis.json``)
 ``quantity``, ``statistic``, ``p_value``, ``p_holm``, ``effect_size`` (log-residual change over the
 covariate's range), ``candidates`` (catalogue causes whose signature involves that covariate).
 ``not_identifiable``: statements such as the I2 dependence from torque-only shear data.
+``confounded``: sets of across-curve covariates this design cannot separate, tested jointly, with the design
+that would separate them (:func:`tissuemech.diagnosis.generic.confounded_covariates`).
 """
 from __future__ import annotations
 
@@ -49,7 +51,7 @@ from . import stats as st
 from .catalogue import DiagnosisContext, explains
 from .causes import CAUSE_IDS, DETECTORS
 from .evidence import residual_table, residual_table_to_xarray
-from .generic import serial_structure, structure_tests
+from .generic import confounded_covariates, serial_structure, structure_tests
 from .homogeneous import is_homogeneous, run_homogeneous_diagnosis
 
 
@@ -117,9 +119,11 @@ def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "mode
     rest.sort(key=lambda f: f["log10_p"] if np.isfinite(f.get("log10_p", np.nan)) else 1.0)
     unexplained = []
     fitted = set(fit_info.get("fitted_tests") or ())
+    confounded = confounded_covariates(table, runs)
+    sets = [c["covariates"] for c in confounded]
 
     def explained(g):
-        if any(explains(f["effect"], g["test"], g["covariate"], g["level"]) for f in detected):
+        if any(explains(f["effect"], g["test"], g["covariate"], g["level"], sets) for f in detected):
             return True
         # a test the baseline did not fit is a cross-test prediction: a named cause that distorts the
         # fitted tests distorts the fitted parameters and therefore that prediction too
@@ -143,7 +147,7 @@ def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "mode
                         if f.get("identifiable") is False]
     return {"model": model, "fit_info": {k: v for k, v in fit_info.items() if k != "fixes"}, "alpha": alpha,
             "n_tests": len(pvals), "findings": detected + rest, "unexplained": unexplained,
-            "not_identifiable": not_identifiable, "structure_tests": generic, "serial": serial_structure(table)}
+            "not_identifiable": not_identifiable, "confounded": confounded, "structure_tests": generic, "serial": serial_structure(table)}
 
 
 def top_finding(result: dict) -> str | None:

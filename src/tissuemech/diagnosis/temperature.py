@@ -180,7 +180,7 @@ def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
                    + f". Leaving each temperature out, the TTS prediction of its sweep errs by {cv['after']:.3g} "
                      f"decades against {cv['before']:.3g} for the temperature-blind prediction ({cv['n_folds']} "
                      f"folds, {cv['n_points']} values).")
-    evidence = (f"Curve levels of {ctx.model} change by {100 * size:+.1f} % (ln) over "
+    evidence = (f"Curve levels ln(observed/predicted) of {ctx.model} change by {size:+.3g} over "
                 f"{lo:.3g}..{hi:.3g} degC across {len(levels)} curves at {len(distinct)} temperatures "
                 f"({', '.join(sorted(levels['test'].unique()))}; {design}; t = {t['statistic']:.2f}).{fix_txt}")
     return make_finding(EFFECT, t, "t", size, "ln(observed/predicted) over the temperature range",
