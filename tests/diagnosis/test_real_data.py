@@ -71,6 +71,7 @@ def lims(shared_real, tmp_path_factory):
     return runs, *_diagnose(runs, "prony4", ("frequency_sweep",))
 
 
+@pytest.mark.slow
 def test_lims_cooling_series_is_attributed_to_temperature(lims):
     runs, fit, table, result = lims
     temp = _finding(result, "temperature_dependence")
@@ -88,6 +89,7 @@ def test_lims_cooling_series_is_attributed_to_temperature(lims):
     assert temp["held_out"]["n_folds"] == 20
 
 
+@pytest.mark.slow
 def test_lims_cooling_series_is_not_called_drift(lims):
     runs, fit, table, result = lims
     drift = _finding(result, "elapsed_time_drift")
@@ -127,7 +129,7 @@ def test_fungi_sweeps_run_without_a_detector_failure(fungi):
 def test_fungi_inertia_dominated_points_are_named(fungi, shared_real):
     runs, fit, table, result = fungi
     f = _finding(result, "inertia_dominated_points")
-    assert f["tested"]
+    assert f["tested"] and f["detected"], f["evidence"]
     # hand-read oracle: the export's raw phase exceeds 90 deg at every angular frequency >= 6.3 rad/s
     fs = next(b for b in read_export(shared_real / "trios/hr20_fungi_frequency_sweep.xls")
               if b.name == "Frequency sweep - 2").data
@@ -152,6 +154,7 @@ def cnf(shared_real, tmp_path_factory):
     return runs, *_diagnose(runs, "prony2", ("stress_relaxation",))
 
 
+@pytest.mark.slow
 def test_cnf_replicates_raise_no_false_cause(cnf):
     runs, fit, table, result = cnf
     assert len(runs) == 10
@@ -159,3 +162,23 @@ def test_cnf_replicates_raise_no_false_cause(cnf):
     assert detected == [] or detected == ["baseline_inadequate"], [
         (f["effect"], f["evidence"]) for f in result["findings"] if f["detected"]]
     assert not any("detector failed" in (f.get("evidence") or "") for f in result["findings"])
+
+
+def _has_baseline_inadequate() -> bool:
+    from tissuemech.diagnosis import causes
+
+    return "baseline_inadequate" in causes.CAUSE_IDS or any(
+        "baseline_inadequate" in p.read_text() for p in Path(causes.__file__).parent.glob("*.py"))
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(not _has_baseline_inadequate(), strict=False, reason="needs baseline_inadequate from diag-core")
+def test_cnf_as_one_sample_reports_the_inadequate_baseline(shared_real, tmp_path):
+    """The issue's layout: the ten relaxations as tests of one sample; the two-mode Prony fit collapses
+    (relaxation times at the bound, no covariance), which must be the first finding, not "no named cause"."""
+    rows = [{"file": f"rheocompass_cnf_hydrogel/{f}", "specimen": "HC1", "sample": "a",
+             "test": "stress_relaxation", "order": k + 1} for k, f in enumerate(CNF_FILES)]
+    runs = _lab_dataset(tmp_path, "cnf_one", rows, shared_real, "CNF hydrogel")
+    fit, table, result = _diagnose(runs, "prony2", ("stress_relaxation",))
+    named = [f["effect"] for f in result["findings"] if f["detected"]]
+    assert "baseline_inadequate" in named
