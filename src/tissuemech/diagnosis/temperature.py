@@ -10,8 +10,9 @@ its ``temperature_c`` attribute (sample sheet / export); never a default
 The per-curve level of the baseline's residual (:func:`tissuemech.diagnosis.catalogue.curve_levels`: median
 ln(observed/predicted) on the lower half of each curve) is regressed on the run temperature
 (:func:`tissuemech.diagnosis.catalogue.level_regression`, sample/condition fixed effects where the design
-allows, cluster-robust by sample; and the two-stage between-sample test when >= 5 samples); the stronger
-with a Bonferroni factor 2. ``effect_size`` is the change of the curve level (ln) over the 5-95 % range of
+allows, cluster-robust by sample; with >= 5 distinct temperatures the p-value is the joint F-test of T and
+T^2, because shift factors are curved in T; and the two-stage between-sample test when >= 5 samples); the
+stronger with a Bonferroni factor 2. ``effect_size`` is the change of the curve level (ln) over the 5-95 % range of
 temperatures, practical when >= :data:`tissuemech.diagnosis.generic.MIN_EFFECT`.
 
 Fix and held-out gain (leave-one-temperature-out)
@@ -124,6 +125,27 @@ def leave_one_temperature_out(sweeps: Sequence[tts.Sweep]) -> dict:
             "n_folds": len(before), "n_points": int(b.size), "shift_functions": used, "per_temperature": per_t}
 
 
+def _curved_test(levels: pd.DataFrame) -> dict | None:
+    """Joint Wald F-test of temperature and (centred) temperature^2 in the curve-level regression (same
+    fixed effects and robust covariance as :func:`level_regression`); None with < 5 distinct temperatures."""
+    if levels["temperature_c"].nunique() < 5:
+        return None
+    t = levels["temperature_c"]
+    lv = levels.assign(temperature_sq=((t - t.mean()) / max(float(t.std()), 1e-12)) ** 2)
+    res = level_regression(lv, "log_scale", ["temperature_c", "temperature_sq"])
+    if res is None:
+        return None
+    names = list(res.params.index)
+    R = np.zeros((2, len(names)))
+    R[0, names.index("temperature_c")] = 1.0
+    R[1, names.index("temperature_sq")] = 1.0
+    w = res.f_test(R)
+    f = float(np.squeeze(w.fvalue))
+    df2 = float(w.df_denom)
+    return {"statistic": f, "df1": 2.0, "df2": df2, "log10_p": st.log10_p_from_f(f, 2.0, df2),
+            "p_value": 10 ** st.log10_p_from_f(f, 2.0, df2)}
+
+
 def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
     """Curve levels of the baseline regressed on run temperature; fix = TTS scored on a held-out
     temperature (module docstring)."""
@@ -141,8 +163,15 @@ def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
     found = []
     res = level_regression(levels, "log_scale", ["temperature_c"])
     if res is not None:
-        found.append((st.coefficient_test(res, "temperature_c"),
-                      f"curve levels, fixed effects {res.fixed_effects or 'none'}"))
+        lin = st.coefficient_test(res, "temperature_c")
+        design = f"curve levels, fixed effects {res.fixed_effects or 'none'}"
+        joint = _curved_test(levels)
+        if joint is not None:
+            # the slope gives the size; the p-value is the joint test of (T, T^2): shift factors are curved
+            # in T (WLF), so a straight line understates a temperature dependence
+            lin = dict(lin, statistic=joint["statistic"], p_value=joint["p_value"], log10_p=joint["log10_p"])
+            design += f", joint F of T and T^2 (df {joint['df1']:.0f}, {joint['df2']:.0f})"
+        found.append((lin, design))
     b = between_sample_test(levels, "log_scale", "temperature_c")
     if b is not None:
         found.append((b, f"between samples ({b['design']})"))
@@ -182,6 +211,7 @@ def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
                      f"folds, {cv['n_points']} values).")
     evidence = (f"Curve levels ln(observed/predicted) of {ctx.model} change by {size:+.3g} over "
                 f"{lo:.3g}..{hi:.3g} degC across {len(levels)} curves at {len(distinct)} temperatures "
-                f"({', '.join(sorted(levels['test'].unique()))}; {design}; t = {t['statistic']:.2f}).{fix_txt}")
-    return make_finding(EFFECT, t, "t", size, "ln(observed/predicted) over the temperature range",
+                f"({', '.join(sorted(levels['test'].unique()))}; {design}; "
+                f"{'F' if 'joint F' in design else 't'} = {t['statistic']:.2f}, p = {t['p_value']:.2g}).{fix_txt}")
+    return make_finding(EFFECT, t, "F" if "joint F" in design else "t", size, "ln(observed/predicted) over the temperature range",
                    abs(size) >= MIN_EFFECT, evidence, fix, **extra)
