@@ -133,3 +133,31 @@ def test_instrument_inertia_not_testable_without_radius():
     table = residual_table(runs, [{"storage_modulus": g1, "loss_modulus": g2}] * 4, "m")
     f = DETECTORS["instrument_inertia"](DiagnosisContext(runs=runs, table=table))
     assert not f["tested"] and "no plate radius" in f["evidence"]
+
+
+def ringing_table(amplitude, n_curves=5, seed=1):
+    """Relaxation residual rows: 0.01 s sampling to 0.5 s then log-spaced to 100 s; a coherent damped ring
+    (period 0.1 s, decay 0.1 s, amplitude x the 100 Pa stress level) plus 1 % white noise."""
+    rng = np.random.default_rng(seed)
+    t = np.r_[np.arange(0.01, 0.5, 0.01), np.geomspace(0.5, 100.0, 40)]
+    rows = []
+    for c in range(n_curves):
+        level = 100.0 * (1 + 0.2 * c)
+        ring = amplitude * level * np.exp(-(t - t[0]) / 0.1) * np.sin(2 * np.pi * t / 0.1 + 0.3)
+        rows.append(pd.DataFrame({"curve": f"sr{c}", "test": "stress_relaxation", "quantity": "shear_stress",
+                                  "time_in_test": t, "predicted": np.full(t.size, level),
+                                  "residual": ring + 0.01 * level * rng.standard_normal(t.size)}))
+    return pd.concat(rows, ignore_index=True)
+
+
+def test_inertial_ringing_found_with_its_period_and_a_held_out_gain():
+    f = DETECTORS["inertial_ringing"](DiagnosisContext(runs=[], table=ringing_table(0.5)))
+    assert f["tested"] and f["p_value"] < 1e-3 and f["practical"]
+    assert 0.08 <= f["period_s"] <= 0.125
+    assert f["fix"]["gain"] > 0.5
+
+
+def test_inertial_ringing_not_raised_by_noise():
+    ps = [DETECTORS["inertial_ringing"](DiagnosisContext(runs=[], table=ringing_table(0.0, seed=s)))["p_value"]
+          for s in range(5)]
+    assert min(ps) > 0.01

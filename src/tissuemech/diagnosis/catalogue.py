@@ -76,6 +76,7 @@ DISTORTS: dict[str, tuple[str, ...]] = {
     "temperature_dependence": ("constant_shear_rate", "stress_relaxation", "creep_recovery", "frequency_sweep",
                                "amplitude_sweep"),
     "inertia_dominated_points": ("frequency_sweep", "amplitude_sweep"),
+    "inertial_ringing": ("stress_relaxation",),
 }
 
 #: covariates whose structure each cause explains in any test (curve-level signatures)
@@ -93,6 +94,7 @@ EXPLAINS: dict[str, tuple[str, ...]] = {
     "unidentified_i2_dependence": ("channel_normal_force",),
     "temperature_dependence": ("channel_temperature", "covariate_temperature_c", "temperature_c"),
     "inertia_dominated_points": ("frequency_sq", "channel_raw_phase"),
+    "inertial_ringing": (),
 }
 
 
