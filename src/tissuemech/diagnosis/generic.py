@@ -30,6 +30,8 @@ structure of the others (:func:`tissuemech.diagnosis.catalogue.explains`).
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pandas as pd
 import statsmodels.api as sm
@@ -291,7 +293,10 @@ def confounded_covariates(table: pd.DataFrame, runs=(), r2_limit: float = CONFOU
         unique = {}
         if numeric and len(f) > len(numeric) + 2:
             X = sm.add_constant(f[numeric].astype(float), has_constant="add")
-            fit = sm.OLS(f["y"].to_numpy(float), X).fit()
+            with warnings.catch_warnings():
+                # the members are collinear by construction: the joint test uses the design's rank (pinv)
+                warnings.simplefilter("ignore")
+                fit = sm.OLS(f["y"].to_numpy(float), X).fit()
             if np.isfinite(fit.fvalue):
                 joint = {"statistic": float(fit.fvalue), "p_value": float(fit.f_pvalue)}
             unique = {m: float(fit.pvalues[m]) for m in numeric if m in fit.pvalues}
