@@ -161,3 +161,16 @@ def test_inertial_ringing_not_raised_by_noise():
     ps = [DETECTORS["inertial_ringing"](DiagnosisContext(runs=[], table=ringing_table(0.0, seed=s)))["p_value"]
           for s in range(5)]
     assert min(ps) > 0.01
+
+
+def test_shuffled_temperature_order_separates_temperature_from_time():
+    temps = [50.0, 20.0, 80.0, 30.0, 70.0, 10.0, 90.0, 40.0, 60.0]   # not following the clock
+    runs, table = temperature_series(temps)
+    ctx = DiagnosisContext(runs=runs, table=table, model="blind")
+    f = detect_temperature_dependence(ctx)
+    assert f["tested"] and f["p_value"] < 1e-3 and "elapsed-time control" in f["evidence"]
+    assert f["fix"]["gain"] > 0.5
+    drift = DETECTORS["elapsed_time_drift"](ctx)
+    assert "follows the elapsed time" not in drift["evidence"]
+    assert not any({"channel_temperature", "elapsed_time"} <= set(c["covariates"])
+                   for c in confounded_covariates(table, runs))

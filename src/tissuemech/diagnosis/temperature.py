@@ -10,7 +10,8 @@ its ``temperature_c`` attribute (sample sheet / export); never a default
 The per-curve level of the baseline's residual (:func:`tissuemech.diagnosis.catalogue.curve_levels`: median
 ln(observed/predicted) on the lower half of each curve) is regressed on the run temperature
 (:func:`tissuemech.diagnosis.catalogue.level_regression`, sample/condition fixed effects where the design
-allows, cluster-robust by sample; with >= 5 distinct temperatures the p-value is the joint F-test of T and
+allows, cluster-robust by sample; elapsed time as a control when it varies and is not collinear with
+temperature; with >= 5 distinct temperatures the p-value is the joint F-test of T and
 T^2, because shift factors are curved in T; and the two-stage between-sample test when >= 5 samples); the
 stronger with a Bonferroni factor 2. ``effect_size`` is the change of the curve level (ln) over the 5-95 % range of
 temperatures, practical when >= :data:`tissuemech.diagnosis.generic.MIN_EFFECT`.
@@ -43,7 +44,7 @@ from . import stats as st
 from .catalogue import (DiagnosisContext, between_sample_test, curve_levels, make_finding, fix_record,
                         level_regression, untested_finding)
 from .evidence import run_id
-from .generic import MIN_EFFECT
+from .generic import CONFOUNDED_R2, MIN_EFFECT
 
 EFFECT = "temperature_dependence"
 #: fewest distinct run temperatures for a test (a slope and a held-out temperature need three)
@@ -125,14 +126,25 @@ def leave_one_temperature_out(sweeps: Sequence[tts.Sweep]) -> dict:
             "n_folds": len(before), "n_points": int(b.size), "shift_functions": used, "per_temperature": per_t}
 
 
-def _curved_test(levels: pd.DataFrame) -> dict | None:
+def _time_control(levels: pd.DataFrame) -> list[str]:
+    """``["elapsed_h"]`` when elapsed time varies across curves and is not collinear with temperature (R^2 <
+    :data:`tissuemech.diagnosis.generic.CONFOUNDED_R2`): temperature is then tested given elapsed time (the two
+    compete for the same curve-level structure); [] otherwise (collinear sets are reported as confounded)."""
+    e = levels["elapsed_h"]
+    if not (e.notna().all() and e.nunique() > 2 and levels["temperature_c"].std() > 0 and e.std() > 0):
+        return []
+    r2 = float(np.corrcoef(levels["temperature_c"], e)[0, 1] ** 2)
+    return ["elapsed_h"] if r2 < CONFOUNDED_R2 else []
+
+
+def _curved_test(levels: pd.DataFrame, controls: Sequence[str] = ()) -> dict | None:
     """Joint Wald F-test of temperature and (centred) temperature^2 in the curve-level regression (same
     fixed effects and robust covariance as :func:`level_regression`); None with < 5 distinct temperatures."""
     if levels["temperature_c"].nunique() < 5:
         return None
     t = levels["temperature_c"]
     lv = levels.assign(temperature_sq=((t - t.mean()) / max(float(t.std()), 1e-12)) ** 2)
-    res = level_regression(lv, "log_scale", ["temperature_c", "temperature_sq"])
+    res = level_regression(lv, "log_scale", ["temperature_c", "temperature_sq"] + list(controls))
     if res is None:
         return None
     names = list(res.params.index)
@@ -161,11 +173,13 @@ def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
     if len(levels) < 4 or levels["temperature_c"].nunique() < MIN_TEMPERATURES:
         return untested_finding(EFFECT, "not testable here: fewer than 4 residual curves with a temperature")
     found = []
-    res = level_regression(levels, "log_scale", ["temperature_c"])
+    controls = _time_control(levels)
+    res = level_regression(levels, "log_scale", ["temperature_c"] + controls)
     if res is not None:
         lin = st.coefficient_test(res, "temperature_c")
-        design = f"curve levels, fixed effects {res.fixed_effects or 'none'}"
-        joint = _curved_test(levels)
+        design = (f"curve levels, fixed effects {res.fixed_effects or 'none'}"
+                  + (", elapsed-time control" if controls else ""))
+        joint = _curved_test(levels, controls)
         if joint is not None:
             # the slope gives the size; the p-value is the joint test of (T, T^2): shift factors are curved
             # in T (WLF), so a straight line understates a temperature dependence
