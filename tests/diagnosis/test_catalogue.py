@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tissuemech.diagnosis import CATALOGUE_IDS
+from tissuemech.diagnosis import CATALOGUE_IDS, CAUSE_IDS
 from tissuemech.diagnosis.report import top_finding
 
 SMALL = {"n_specimens": 4, "n_samples": 2, "n_points": 16}
@@ -24,7 +24,7 @@ def test_null_design_raises_no_finding(diagnosed):
     _, _, res = diagnosed(None, **SMALL)
     assert [f["effect"] for f in res["findings"] if f["detected"]] == []
     assert res["unexplained"] == []
-    assert {f["effect"] for f in res["findings"]} == set(CATALOGUE_IDS)
+    assert {f["effect"] for f in res["findings"]} == set(CAUSE_IDS)
     i2 = finding(res, "unidentified_i2_dependence")
     assert i2["identifiable"] is False and "not identifiable" in i2["evidence"].lower()
 

@@ -46,6 +46,7 @@ import xarray as xr
 from scipy.optimize import least_squares
 
 from . import stats as st
+from ..tts import run_temperature_c
 from .evidence import (booij_thoone, estimate_noise, fit_prony_relaxation, log_spaced_taus, noise_sd,
                        nominal_strain, prony_complex_modulus, run_id)
 
@@ -57,7 +58,7 @@ CATALOGUE_IDS: tuple[str, ...] = (
 
 #: test kinds whose residuals each cause distorts: a generic structure in these tests is explained once the
 #: cause is named (within a curve, strain, time and predicted level are collinear, so a cause that bends a
-#: curve shows up on all of them)
+#: curve shows up on all of them). "*": the cause scales whole curves and bends none.
 DISTORTS: dict[str, tuple[str, ...]] = {
     "nonseparable_relaxation": ("constant_shear_rate", "stress_relaxation", "creep_recovery", "frequency_sweep",
                                 "amplitude_sweep"),
@@ -71,6 +72,11 @@ DISTORTS: dict[str, tuple[str, ...]] = {
     "amplitude_softening": ("amplitude_sweep",),
     "finite_rise_time": ("stress_relaxation", "frequency_sweep"),
     "unidentified_i2_dependence": (),
+    # a temperature shift moves a curve along log time/frequency: it bends every rate-dependent curve
+    "temperature_dependence": ("constant_shear_rate", "stress_relaxation", "creep_recovery", "frequency_sweep",
+                               "amplitude_sweep"),
+    "inertia_dominated_points": ("frequency_sweep", "amplitude_sweep"),
+    "inertial_ringing": ("stress_relaxation",),
 }
 
 #: covariates whose structure each cause explains in any test (curve-level signatures)
@@ -86,22 +92,30 @@ EXPLAINS: dict[str, tuple[str, ...]] = {
     "amplitude_softening": (),
     "finite_rise_time": ("log_time",),
     "unidentified_i2_dependence": ("channel_normal_force",),
+    "temperature_dependence": ("channel_temperature", "covariate_temperature_c", "temperature_c"),
+    "inertia_dominated_points": ("frequency_sq", "channel_raw_phase"),
+    "inertial_ringing": (),
 }
 
 
-def explains(effect: str, test: str, covariate: str, level: str) -> bool:
+def explains(effect: str, test: str, covariate: str, level: str,
+             confounded: Sequence[Sequence[str]] = ()) -> bool:
     """Whether a named ``effect`` accounts for generic structure in ``covariate`` of ``test`` residuals.
 
-    Curve-level (``across curves``) structure is explained only by causes that act on whole curves
-    (drift, preconditioning, outlier) or through the covariate itself; within-curve structure by the
+    Curve-level (``across curves``) structure is explained only through the covariates of the cause's own
+    signature (:data:`EXPLAINS`) -- a detected drift, preconditioning or outlier does *not* explain every
+    across-curve covariate (a significant temperature channel stays unexplained unless a temperature cause
+    is named) -- or through a covariate that is confounded with one of them in this design
+    (``confounded``: sets of covariate names that the design cannot separate,
+    :func:`tissuemech.diagnosis.generic.confounded_covariates`). Within-curve structure is explained by the
     causes that distort the shape of that test's curves.
     """
-    if covariate in EXPLAINS.get(effect, ()):
+    own = EXPLAINS.get(effect, ())
+    if covariate in own:
         return True
-    tests = DISTORTS.get(effect, ())
     if level == "within curves":
-        return test in tests  # whole-curve causes ("*": drift, first load, outlier) bend no curve
-    return "*" in tests
+        return test in DISTORTS.get(effect, ())  # whole-curve causes ("*": drift, first load, outlier) bend no curve
+    return any(covariate in group and any(c in own for c in group) for group in confounded)
 
 
 TIME_DOMAIN = ("stress_relaxation", "constant_shear_rate", "simple_shear", "creep_recovery")
@@ -131,13 +145,13 @@ class DiagnosisContext:
 # ------------------------------------------------------------------------------------------------
 # helpers
 # ------------------------------------------------------------------------------------------------
-def _untested(effect: str, why: str) -> dict:
+def untested_finding(effect: str, why: str) -> dict:
     return {"effect": effect, "tested": False, "statistic": np.nan, "statistic_name": "", "p_value": np.nan,
             "log10_p": np.nan, "effect_size": np.nan, "effect_size_unit": "", "practical": False,
             "evidence": why, "fix": None}
 
 
-def _finding(effect: str, test: dict, statistic_name: str, effect_size: float, unit: str, practical: bool,
+def make_finding(effect: str, test: dict, statistic_name: str, effect_size: float, unit: str, practical: bool,
              evidence: str, fix: dict | None, **extra) -> dict:
     out = {"effect": effect, "tested": True, "statistic": test["statistic"], "statistic_name": statistic_name,
            "p_value": test["p_value"], "log10_p": test["log10_p"], "effect_size": float(effect_size),
@@ -146,7 +160,7 @@ def _finding(effect: str, test: dict, statistic_name: str, effect_size: float, u
     return out
 
 
-def _fix(model: str, metric: str, before: float, after: float, cv: str, **parameters) -> dict:
+def fix_record(model: str, metric: str, before: float, after: float, cv: str, **parameters) -> dict:
     gain = (before - after) / before if before > 0 and np.isfinite(after) else np.nan
     return {"model": model, "metric": metric, "before": float(before), "after": float(after),
             "gain": float(gain), "cv": cv, "parameters": {k: float(v) for k, v in parameters.items()}}
@@ -411,15 +425,46 @@ def _scale_correction_cv(ctx: DiagnosisContext, levels: pd.DataFrame, column: st
     return _rms(np.concatenate(before)), _rms(np.concatenate(after)), held
 
 
+#: elapsed time and run temperature explaining this share of each other's variance across curves cannot be
+#: separated (R^2 >= 0.9: VIF >= 10; :data:`tissuemech.diagnosis.generic.CONFOUNDED_R2`)
+TIME_TEMPERATURE_R2 = 0.9
+
+
+def _temperature_confound(ctx: DiagnosisContext, levels: pd.DataFrame) -> str:
+    """Why a drift cannot be tested when the run temperature follows the clock ('' when it can)."""
+    temps = {}
+    for r in ctx.runs:
+        t = run_temperature_c(r)
+        if np.isfinite(t):
+            temps[run_id(r)] = t
+    lv = levels.assign(temperature_c=levels["curve"].map(temps))
+    x = lv["elapsed_h"] if lv["elapsed_h"].notna().all() and lv["elapsed_h"].nunique() > 2 else lv["test_order"]
+    ok = lv["temperature_c"].notna() & x.notna()
+    if ok.sum() < 3 or lv.loc[ok, "temperature_c"].std() == 0 or x[ok].std() == 0:
+        return ""
+    r2 = float(np.corrcoef(lv.loc[ok, "temperature_c"], x[ok])[0, 1] ** 2)
+    if r2 < TIME_TEMPERATURE_R2:
+        return ""
+    return (f"not testable here: the run temperature follows the elapsed time (R^2 = {r2:.3f} across "
+            f"{int(ok.sum())} curves, {lv.loc[ok, 'temperature_c'].min():.3g}..{lv.loc[ok, 'temperature_c'].max():.3g} "
+            f"degC), so a drift at constant conditions cannot be separated from the temperature change; the "
+            f"temperature, which has a physical model (time-temperature superposition scored on a held-out "
+            f"temperature), is tested as temperature_dependence. A reference temperature repeated at the start "
+            f"and the end of the session would separate them.")
+
+
 def detect_elapsed_time_drift(ctx: DiagnosisContext) -> dict:
     """Per-curve stiffness scale regressed on elapsed time (specimen fixed effects, first-load control)."""
     eff = "elapsed_time_drift"
     levels = curve_levels(ctx.table)
     if len(levels) < 6:
-        return _untested(eff, "fewer than 6 curves: the per-curve scale cannot be regressed on elapsed time")
+        return untested_finding(eff, "fewer than 6 curves: the per-curve scale cannot be regressed on elapsed time")
+    confound = _temperature_confound(ctx, levels)
+    if confound:
+        return untested_finding(eff, confound) | {"confounded_with": ["temperature"]}
     t, design = _level_tests(levels, "elapsed_h")
     if t is None:
-        return _untested(eff, "elapsed time (total_time/started_at) and test order do not vary across curves "
+        return untested_finding(eff, "elapsed time (total_time/started_at) and test order do not vary across curves "
                               "in a way that is not confounded with the test conditions")
     t = dict(t, estimate=t["estimate"])
     kappa = float(np.expm1(t["estimate"]))
@@ -437,10 +482,10 @@ def detect_elapsed_time_drift(ctx: DiagnosisContext) -> dict:
                 f"{'h' if use_time else 'tests'} of the session the model is off by "
                 f"{100 * np.expm1(abs(t['estimate']) * span):.0f} %; curve scales ordered by time have "
                 f"{int(runs['n_runs'])} runs (runs test p = {runs['p_value']:.2g}).")
-    fix = _fix("elapsed-time covariate: prediction x exp(b0 + kappa t_elapsed)", "rms_log_residual",
+    fix = fix_record("elapsed-time covariate: prediction x exp(b0 + kappa t_elapsed)", "rms_log_residual",
                before, after, f"leave-one-{group}-out", kappa_per_unit=kappa)
     practical = abs(np.expm1(abs(t["estimate"]) * span)) >= 0.05
-    return _finding(eff, t, "t", kappa, unit, practical, evidence, fix)
+    return make_finding(eff, t, "t", kappa, unit, practical, evidence, fix)
 
 
 def detect_preconditioning(ctx: DiagnosisContext) -> dict:
@@ -448,7 +493,7 @@ def detect_preconditioning(ctx: DiagnosisContext) -> dict:
     eff = "preconditioning"
     levels = curve_levels(ctx.table)
     if len(levels) < 6:
-        return _untested(eff, "fewer than 6 curves")
+        return untested_finding(eff, "fewer than 6 curves")
     paired = paired_first_load_test(ctx)
     if paired is not None:
         t, design = paired, (f"paired over {paired['n']:.0f} samples: linear G' of the first-load amplitude "
@@ -456,7 +501,7 @@ def detect_preconditioning(ctx: DiagnosisContext) -> dict:
     else:
         t, design = _level_tests(levels, "first_load")
     if t is None:
-        return _untested(eff, "no sample has a first load comparable with a repeated load of the same quantity "
+        return untested_finding(eff, "no sample has a first load comparable with a repeated load of the same quantity "
                               "(one test per sample, or the first test is always the same kind)")
     delta = float(np.expm1(t["estimate"]))
     before, after, group = _scale_correction_cv(ctx, levels, "first_load")
@@ -465,10 +510,10 @@ def detect_preconditioning(ctx: DiagnosisContext) -> dict:
     evidence = (f"The first test of each sample ({n_first} first loads, mostly {', '.join(first_tests[:2])}) "
                 f"is {100 * delta:+.1f} % {'stiffer' if delta > 0 else 'softer'} than {ctx.model} relative to "
                 f"the repeated tests of the same samples ({design}; t = {t['statistic']:.2f}).")
-    fix = _fix("first-load indicator (pseudo-elastic factor on virgin loading) / discard first cycle",
+    fix = fix_record("first-load indicator (pseudo-elastic factor on virgin loading) / discard first cycle",
                "rms_log_residual", before, after, f"leave-one-{group}-out", first_load_factor=1 + delta)
     # preconditioning softens: only a stiffer first load is this cause (a softer one is another misfit)
-    return _finding(eff, t, "t", delta, "1 (relative stiffness of first load)", delta >= 0.05, evidence, fix)
+    return make_finding(eff, t, "t", delta, "1 (relative stiffness of first load)", delta >= 0.05, evidence, fix)
 
 
 def detect_outlier_specimen(ctx: DiagnosisContext) -> dict:
@@ -476,7 +521,7 @@ def detect_outlier_specimen(ctx: DiagnosisContext) -> dict:
     eff = "outlier_specimen"
     levels = curve_levels(ctx.table)
     if levels["specimen"].nunique() < 4:
-        return _untested(eff, f"only {levels['specimen'].nunique()} specimens: an outlier specimen cannot be "
+        return untested_finding(eff, f"only {levels['specimen'].nunique()} specimens: an outlier specimen cannot be "
                               "separated from specimen variability")
     # remove test/condition effects (model misfit shared by all specimens) before comparing specimens
     resid = levels["log_scale"] - levels.groupby("condition")["log_scale"].transform("median")
@@ -512,11 +557,11 @@ def detect_outlier_specimen(ctx: DiagnosisContext) -> dict:
     evidence = (f"Specimen {name} is {ratio:.2f}x the median of the other {spec.size - 1} specimens "
                 f"(studentized deletion t = {t['statistic']:.2f}, modified z = {t['modified_z']:.1f}, "
                 f"Bonferroni over {spec.size} specimens){mixed_txt}.")
-    fix = _fix("robust/hierarchical population fit (median specimen level; outlier specimen reported apart)",
+    fix = fix_record("robust/hierarchical population fit (median specimen level; outlier specimen reported apart)",
                "rms_log_residual_typical_specimens", before, after, "leave-one-specimen-out",
                outlier_ratio=ratio)
     practical = abs(np.log(ratio)) >= np.log(1.5) and abs(t["modified_z"]) >= 3.5
-    return _finding(eff, t, "t", ratio, "x median specimen", practical, evidence, fix, specimen=name)
+    return make_finding(eff, t, "t", ratio, "x median specimen", practical, evidence, fix, specimen=name)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -527,11 +572,11 @@ def detect_instrument_inertia(ctx: DiagnosisContext) -> dict:
     eff = "instrument_inertia"
     fs = ctx.table[(ctx.table["test"] == "frequency_sweep") & (ctx.table["quantity"] == "storage_modulus")]
     if fs.empty or fs["frequency_sq"].nunique() < 4:
-        return _untested(eff, "no frequency sweep")
+        return untested_finding(eff, "no frequency sweep")
     # the inertial term needs the true gap and plate radius of every sweep: never a default
     fs = fs[np.isfinite(fs["inverse_gap"]) & np.isfinite(fs["radius_m"])]
     if fs.empty or fs["frequency_sq"].nunique() < 4:
-        return _untested(eff, "not testable here: the frequency sweeps record no gap or no plate radius "
+        return untested_finding(eff, "not testable here: the frequency sweeps record no gap or no plate radius "
                               "(the inertial term omega^2 2h/(pi R^4) needs both)")
     gap = 1.0 / fs["inverse_gap"]
     b_inv = 2.0 * gap / (np.pi * fs["radius_m"] ** 4)          # 1/b = 2h/(pi R^4), 1/m^3
@@ -588,10 +633,10 @@ def detect_instrument_inertia(ctx: DiagnosisContext) -> dict:
                 f"dI = {delta_i:.3g} kg m^2 (t = {t['statistic']:.2f}, {frame['curve'].nunique()} sweeps, "
                 f"clustered by sweep, log-omega control): an inertial error of {artefact_at_fmax:+.3g} Pa at "
                 f"{f_max:.3g} Hz where |G'| ~ {gmax:.3g} Pa.{kk_txt}{raw_txt}")
-    fix = _fix("fitted inertia term G'_app = G' - dI omega^2 2h/(pi R^4)", "rms_rel_residual_storage_modulus",
+    fix = fix_record("fitted inertia term G'_app = G' - dI omega^2 2h/(pi R^4)", "rms_rel_residual_storage_modulus",
                before, after, f"leave-one-{group}-out", delta_inertia_kg_m2=delta_i, n_held_out_points=len(frame))
     practical = abs(artefact_at_fmax) >= 0.05 * gmax
-    return _finding(eff, t, "t", delta_i, "kg m^2", practical, evidence, fix)
+    return make_finding(eff, t, "t", delta_i, "kg m^2", practical, evidence, fix)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -633,7 +678,7 @@ def detect_torque_offset(ctx: DiagnosisContext) -> dict:
         levels_pa.append(float(g["predicted_abs"].median()))
         curves.append(c)
     if len(intercepts) < 4:
-        return _untested(eff, "fewer than 4 small-strain relaxation/ramp curves with a usable stress range")
+        return untested_finding(eff, "fewer than 4 small-strain relaxation/ramp curves with a usable stress range")
     # second stage: an offset is the same on every curve, whereas a shape misfit of the model leaves
     # intercepts proportional to the curve's stress level -> intercept_k = c + d * level_k, test c;
     # weighted by the precision of each curve's intercept (robust SEs keep the between-curve scatter)
@@ -678,11 +723,11 @@ def detect_torque_offset(ctx: DiagnosisContext) -> dict:
     evidence = (f"Stress residuals of {ctx.model} on {len(curves)} relaxation holds and ramp starts (<= 20 %) "
                 f"have a common additive intercept of {offset_pa:+.3g} Pa ({where}; t = {tval:.2f} across curves), "
                 f"i.e. {size}: G(t, gamma0) = sigma/gamma0 diverges as 1/gamma0.")
-    fix = _fix("torque offset M0 as a nuisance parameter (stress + 2 M0/(pi R^3))", "rms_rel_residual_small_strain",
+    fix = fix_record("torque offset M0 as a nuisance parameter (stress + 2 M0/(pi R^3))", "rms_rel_residual_small_strain",
                before, after, f"leave-one-{group}-out", offset_pa=offset_pa, offset_uNm=offset_unm,
                n_held_out_points=len(small))
     practical = bool(late_level > 0 and abs(offset_pa) >= 0.02 * late_level)
-    return _finding(eff, t, "t", offset_unm, "uN m", practical, evidence, fix)
+    return make_finding(eff, t, "t", offset_unm, "uN m", practical, evidence, fix)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -700,7 +745,7 @@ def detect_amplitude_softening(ctx: DiagnosisContext) -> dict:
     a = ctx.table[(ctx.table["test"] == "amplitude_sweep") & (ctx.table["quantity"] == "storage_modulus")]
     a = a[np.isfinite(a["log_ratio"]) & (a["strain"] > 0) & a.get("above_noise", True)]
     if a.empty or a["strain"].nunique() < 4:
-        return _untested(eff, "no amplitude sweep above the torque noise floor")
+        return untested_finding(eff, "no amplitude sweep above the torque noise floor")
     a = a.assign(log_g0=np.log10(a["strain"]), y=_demean_by(a, "log_ratio", "curve"))
     # softening sets in above gamma_c: test the within-sweep trend on log amplitude and on amplitude
     # (the latter weights the large amplitudes where Kraus softening acts), Bonferroni x 2
@@ -742,10 +787,10 @@ def detect_amplitude_softening(ctx: DiagnosisContext) -> dict:
                 f"decades of amplitude "
                 f"({100 * a['strain'].min():.2g}-{100 * a['strain'].max():.2g} %); Kraus fit G'inf/G'0 = "
                 f"{full[0]:.2f}, gamma_c = {100 * 10 ** full[1]:.2g} %, m = {full[2]:.2f}.")
-    fix = _fix("Kraus amplitude softening G'(g0) = G'inf + (G'0 - G'inf)/(1 + (g0/gc)^(2m))",
+    fix = fix_record("Kraus amplitude softening G'(g0) = G'inf + (G'0 - G'inf)/(1 + (g0/gc)^(2m))",
                "rms_log_residual_amplitude_sweep_shape", before, after, f"leave-one-{group}-out",
                ratio_inf=full[0], gamma_c=10 ** full[1], m=full[2], n_held_out_points=len(a))
-    return _finding(eff, t, "t", change, "relative change of G' over the sweep", change <= -0.05, evidence, fix)
+    return make_finding(eff, t, "t", change, "relative change of G' over the sweep", change <= -0.05, evidence, fix)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -858,14 +903,14 @@ def detect_nonseparable_relaxation(ctx: DiagnosisContext) -> dict:
                              f"{100 * lv[-1]:g} % curve decays {100 * shape_change:+.1f} % relative to the "
                              f"{100 * lv[0]:g} % curve beyond what the shared QLV shape allows")
     if not parts:
-        return _untested(eff, "needs constant-shear-rate ramps at >= 2 rates or relaxation at >= 2 strain levels")
+        return untested_finding(eff, "needs constant-shear-rate ramps at >= 2 rates or relaxation at >= 2 strain levels")
     lp = st.bonferroni_min([p["log10_p"] for p in parts])
     best = min(parts, key=lambda p: p["log10_p"])
     t = {"statistic": best["statistic"], "p_value": 10 ** lp, "log10_p": lp}
     effect = ev_size if np.isfinite(ev_size) else shape_change
     fix = ctx.fit_info.get("fixes", {}).get(eff)
     evidence = "Non-separable (strain-dependent) relaxation: " + "; ".join(texts) + "."
-    return _finding(eff, t, "t" if best is parts[0] and np.isfinite(ev_size) else "F", effect,
+    return make_finding(eff, t, "t" if best is parts[0] and np.isfinite(ev_size) else "F", effect,
                     "log residual change across rates at max strain" if np.isfinite(ev_size) else
                     "relative shape change", abs(effect) >= 0.03, evidence, fix)
 
@@ -949,7 +994,7 @@ def detect_rim_stress_nonlinearity(ctx: DiagnosisContext) -> dict:
         ns = _ramp_exponents(ctx)
         source = f"log slope over the top 70 % of strain of {ns.size} constant-shear-rate ramps"
     if ns.size < 3:
-        return _untested(eff, "fewer than 3 samples with relaxation at >= 3 strains and fewer than 3 "
+        return untested_finding(eff, "fewer than 3 samples with relaxation at >= 3 strains and fewer than 3 "
                               "constant-shear-rate ramps to estimate n = dlnM/dln(gamma_R)")
     n_mean = float(ns.mean())
     se = float(ns.std(ddof=1) / np.sqrt(ns.size))
@@ -961,7 +1006,7 @@ def detect_rim_stress_nonlinearity(ctx: DiagnosisContext) -> dict:
     if target not in RIM_BIASED_TARGETS:
         evidence = (f"n = dlnM/dln(gamma_R) = {n_mean:.2f} +- {se:.2f} at {100 * gmax:.0f} % ({source}), but the "
                     f"baseline was fitted through {target}, which already accounts for the radial strain field.")
-        return _finding(eff, st._pack(tval, 0.0), "t", 0.0, "relative stress bias", False, evidence, None)
+        return make_finding(eff, st._pack(tval, 0.0), "t", 0.0, "relative stress bias", False, evidence, None)
     evidence = (f"The material {'stiffens' if n_mean > 1 else 'softens'} (n = dlnM/dln(gamma_R) = {n_mean:.2f} +- "
                 f"{se:.2f} at {100 * gmax:.0f} %, {source}) while {ctx.model} was fitted to the reported "
                 f"2M/(pi R^3) as if it were the rim stress: the reported stress is {100 * bias:+.0f} % off the rim "
@@ -969,10 +1014,10 @@ def detect_rim_stress_nonlinearity(ctx: DiagnosisContext) -> dict:
                 f"parameters are biased (C20 -> 2/3, C30 -> 1/2 of the truth for a reduced polynomial).")
     # the correction is exact for the power-law segment; its residual bias is the n uncertainty
     after = abs(4.0 / (n_mean + 3.0) - 4.0 / (n_mean + se + 3.0))
-    fix = _fix("torque forward model (radial Gauss-Legendre integral) or Rabinowitsch-corrected rim stress "
+    fix = fix_record("torque forward model (radial Gauss-Legendre integral) or Rabinowitsch-corrected rim stress "
                "sigma_R = M/(2 pi R^3) (3 + n)", "rim_stress_bias_at_max_strain (not held-out)", abs(bias), after,
                "none (bias correction)", n=n_mean)
-    return _finding(eff, t, "t", bias, "relative stress bias at max strain", abs(bias) >= 0.05, evidence, fix)
+    return make_finding(eff, t, "t", bias, "relative stress bias at max strain", abs(bias) >= 0.05, evidence, fix)
 
 
 def detect_wall_slip(ctx: DiagnosisContext) -> dict:
@@ -981,10 +1026,10 @@ def detect_wall_slip(ctx: DiagnosisContext) -> dict:
     eff = "wall_slip"
     c = _csr_frame(ctx)
     if c.empty or c["curve"].nunique() < 4:
-        return _untested(eff, "needs >= 4 constant-shear-rate ramps")
+        return untested_finding(eff, "needs >= 4 constant-shear-rate ramps")
     best, k = _best_slip(c)
     if best is None:
-        return _finding(eff, st._pack(0.0, 0.0), "t", 0.0, "Pa", False,
+        return make_finding(eff, st._pack(0.0, 0.0), "t", 0.0, "Pa", False,
                         "No stress-threshold loss of stress in the ramps.", None)
     sigma_c, t, res = best
     lp = min(0.0, t["log10_p"] + np.log10(k))
@@ -1016,10 +1061,10 @@ def detect_wall_slip(ctx: DiagnosisContext) -> dict:
                 f"{ctx.model} at every rate (up to {100 * loss:+.0f} % at the largest stress; slip covariate "
                 f"max(0, sigma - sigma_c)/(h gamma), t = {t['statistic']:.2f}, controls strain^2 and "
                 f"strain^2 x log-rate, Bonferroni over {k} thresholds){gap_txt}.")
-    fix = _fix("slip-corrected strain gamma = gamma_app - 2 beta_s max(0, sigma - sigma_c)/h",
+    fix = fix_record("slip-corrected strain gamma = gamma_app - 2 beta_s max(0, sigma - sigma_c)/h",
                "rms_log_residual", before, after, f"leave-one-{group}-out", sigma_c_pa=sigma_c,
                n_held_out_points=len(c))
-    return _finding(eff, t, "t", sigma_c, "Pa (critical stress)", loss <= -0.03, evidence, fix)
+    return make_finding(eff, t, "t", sigma_c, "Pa (critical stress)", loss <= -0.03, evidence, fix)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -1047,7 +1092,7 @@ def detect_finite_rise_time(ctx: DiagnosisContext) -> dict:
     eff = "finite_rise_time"
     sr = [r for r in ctx.runs_of("stress_relaxation") if all(k in r for k in ("time", "shear_stress", "shear_strain"))]
     if len(sr) < 3:
-        return _untested(eff, "fewer than 3 relaxation tests")
+        return untested_finding(eff, "fewer than 3 relaxation tests")
     lv = min(nominal_strain(r) for r in sr)
     small = [r for r in sr if nominal_strain(r) <= 1.5 * lv]
     ramps = []
@@ -1057,7 +1102,7 @@ def detect_finite_rise_time(ctx: DiagnosisContext) -> dict:
         ramps.append(t_[np.argmax(g >= 0.98 * g.max())] - t_[0])
     t_r = float(np.median(ramps))
     if t_r <= 0:
-        return _untested(eff, "the relaxation data contain no ramp (ideal step in the export): the rise time "
+        return untested_finding(eff, "the relaxation data contain no ramp (ideal step in the export): the rise time "
                               "cannot be checked from these files")
     step_baseline = ctx.fit_info.get("relaxation", "measured") == "step"
     parts, texts, fix = [], [], None
@@ -1089,7 +1134,7 @@ def detect_finite_rise_time(ctx: DiagnosisContext) -> dict:
         tval = d.mean() / (d.std(ddof=1) / np.sqrt(d.size)) if d.size > 1 and d.std(ddof=1) > 0 else 0.0
         parts.append(st._pack(tval, st.log10_p_from_t(tval, max(d.size - 1, 1))))
         before, after = float(np.mean(e_step)), float(np.mean(e_ramp))
-        fix = _fix("ramp-aware relaxation fit (exact recursion over the measured strain history)",
+        fix = fix_record("ramp-aware relaxation fit (exact recursion over the measured strain history)",
                    "rms_log_error_frequency_sweep_predicted_from_relaxation", before, after,
                    "cross-test (relaxation -> frequency sweep)", rise_time_s=t_r)
         texts.append(f"the frequency sweep predicted from each {100 * lv:g} % relaxation is off by "
@@ -1109,7 +1154,7 @@ def detect_finite_rise_time(ctx: DiagnosisContext) -> dict:
             texts.append(f"the baseline's residuals in the first {10 * t_r:.3g} s of the holds differ by "
                          f"{100 * te['estimate']:+.1f} % from the later hold (t = {te['statistic']:.2f})")
     if not parts:
-        return _untested(eff, "no frequency sweep to cross-check and no early-hold residuals")
+        return untested_finding(eff, "no frequency sweep to cross-check and no early-hold residuals")
     lp = st.bonferroni_min([p["log10_p"] for p in parts])
     best = min(parts, key=lambda p: p["log10_p"])
     t = {"statistic": best["statistic"], "p_value": 10 ** lp, "log10_p": lp}
@@ -1123,7 +1168,7 @@ def detect_finite_rise_time(ctx: DiagnosisContext) -> dict:
         practical = bool(np.isfinite(fix["gain"]) and fix["gain"] >= 0.1)
     else:
         practical = abs(parts[-1].get("estimate", 0.0)) >= 0.03
-    return _finding(eff, t, "t", t_r, "s (rise time)", bool(practical), evidence, fix)
+    return make_finding(eff, t, "t", t_r, "s (rise time)", bool(practical), evidence, fix)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -1150,7 +1195,7 @@ def detect_unidentified_i2_dependence(ctx: DiagnosisContext) -> dict:
     corr_txt = (f" The fitted C10-C01 correlation is {list(corr.values())[0]:+.3f}." if corr else "")
     modes = {str(r.attrs.get("test")) for r in ctx.runs}
     if not rows:
-        finding = _untested(eff, "")
+        finding = untested_finding(eff, "")
         finding.update(identifiable=False, evidence=(
             "Not identifiable from these data: in simple shear/torsion I1 = I2 = 3 + gamma^2, so the torque "
             "depends on W1 + W2 only; the C10 and C01 Jacobian columns are identical (correlation -> -1, flat "
@@ -1160,7 +1205,7 @@ def detect_unidentified_i2_dependence(ctx: DiagnosisContext) -> dict:
     d = pd.concat(rows, ignore_index=True)
     d = d[np.isfinite(d["F"]) & np.isfinite(d["x"]) & (d["strain"] >= 0.1)]
     if len(d) < 10 or d["curve"].nunique() < 2:
-        finding = _untested(eff, "normal force recorded only below 10 % strain, where the thrust is at the "
+        finding = untested_finding(eff, "normal force recorded only below 10 % strain, where the thrust is at the "
                                  "resolution of the transducer: C01 is not identifiable")
         finding["identifiable"] = False
         return finding
@@ -1177,7 +1222,7 @@ def detect_unidentified_i2_dependence(ctx: DiagnosisContext) -> dict:
     fix = ctx.fit_info.get("fixes", {}).get(eff)
     # the thrust relation is exact for elastic laws; viscoelastic normal-stress histories depart from it by
     # a few % of C10 + C01, so only a larger C01 is a finding
-    return _finding(eff, t, "t", c01, "Pa (C01)", abs(c01) >= 0.1 * abs(c_sum), evidence, fix, identifiable=True,
+    return make_finding(eff, t, "t", c01, "Pa (C01)", abs(c01) >= 0.1 * abs(c_sum), evidence, fix, identifiable=True,
                     c10_plus_c01_pa=c_sum)
 
 

@@ -20,15 +20,26 @@ Specimen-to-specimen variability is expected and not scanned (an unusual specime
 change; 0.05 = 5 %). A structure is *practically* relevant when |effect_size| >= :data:`MIN_EFFECT`.
 The false-alarm rate is controlled by the caller (Holm across every catalogue and generic test,
 :mod:`.report`).
+
+Attribution among confounded covariates (:func:`confounded_covariates`): the across-curve covariates
+(elapsed time, order, logged temperature/gap/normal-force means, the run temperature, sample-sheet columns,
+specimen and text columns as factors) are compared pairwise; sets the design cannot separate (R^2 >=
+:data:`CONFOUNDED_R2`, VIF >= 10) are tested jointly and reported with the design that would separate them
+(``diagnosis.json`` ``confounded``). A named cause that explains one member of such a set explains the
+structure of the others (:func:`tissuemech.diagnosis.catalogue.explains`).
 """
 from __future__ import annotations
+
+import warnings
 
 import numpy as np
 import pandas as pd
 import statsmodels.api as sm
 
+from ..tts import run_temperature_c
 from . import stats as st
 from .catalogue import between_sample_test, level_regression
+from .evidence import run_id
 
 #: smallest structured misfit (log-residual change over the covariate range) worth reporting
 MIN_EFFECT = 0.03
@@ -150,4 +161,151 @@ def serial_structure(table: pd.DataFrame) -> dict:
             out[str(test)] = {"n_curves": len(dws), "median_durbin_watson": float(np.median(dws)),
                               "share_dw_below_1_5": float(np.mean(np.asarray(dws) < 1.5)),
                               "median_runs_z": float(np.median(zs[np.isfinite(zs)])) if np.isfinite(zs).any() else np.nan}
+    return out
+
+
+# ------------------------------------------------------------------------------------------------
+# attribution among confounded across-curve covariates
+# ------------------------------------------------------------------------------------------------
+#: two curve-level covariates are confounded in a design when one explains this share of the other's
+#: variance across curves: R^2 >= 0.9 is a variance inflation factor >= 10, the usual limit of serious
+#: multicollinearity (Kutner, Nachtsheim, Neter & Li 2005, Applied Linear Statistical Models, 5th ed., 10.5)
+CONFOUNDED_R2 = 0.9
+
+#: what separates a covariate from the others in a design (used in the ``design`` sentence)
+SEPARATING_DESIGN = {
+    "temperature": "repeat one temperature at the start and at the end of the series (or measure heating and "
+                   "cooling, or randomise the temperature order) so that temperature no longer follows the clock",
+    "elapsed_time": "repeat a reference test at the start and at the end of the session at constant conditions",
+    "test_order": "shuffle the test order between samples",
+    "gap": "measure at two gaps at the same conditions",
+    "strain": "repeat the sweep at two strain amplitudes at the same conditions",
+    "factor": "cross the factor levels with the other covariates (each level at several of their values)",
+}
+
+
+def _kind(name: str) -> str:
+    for key in ("temperature", "elapsed_time", "test_order", "gap", "strain"):
+        if key in name:
+            return key
+    return "factor"
+
+
+def curve_covariates(table: pd.DataFrame, runs=()) -> pd.DataFrame:
+    """One row per curve (index: curve id) of every covariate that is constant within curves: the numeric
+    :func:`covariate_columns` whose within-curve range is < 5 % of their range across curves (curve mean),
+    the run temperature ``temperature_c`` (logged channel median, else the attribute; from ``runs``), the
+    specimen and every text ``covariate_*`` attribute of ``runs`` as factors (``factor:<name>``)."""
+    rows = table[np.isfinite(table["log_ratio"])] if "log_ratio" in table else table
+    if rows.empty:
+        return pd.DataFrame()
+    g = rows.groupby("curve", sort=False)
+    out = {}
+    for c in covariate_columns(rows):
+        x = rows[c].astype(float)
+        if not np.isfinite(x).any():
+            continue
+        within = (g[c].max() - g[c].min()).median()
+        mean = g[c].mean()
+        total = float(mean.max() - mean.min())
+        if total > 0 and within <= 0.05 * total:
+            out[c] = mean
+    frame = pd.DataFrame(out)
+    frame["factor:specimen"] = g["specimen"].first()
+    for r in runs:
+        cid = run_id(r)
+        if cid not in frame.index:
+            continue
+        t = run_temperature_c(r)
+        if np.isfinite(t):
+            frame.loc[cid, "temperature_c"] = t
+        for k, v in r.attrs.items():
+            if k.startswith("covariate_") and isinstance(v, str) and v:
+                frame.loc[cid, f"factor:{k}"] = v
+    return frame
+
+
+def _r2(frame: pd.DataFrame, a: str, b: str) -> float:
+    """Share of variance of one covariate explained by the other across curves (numeric-numeric: r^2;
+    factor-numeric: one-way ANOVA eta^2; factor-factor: 1 when the partitions coincide, else 0)."""
+    f = frame[[a, b]].dropna()
+    if len(f) < 3:
+        return np.nan
+    fa, fb = a.startswith("factor:"), b.startswith("factor:")
+    if fa and fb:
+        ca, cb = pd.factorize(f[a])[0], pd.factorize(f[b])[0]
+        return float(len(set(zip(ca, cb))) == len(set(ca)) == len(set(cb)) and len(set(ca)) > 1)
+    if fa or fb:
+        fac, num = (a, b) if fa else (b, a)
+        y = f[num].astype(float)
+        if y.std() == 0 or f[fac].nunique() < 2:
+            return np.nan
+        fitted = y.groupby(f[fac]).transform("mean")
+        return float(1.0 - ((y - fitted) ** 2).sum() / ((y - y.mean()) ** 2).sum())
+    x, y = f[a].astype(float), f[b].astype(float)
+    if x.std() == 0 or y.std() == 0:
+        return np.nan
+    return float(np.corrcoef(x, y)[0, 1] ** 2)
+
+
+def confounded_covariates(table: pd.DataFrame, runs=(), r2_limit: float = CONFOUNDED_R2) -> list[dict]:
+    """Sets of across-curve covariates that this design cannot separate, each tested jointly.
+
+    Covariates (:func:`curve_covariates`) are linked when one explains >= ``r2_limit`` of the other's
+    variance across curves; every connected set of >= 2 is reported with ``covariates``, ``r2`` (pairwise,
+    ``"a|b"``), the joint F-test of the curve levels (median ln(observed/predicted) per curve, numeric members
+    together, OLS) ``joint_statistic``/``joint_p``, ``unique_p`` (each member's partial t-test given the
+    others; large when the set is collinear: the data cannot say which one it is), and ``design`` (what
+    would separate them).
+    """
+    frame = curve_covariates(table, runs)
+    if frame.empty or len(frame) < 4:
+        return []
+    cols = [c for c in frame.columns if frame[c].nunique(dropna=True) > 1]
+    links = {}
+    for i, a in enumerate(cols):
+        for b in cols[i + 1:]:
+            r2 = _r2(frame, a, b)
+            if np.isfinite(r2) and r2 >= r2_limit:
+                links[(a, b)] = r2
+    # connected components
+    parent = {c: c for c in cols}
+
+    def root(c):
+        while parent[c] != c:
+            c = parent[c]
+        return c
+
+    for a, b in links:
+        parent[root(a)] = root(b)
+    groups: dict[str, list[str]] = {}
+    for c in cols:
+        groups.setdefault(root(c), []).append(c)
+    rows = table[np.isfinite(table["log_ratio"])]
+    level = rows.groupby("curve")["log_ratio"].median()
+    out = []
+    for members in groups.values():
+        if len(members) < 2:
+            continue
+        numeric = [m for m in members if not m.startswith("factor:")]
+        f = frame.join(level.rename("y")).dropna(subset=["y"] + numeric)
+        joint = {"statistic": np.nan, "p_value": np.nan}
+        unique = {}
+        if numeric and len(f) > len(numeric) + 2:
+            X = sm.add_constant(f[numeric].astype(float), has_constant="add")
+            with warnings.catch_warnings():
+                # the members are collinear by construction: the joint test uses the design's rank (pinv)
+                warnings.simplefilter("ignore")
+                fit = sm.OLS(f["y"].to_numpy(float), X).fit()
+            if np.isfinite(fit.fvalue):
+                joint = {"statistic": float(fit.fvalue), "p_value": float(fit.f_pvalue)}
+            unique = {m: float(fit.pvalues[m]) for m in numeric if m in fit.pvalues}
+        kinds = sorted({_kind(m) for m in members})
+        out.append({"covariates": members,
+                    "r2": {f"{a}|{b}": r for (a, b), r in links.items() if a in members and b in members},
+                    "joint_statistic": joint["statistic"], "joint_p": joint["p_value"], "unique_p": unique,
+                    "n_curves": int(len(f)),
+                    "design": f"{', '.join(members)} vary together across the {len(frame)} curves of this design "
+                              f"(R^2 >= {r2_limit}); to separate them: "
+                              + "; ".join(SEPARATING_DESIGN[k] for k in kinds) + "."})
     return out

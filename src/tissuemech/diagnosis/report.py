@@ -43,6 +43,8 @@ pass Holm and practical relevance but whose fix was not scored (not named).
 ``quantity``, ``statistic``, ``p_value``, ``p_holm``, ``effect_size`` (log-residual change over the
 covariate's range), ``candidates`` (catalogue causes whose signature involves that covariate).
 ``not_identifiable``: statements such as the I2 dependence from torque-only shear data.
+``confounded``: sets of across-curve covariates this design cannot separate, tested jointly, with the design
+that would separate them (:func:`tissuemech.diagnosis.generic.confounded_covariates`).
 """
 from __future__ import annotations
 
@@ -62,9 +64,10 @@ from ..models.registry import available_models, get_model
 from . import stats as st
 from .baseline import (baseline_adequacy, extension_gain, predict_runs, ranked_candidates, read_fit_record,
                        resolved_window_s, window_taus)
-from .catalogue import CATALOGUE_IDS, DETECTORS, DiagnosisContext, curve_levels, explains
+from .catalogue import DiagnosisContext, curve_levels, explains
+from .causes import CAUSE_IDS, DETECTORS
 from .evidence import estimate_noise, residual_table, residual_table_to_xarray
-from .generic import serial_structure, structure_tests
+from .generic import confounded_covariates, serial_structure, structure_tests
 from .homogeneous import is_homogeneous, run_homogeneous_diagnosis
 
 DECISION_RULE = (
@@ -101,7 +104,7 @@ def _clean(obj):
 def run_detectors(ctx: DiagnosisContext) -> list[dict]:
     """Every catalogue detector; a detector that fails is reported as untested with the error (never silent)."""
     out = []
-    for eff in CATALOGUE_IDS:
+    for eff in CAUSE_IDS:
         try:
             out.append(DETECTORS[eff](ctx))
         except (MissingDataError, KeyError) as exc:
@@ -212,9 +215,11 @@ def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "mode
     rest.sort(key=lambda f: f["log10_p"] if np.isfinite(f.get("log10_p", np.nan)) else 1.0)
     unexplained = []
     fitted = set(fit_info.get("fitted_tests") or ())
+    confounded = confounded_covariates(table, runs)
+    sets = [c["covariates"] for c in confounded]
 
     def explained(g):
-        if any(explains(f["effect"], g["test"], g["covariate"], g["level"]) for f in detected):
+        if any(explains(f["effect"], g["test"], g["covariate"], g["level"], sets) for f in detected):
             return True
         # a test the baseline did not fit is a cross-test prediction: a named cause that distorts the
         # fitted tests distorts the fitted parameters and therefore that prediction too
@@ -223,7 +228,7 @@ def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "mode
 
     for g in generic:
         if g["significant"] and g["practical"] and not explained(g):
-            candidates = [e for e in CATALOGUE_IDS if explains(e, g["test"], g["covariate"], g["level"])]
+            candidates = [e for e in CAUSE_IDS if explains(e, g["test"], g["covariate"], g["level"])]
             unexplained.append({"effect": "unexplained_structure", **{k: g[k] for k in (
                 "covariate", "test", "quantity", "level", "statistic", "p_value", "p_holm", "effect_size",
                 "n_curves")}, "candidates": candidates,
@@ -254,7 +259,7 @@ def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "mode
             "baseline": {"model": model, "adequate": usable, "tried": list(adequacy)},
             "n_tests": len(pvals), "findings": head + detected + rest, "unexplained": unexplained,
             "significant_fix_not_evaluated": not_evaluated,
-            "not_identifiable": not_identifiable, "structure_tests": generic,
+            "not_identifiable": not_identifiable, "confounded": confounded, "structure_tests": generic,
             "serial": serial_structure(table) if len(table) else []}
 
 

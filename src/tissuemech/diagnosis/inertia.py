@@ -1,0 +1,316 @@
+"""Inertia-dominated oscillation points as a named cause (``inertia_dominated_points``).
+
+Criterion (physical, from the raw phase; no fitted threshold)
+-------------------------------------------------------------
+A combined motor-transducer rheometer measures the raw torque ``M_raw = M_sample + M_inertia``; the
+inertial torque ``-I omega^2 theta`` is at 180 deg to the displacement, the sample torque at the sample phase
+delta in [0, 90] deg. The raw phase (angle of M_raw to the displacement, the instrument's ``Raw phase``
+channel) exceeds :data:`RAW_PHASE_LIMIT_RAD` = 90 deg exactly when the inertial torque exceeds the sample's
+in-phase (elastic) torque ``|G*| b theta cos(delta)``: G' is then the difference of two torques of which the
+subtracted inertia correction is the larger, i.e. the point lies beyond the instrument-inertia limit
+(inertial torque = sample torque; Ewoldt, Johnston & Caretta 2015, "Experimental challenges of shear
+rheology: how to avoid bad data", in *Complex Fluids in Biological Systems*, Springer, pp. 207-241;
+``science.md`` 2.5: "raw phase -> 180 deg"). Such points are named with their run, angular frequency and
+raw phase. The raw phase channel is required: without it the cause is not testable (never inferred from a
+default inertia or geometry).
+
+Statistical test and fix (held-out)
+-----------------------------------
+Fix = excluding the flagged points. It is scored on the points that are *not* flagged: every unflagged point
+of a run is left out in turn and predicted by a smooth description of the run (quadratic in log10 omega of
+log10 G' and log10 G'', refitted in every fold) fitted to the other points either with the flagged ones
+(``before``) or without them (``after``); metric: RMS log10 error (decades) of the held-out G' and G''.
+The p-value is the one-sided Wilcoxon signed-rank test (:func:`scipy.stats.wilcoxon`) that the squared
+held-out errors are larger with the flagged points than without; ``effect_size`` is the share of
+oscillation points that are flagged, practical when >= 1 point is flagged.
+
+Inertial ringing after a strain step (``inertial_ringing``)
+----------------------------------------------------------
+After a fast strain step the motor, geometry and sample form a damped oscillator; the stress of the first
+instants rings around the relaxation (the stress may even turn negative, which no relaxing material does).
+In the early window of every relaxation curve (0 < t <= sqrt(t_min t_max), the first half in log time) the
+baseline's stress residual is regressed on a smooth trend (1, ln t, ln^2 t per curve) with and without a
+damped sine ``exp(-(t - t0)/tau) (a sin(2 pi t/P) + b cos(2 pi t/P))`` (a, b per curve; P and tau common;
+t from the step, so the phase of a ring triggered by the step is the same in every curve).
+P is scanned on a log grid between 4 sampling intervals and half the window (>= 2 cycles), tau in 0.25, 0.5,
+1, 2, 4 periods. Test: a ring triggered by the step is *coherent* -- the same phase and relative amplitude in
+replicate curves -- whereas noise at the step is not, so the per-curve coefficients (a, b) / stress level
+are tested for a zero mean across curves (one-sample Hotelling T^2, F(2, n - 2); >= 3 curves); the p-value of
+the best (P, tau) is multiplied by the number of pairs (Bonferroni: the ringing frequency is undefined under
+the null). ``effect_size`` = first ring amplitude / stress level of the
+window (median over curves), practical when >= 0.05. Fix: the damped-sine term with (P, tau) chosen on the
+other curves (same criterion, then refined by least squares); held out: its amplitudes fitted on the even points of a curve and scored on the odd points,
+against the trend alone, on the odd points within 3 decay times of the window start.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from scipy import stats as sps
+from scipy.optimize import minimize
+
+from . import stats as st
+from .catalogue import DiagnosisContext, fix_record, make_finding, untested_finding
+from .evidence import run_id
+
+EFFECT = "inertia_dominated_points"
+#: raw phase above which the inertial torque exceeds the sample's in-phase torque (rad; module docstring)
+RAW_PHASE_LIMIT_RAD = np.pi / 2
+#: fewest unflagged points of a run for the held-out score (a quadratic needs 3 + 1 to leave out)
+MIN_CLEAN_POINTS = 5
+OSCILLATION = ("frequency_sweep", "amplitude_sweep")
+
+
+def flagged_points(raw_phase_rad: np.ndarray) -> np.ndarray:
+    """Boolean mask of inertia-dominated points: raw phase > :data:`RAW_PHASE_LIMIT_RAD` (|raw phase|, so
+    exports that report the raw phase as a negative angle are read alike)."""
+    return np.abs(np.asarray(raw_phase_rad, float)) > RAW_PHASE_LIMIT_RAD
+
+
+def _loo_errors(log_w: np.ndarray, log_g: np.ndarray, flagged: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Held-out squared errors of every unflagged point, fitted with (before) and without (after) the
+    flagged points (module docstring); arrays of shape (n_clean * 2,)."""
+    eb, ea = [], []
+    clean = np.flatnonzero(~flagged)
+    for i in clean:
+        train_all = np.ones(log_w.size, bool)
+        train_all[i] = False
+        train_clean = train_all & ~flagged
+        for k in range(2):
+            cb = np.polyfit(log_w[train_all], log_g[train_all, k], 2)
+            ca = np.polyfit(log_w[train_clean], log_g[train_clean, k], 2)
+            eb.append(np.polyval(cb, log_w[i]) - log_g[i, k])
+            ea.append(np.polyval(ca, log_w[i]) - log_g[i, k])
+    return np.asarray(eb), np.asarray(ea)
+
+
+def detect_inertia_dominated_points(ctx: DiagnosisContext) -> dict:
+    """Oscillation points with raw phase beyond 90 deg; fix = exclude them, scored on held-out points."""
+    runs = [r for r in ctx.runs if r.attrs.get("test") in OSCILLATION]
+    if not runs:
+        return untested_finding(EFFECT, "not testable here: no oscillation test")
+    with_phase = [r for r in runs if "raw_phase" in r and np.isfinite(np.asarray(r["raw_phase"].values, float)).any()]
+    if not with_phase:
+        return untested_finding(EFFECT, "not testable here: no raw phase channel in the oscillation exports")
+    named, n_total = [], 0
+    eb, ea = [], []
+    for r in with_phase:
+        phase = np.asarray(r["raw_phase"].values, float)
+        ok = np.isfinite(phase)
+        n_total += int(ok.sum())
+        flag = flagged_points(phase) & ok
+        if "angular_frequency" in r:
+            w = np.asarray(r["angular_frequency"].values, float)
+        elif "frequency" in r:
+            w = 2 * np.pi * np.asarray(r["frequency"].values, float)
+        else:
+            w = np.full(phase.size, np.nan)
+        for i in np.flatnonzero(flag):
+            named.append({"run": run_id(r), "point": int(i), "angular_frequency_rad_s": float(w[i]),
+                          "raw_phase_deg": float(np.degrees(phase[i]))})
+        if not flag.any() or "storage_modulus" not in r or "loss_modulus" not in r:
+            continue
+        g1 = np.asarray(r["storage_modulus"].values, float)
+        g2 = np.asarray(r["loss_modulus"].values, float)
+        x = np.log10(w) if r.attrs.get("test") == "frequency_sweep" else np.log10(
+            np.abs(np.asarray(r["shear_strain"].values, float))) if "shear_strain" in r else np.full(phase.size, np.nan)
+        good = ok & np.isfinite(x) & (g1 > 0) & (g2 > 0)
+        if (good & ~flag).sum() < MIN_CLEAN_POINTS:
+            continue
+        b, a = _loo_errors(x[good], np.log10(np.column_stack([g1[good], g2[good]])), flag[good])
+        eb.append(b)
+        ea.append(a)
+    share = len(named) / max(n_total, 1)
+    if not named:
+        return untested_finding(EFFECT, f"tested, none found: the raw phase of all {n_total} oscillation points "
+                                        f"is <= 90 deg") | {"tested": True, "p_value": 1.0, "log10_p": 0.0,
+                                                           "statistic": 0.0, "effect_size": 0.0, "points": []}
+    if not eb:
+        out = untested_finding(EFFECT, f"{len(named)} oscillation points have raw phase > 90 deg (inertia-dominated), "
+                                       f"but no run keeps >= {MIN_CLEAN_POINTS} clean points to score their exclusion")
+        out["points"] = named
+        return out
+    eb, ea = np.concatenate(eb), np.concatenate(ea)
+    d = eb ** 2 - ea ** 2
+    if np.allclose(d, 0):
+        test = {"statistic": 0.0, "p_value": 1.0, "log10_p": 0.0}
+    else:
+        w = sps.wilcoxon(eb ** 2, ea ** 2, alternative="greater")
+        p = float(max(w.pvalue, 1e-300))
+        test = {"statistic": float(w.statistic), "p_value": p, "log10_p": float(np.log10(p))}
+    before, after = float(np.sqrt(np.mean(eb ** 2))), float(np.sqrt(np.mean(ea ** 2)))
+    runs_named = sorted({p["run"] for p in named})
+    wmin = min(p["angular_frequency_rad_s"] for p in named)
+    evidence = (f"{len(named)} of {n_total} oscillation points ({', '.join(runs_named)}) have a raw phase above 90 deg "
+                f"(max {max(p['raw_phase_deg'] for p in named):.1f} deg; from {wmin:.3g} rad/s up): there the inertial "
+                f"torque exceeds the sample's in-phase torque. Predicting each clean point from the others, the smooth "
+                f"description errs by {before:.3g} decades with these points and {after:.3g} without them "
+                f"(one-sided Wilcoxon signed-rank p = {test['p_value']:.2g}).")
+    fix = fix_record("exclude inertia-dominated points (raw phase > 90 deg)", "rms_log10_modulus_held_out_clean_points",
+                     before, after, "leave-one-clean-point-out", n_excluded=len(named))
+    return make_finding(EFFECT, test, "W", share, "share of oscillation points", len(named) >= 1, evidence, fix,
+                        points=named)
+
+
+# ------------------------------------------------------------------------------------------------
+# inertial ringing after a strain step
+# ------------------------------------------------------------------------------------------------
+RINGING = "inertial_ringing"
+#: periods scanned (log grid between 4 sampling intervals and half the early window, so that >= 2 cycles fit)
+N_PERIODS = 16
+#: damping times scanned, in periods (0.25 period: the amplitude falls e^-2 per half cycle, the strongest
+#: damping that still shows a sign change)
+DAMPING_IN_PERIODS = (0.25, 0.5, 1.0, 2.0, 4.0)
+#: fewest early points of a relaxation curve to scan it
+MIN_EARLY_POINTS = 12
+
+
+def _early_window(g: pd.DataFrame) -> pd.DataFrame:
+    """Points of one relaxation curve in its early window: 0 < t <= sqrt(t_min t_max) (the first half of the
+    record in log time, where a ringing of the motor-sample system decays)."""
+    t = g["time_in_test"].to_numpy(float)
+    pos = t[t > 0]
+    if pos.size < 3:
+        return g.iloc[:0]
+    t_w = np.sqrt(pos.min() * pos.max())
+    return g[(g["time_in_test"] > 0) & (g["time_in_test"] <= t_w)].sort_values("time_in_test")
+
+
+def _trend(t: np.ndarray) -> np.ndarray:
+    lt = np.log(t)
+    lt = (lt - lt.mean()) / max(lt.std(), 1e-12)
+    return np.column_stack([np.ones_like(t), lt, lt ** 2])
+
+
+def _ring(t: np.ndarray, period: float, tau: float) -> np.ndarray:
+    w = 2 * np.pi / period
+    env = np.exp(-(t - t.min()) / tau)
+    return np.column_stack([env * np.sin(w * t), env * np.cos(w * t)])
+
+
+def _rss(y, X):
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    r = y - X @ coef
+    return float(r @ r), coef
+
+
+#: fewest relaxation curves: the ring is tested as a common (coherent) response to the step across curves
+MIN_RINGING_CURVES = 3
+
+
+def _hotelling(coefs: np.ndarray) -> dict | None:
+    """One-sample Hotelling T^2 test that the mean of the per-curve (a, b) ring coefficients is zero:
+    F = (n - 2) / (2 (n - 1)) T^2 ~ F(2, n - 2). The curves are the replicates, so within-curve noise that
+    decays or is autocorrelated does not enter the error term."""
+    n = coefs.shape[0]
+    if n < MIN_RINGING_CURVES or not np.isfinite(coefs).all():
+        return None
+    m = coefs.mean(axis=0)
+    S = np.cov(coefs, rowvar=False)
+    try:
+        t2 = float(n * m @ np.linalg.solve(S, m))
+    except np.linalg.LinAlgError:
+        return None
+    f = (n - 2) / (2.0 * (n - 1)) * t2
+    return {"statistic": f, "log10_p": st.log10_p_from_f(f, 2.0, float(n - 2))}
+
+
+def _best_pair(curves, grid, full: bool = False):
+    """(period, decay) of the grid with the strongest coherent ring (smallest Hotelling p) over ``curves``;
+    with ``full`` also its test, as (period, decay, test); None when no pair is testable."""
+    best = None
+    for p, tau in grid:
+        coefs = np.array([_rss(c[2], np.column_stack([_trend(c[1]), _ring(c[1], p, tau)]))[1][3:5] / max(c[3], 1e-300)
+                          for c in curves])
+        h = _hotelling(coefs)
+        if h is not None and (best is None or h["log10_p"] < best[2]["log10_p"]):
+            best = (p, tau, h)
+    if best is None:
+        return None
+    return best if full else best[:2]
+
+
+def _refine(curves, start: tuple[float, float]) -> tuple[float, float]:
+    """(period, decay) minimising the pooled residual sum of squares of trend + damped sine over ``curves``
+    (variable projection, Nelder-Mead in log P, log tau from the grid's pick). Used for the fix only: the
+    p-value stays the grid's (Bonferroni)."""
+    def cost(x):
+        p_, tau_ = np.exp(x)
+        return sum(_rss(c[2] / max(c[3], 1e-300), np.column_stack([_trend(c[1]), _ring(c[1], p_, tau_)]))[0]
+                   for c in curves)
+
+    res = minimize(cost, np.log(start), method="Nelder-Mead", options={"xatol": 1e-3, "fatol": 1e-12})
+    return tuple(np.exp(res.x)) if res.success and cost(res.x) <= cost(np.log(start)) else start
+
+
+def detect_inertial_ringing(ctx: DiagnosisContext) -> dict:
+    """Damped oscillation in the early relaxation residual (module docstring, "Inertial ringing")."""
+    t = ctx.table
+    if t.empty or "time_in_test" not in t:
+        return untested_finding(RINGING, "not testable here: no relaxation test")
+    rows = t[(t["test"] == "stress_relaxation") & (t["quantity"] == "shear_stress") & np.isfinite(t["residual"])
+             & np.isfinite(t["time_in_test"])]
+    curves = []
+    for cid, g in rows.groupby("curve", sort=False):
+        e = _early_window(g)
+        if len(e) >= MIN_EARLY_POINTS:
+            curves.append((cid, e["time_in_test"].to_numpy(float), e["residual"].to_numpy(float),
+                           float(np.median(np.abs(e["predicted"])))))
+    if not curves:
+        return untested_finding(RINGING, f"not testable here: no relaxation curve with >= {MIN_EARLY_POINTS} points in "
+                                         f"its early window")
+    dt = float(np.median(np.concatenate([np.diff(c[1]) for c in curves])))
+    span = float(np.median([c[1].max() - c[1].min() for c in curves]))
+    if span < 8 * dt:
+        return untested_finding(RINGING, "not testable here: the early relaxation window holds fewer than two "
+                                         "oscillation periods at the sampling interval")
+    if len(curves) < MIN_RINGING_CURVES:
+        return untested_finding(RINGING, f"not testable here: {len(curves)} relaxation curve(s); the coherence test of a "
+                                         f"ringing needs >= {MIN_RINGING_CURVES}")
+    periods = np.geomspace(4 * dt, span / 2, N_PERIODS)
+    grid = [(p, m * p) for p in periods for m in DAMPING_IN_PERIODS]
+    best = _best_pair(curves, grid, full=True)
+    if best is None:
+        return untested_finding(RINGING, "not testable here: the ring coefficients of the curves are degenerate")
+    p, tau, h = best
+    # the best of len(grid) (period, damping) pairs: Bonferroni over the grid (the frequency of a ringing is
+    # not defined under the null, so the p-value of the best pair alone would be anti-conservative)
+    lp = min(0.0, h["log10_p"] + np.log10(len(grid)))
+    f, df1, df2 = h["statistic"], 2, len(curves) - 2
+    test = {"statistic": float(f), "p_value": 10 ** lp, "log10_p": float(lp)}
+    # size: first ring amplitude relative to the stress level of the window, median over curves
+    amps = []
+    for cid, tt, y, level in curves:
+        _, coef = _rss(y, np.column_stack([_trend(tt), _ring(tt, p, tau)]))
+        amps.append(np.hypot(coef[3], coef[4]) / max(level, 1e-300))
+    size = float(np.median(amps))
+    # held out: period and damping from the other curves (or all when one curve), amplitudes fitted on the
+    # even points of the held-out curve and scored on its odd points; before = trend only
+    eb, ea = [], []
+    for i, (cid, tt, y, level) in enumerate(curves):
+        others = [c for j, c in enumerate(curves) if j != i]
+        pick = _refine(others, _best_pair(others, grid) if len(others) >= MIN_RINGING_CURVES else (p, tau))
+        ev = np.arange(tt.size) % 2 == 0
+        od = ~ev & (tt - tt.min() <= 3 * pick[1])      # scored where the ringing is: 3 decay times
+        Xb, Xa = _trend(tt), np.column_stack([_trend(tt), _ring(tt, *pick)])
+        _, cb = _rss(y[ev], Xb[ev])
+        _, ca = _rss(y[ev], Xa[ev])
+        if od.any():
+            eb.append((y[od] - Xb[od] @ cb) / max(level, 1e-300))
+            ea.append((y[od] - Xa[od] @ ca) / max(level, 1e-300))
+    if not eb:
+        eb, ea = [np.array([np.nan])], [np.array([np.nan])]
+    before = float(np.sqrt(np.mean(np.concatenate(eb) ** 2)))
+    after = float(np.sqrt(np.mean(np.concatenate(ea) ** 2)))
+    evidence = (f"The early relaxation residuals of {ctx.model} ({len(curves)} curves, t <= sqrt(t_min t_max)) "
+                f"hold a damped oscillation: period {p:.3g} s, decay time {tau:.3g} s, first amplitude "
+                f"{100 * size:.3g} % of the stress level (median over curves), coherent across curves: Hotelling "
+                f"F = {f:.2f} ({df1}, {df2}) on the per-curve ring coefficients over a smooth trend in log t, "
+                f"Bonferroni over {len(grid)} (period, decay) pairs. A relaxing material "
+                f"cannot oscillate: this is the motor-sample system ringing after the step.")
+    fix = fix_record("damped-sine term (period, decay from the other curves) in the early window, or excluding "
+                     f"t < {3 * tau:.3g} s", "rms_rel_residual_odd_points", before, after,
+                     "leave-one-curve-out period/decay; amplitudes on even points, scored on odd points",
+                     period_s=p, decay_s=tau)
+    return make_finding(RINGING, test, "F", size, "first ring amplitude / stress level", size >= 0.05, evidence,
+                        fix, period_s=p, decay_s=tau)

@@ -1,0 +1,231 @@
+"""Temperature dependence as a named cause (``temperature_dependence``).
+
+Detection
+---------
+The temperature of every run is read from the data: the median of its logged ``temperature`` channel, else
+its ``temperature_c`` attribute (sample sheet / export); never a default
+(:func:`tissuemech.tts.run_temperature_c`). When fewer than :data:`MIN_TEMPERATURES` distinct temperatures
+(rounded to :data:`TEMPERATURE_RESOLUTION_C`) are present the cause is not testable.
+
+The per-curve level of the baseline's residual (:func:`tissuemech.diagnosis.catalogue.curve_levels`: median
+ln(observed/predicted) on the lower half of each curve) is regressed on the run temperature
+(:func:`tissuemech.diagnosis.catalogue.level_regression`, sample/condition fixed effects where the design
+allows, cluster-robust by sample; elapsed time as a control when it varies and is not collinear with
+temperature; with >= 5 distinct temperatures the p-value is the joint F-test of T and
+T^2, because shift factors are curved in T; and the two-stage between-sample test when >= 5 samples); the
+stronger with a Bonferroni factor 2. ``effect_size`` is the change of the curve level (ln) over the 5-95 % range of
+temperatures, practical when >= :data:`tissuemech.diagnosis.generic.MIN_EFFECT`.
+
+Fix and held-out gain (leave-one-temperature-out)
+-------------------------------------------------
+Where frequency sweeps exist at >= :data:`MIN_TEMPERATURES` temperatures: for every temperature, the
+sweeps at the *other* temperatures are shifted automatically (:func:`tissuemech.tts.shift_factors`), a WLF
+function is fitted to their log aT(T) (Arrhenius if WLF fails, linear interpolation of log aT if both fail;
+the one used is reported), log aT of the held-out temperature is predicted from it and the held-out sweep is
+predicted from the training mastercurve (:func:`tissuemech.tts.predict_from_mastercurve`). "Before" is the
+temperature-blind prediction from the same training sweeps (their unshifted pooled curve at the held-out
+frequencies: what a model without temperature predicts). Metric: RMS of log10 G' and log10 G'' errors
+(decades) over the held-out points both predictions cover; ``gain = (before - after) / before``. Without
+sweeps at several temperatures the fix is not evaluated (``fix`` None).
+
+The finding carries ``shift_factors`` (:meth:`tissuemech.tts.TTSResult.to_dict` of all sweeps), ``wlf`` and
+``arrhenius`` (parameters with standard errors) and ``temperatures_c``.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pandas as pd
+import xarray as xr
+
+from .. import tts
+from . import stats as st
+from .catalogue import (DiagnosisContext, between_sample_test, curve_levels, make_finding, fix_record,
+                        level_regression, untested_finding)
+from .evidence import run_id
+from .generic import CONFOUNDED_R2, MIN_EFFECT
+
+EFFECT = "temperature_dependence"
+#: fewest distinct run temperatures for a test (a slope and a held-out temperature need three)
+MIN_TEMPERATURES = 3
+#: temperatures closer than this are one temperature (degC); the set-point stability of rheometer Peltier
+#: and oven controls is about +-0.1 degC, so 0.5 degC separates set points, not sensor noise
+TEMPERATURE_RESOLUTION_C = 0.5
+
+
+def curve_temperatures(runs: Sequence[xr.Dataset]) -> dict[str, float]:
+    """Temperature [degC] of every run with one, keyed by the residual table's curve id."""
+    out = {}
+    for r in runs:
+        t = tts.run_temperature_c(r)
+        if np.isfinite(t):
+            out[run_id(r)] = t
+    return out
+
+
+def distinct_temperatures(temps) -> np.ndarray:
+    """Distinct temperatures after rounding to :data:`TEMPERATURE_RESOLUTION_C`."""
+    t = np.asarray(list(temps), float)
+    t = t[np.isfinite(t)]
+    return np.unique(np.round(t / TEMPERATURE_RESOLUTION_C) * TEMPERATURE_RESOLUTION_C)
+
+
+def _shift_function(res: tts.TTSResult):
+    """Callable log aT(T) fitted to ``res`` and its name: WLF, else Arrhenius, else linear interpolation."""
+    ok = np.isfinite(res.log_aT)
+    wlf = tts.fit_wlf(res.temperatures_c[ok], res.log_aT[ok], res.log_aT_stderr[ok], res.t_ref_c)
+    if wlf.get("success") and np.isfinite(wlf.get("c1", np.nan)):
+        return (lambda t: tts.wlf_log_aT(t, wlf["c1"], wlf["c2_k"], res.t_ref_c)), "WLF"
+    arr = tts.fit_arrhenius(res.temperatures_c[ok], res.log_aT[ok], res.log_aT_stderr[ok], res.t_ref_c)
+    if arr.get("success") and np.isfinite(arr.get("ea_j_per_mol", np.nan)):
+        return (lambda t: tts.arrhenius_log_aT(t, arr["ea_j_per_mol"], res.t_ref_c)), "Arrhenius"
+    return (lambda t: np.interp(t, res.temperatures_c[ok], res.log_aT[ok])), "interpolated"
+
+
+def leave_one_temperature_out(sweeps: Sequence[tts.Sweep]) -> dict:
+    """Held-out comparison of the TTS prediction with the temperature-blind one (module docstring).
+
+    Returns ``before``, ``after`` (RMS decades), ``n_folds``, ``n_points``, ``shift_functions`` (name
+    used per fold) and ``per_temperature`` {T: [before, after]}."""
+    groups = np.round(np.array([s.temperature_c for s in sweeps]) / TEMPERATURE_RESOLUTION_C)
+    cache: dict = {}
+    before, after, used, per_t = [], [], [], {}
+    for g in np.unique(groups):
+        held = [s for s, k in zip(sweeps, groups) if k == g]
+        train = sorted((s for s, k in zip(sweeps, groups) if k != g), key=lambda s: s.temperature_c)
+        if len(distinct_temperatures(s.temperature_c for s in train)) < 2:
+            continue
+        try:
+            res = tts.shift_factors(train, cache=cache)
+        except ValueError:
+            continue
+        func, name = _shift_function(res)
+        mx, my = tts.mastercurve(train, res.log_aT)
+        bx, by = tts.mastercurve(train, np.zeros(len(train)))
+        eb, ea = [], []
+        for s in held:
+            la = float(func(s.temperature_c))
+            p_after = tts.predict_from_mastercurve(mx, my, s.log_w, la) if np.isfinite(la) else np.full((s.omega.size, 2), np.nan)
+            p_before = tts.predict_from_mastercurve(bx, by, s.log_w, 0.0)
+            ok = np.isfinite(p_after) & np.isfinite(p_before)
+            eb.append((p_before - s.log_g)[ok])
+            ea.append((p_after - s.log_g)[ok])
+        eb, ea = np.concatenate(eb), np.concatenate(ea)
+        if eb.size:
+            before.append(eb)
+            after.append(ea)
+            used.append(name)
+            per_t[float(np.mean([s.temperature_c for s in held]))] = [float(np.sqrt(np.mean(eb ** 2))),
+                                                                     float(np.sqrt(np.mean(ea ** 2)))]
+    if not before:
+        return {"before": np.nan, "after": np.nan, "n_folds": 0, "n_points": 0, "shift_functions": [],
+                "per_temperature": {}}
+    b, a = np.concatenate(before), np.concatenate(after)
+    return {"before": float(np.sqrt(np.mean(b ** 2))), "after": float(np.sqrt(np.mean(a ** 2))),
+            "n_folds": len(before), "n_points": int(b.size), "shift_functions": used, "per_temperature": per_t}
+
+
+def _time_control(levels: pd.DataFrame) -> list[str]:
+    """``["elapsed_h"]`` when elapsed time varies across curves and is not collinear with temperature (R^2 <
+    :data:`tissuemech.diagnosis.generic.CONFOUNDED_R2`): temperature is then tested given elapsed time (the two
+    compete for the same curve-level structure); [] otherwise (collinear sets are reported as confounded)."""
+    e = levels["elapsed_h"]
+    if not (e.notna().all() and e.nunique() > 2 and levels["temperature_c"].std() > 0 and e.std() > 0):
+        return []
+    r2 = float(np.corrcoef(levels["temperature_c"], e)[0, 1] ** 2)
+    return ["elapsed_h"] if r2 < CONFOUNDED_R2 else []
+
+
+def _curved_test(levels: pd.DataFrame, controls: Sequence[str] = ()) -> dict | None:
+    """Joint Wald F-test of temperature and (centred) temperature^2 in the curve-level regression (same
+    fixed effects and robust covariance as :func:`level_regression`); None with < 5 distinct temperatures."""
+    if levels["temperature_c"].nunique() < 5:
+        return None
+    t = levels["temperature_c"]
+    lv = levels.assign(temperature_sq=((t - t.mean()) / max(float(t.std()), 1e-12)) ** 2)
+    res = level_regression(lv, "log_scale", ["temperature_c", "temperature_sq"] + list(controls))
+    if res is None:
+        return None
+    names = list(res.params.index)
+    R = np.zeros((2, len(names)))
+    R[0, names.index("temperature_c")] = 1.0
+    R[1, names.index("temperature_sq")] = 1.0
+    w = res.f_test(R)
+    f = float(np.squeeze(w.fvalue))
+    df2 = float(w.df_denom)
+    return {"statistic": f, "df1": 2.0, "df2": df2, "log10_p": st.log10_p_from_f(f, 2.0, df2),
+            "p_value": 10 ** st.log10_p_from_f(f, 2.0, df2)}
+
+
+def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
+    """Curve levels of the baseline regressed on run temperature; fix = TTS scored on a held-out
+    temperature (module docstring)."""
+    temps = curve_temperatures(ctx.runs)
+    distinct = distinct_temperatures(temps.values())
+    if len(distinct) < MIN_TEMPERATURES:
+        why = ("no run temperature in the data (no temperature channel, no temperature_c)" if not temps else
+               f"runs are at {len(distinct)} distinct temperature(s) ({', '.join(f'{t:g}' for t in distinct)} "
+               f"degC); a temperature dependence needs >= {MIN_TEMPERATURES}")
+        return untested_finding(EFFECT, "not testable here: " + why)
+    levels = curve_levels(ctx.table)
+    levels = levels.assign(temperature_c=levels["curve"].map(temps)).dropna(subset=["temperature_c"])
+    if len(levels) < 4 or levels["temperature_c"].nunique() < MIN_TEMPERATURES:
+        return untested_finding(EFFECT, "not testable here: fewer than 4 residual curves with a temperature")
+    found = []
+    controls = _time_control(levels)
+    res = level_regression(levels, "log_scale", ["temperature_c"] + controls)
+    if res is not None:
+        lin = st.coefficient_test(res, "temperature_c")
+        design = (f"curve levels, fixed effects {res.fixed_effects or 'none'}"
+                  + (", elapsed-time control" if controls else ""))
+        joint = _curved_test(levels, controls)
+        if joint is not None:
+            # the slope gives the size; the p-value is the joint test of (T, T^2): shift factors are curved
+            # in T (WLF), so a straight line understates a temperature dependence
+            lin = dict(lin, statistic=joint["statistic"], p_value=joint["p_value"], log10_p=joint["log10_p"])
+            design += f", joint F of T and T^2 (df {joint['df1']:.0f}, {joint['df2']:.0f})"
+        found.append((lin, design))
+    b = between_sample_test(levels, "log_scale", "temperature_c")
+    if b is not None:
+        found.append((b, f"between samples ({b['design']})"))
+    if not found:
+        return untested_finding(EFFECT, "not testable here: temperature is collinear with the sample/condition "
+                                        "fixed effects of this design")
+    t, design = min(found, key=lambda f: f[0]["log10_p"])
+    lp = min(0.0, t["log10_p"] + np.log10(len(found)))
+    t = dict(t, log10_p=lp, p_value=10 ** lp)
+    lo, hi = np.nanquantile(levels["temperature_c"], [0.05, 0.95])
+    size = float(t["estimate"] * (hi - lo))
+    sweeps = tts.sweeps_from_runs(ctx.runs)
+    extra: dict = {"temperatures_c": [float(x) for x in distinct]}
+    fix = None
+    fix_txt = " No frequency sweeps at several temperatures: the TTS fix is not evaluated."
+    if len(distinct_temperatures(s.temperature_c for s in sweeps)) >= MIN_TEMPERATURES:
+        full = tts.shift_factors(sweeps)
+        ok = np.isfinite(full.log_aT)
+        wlf = tts.fit_wlf(full.temperatures_c[ok], full.log_aT[ok], full.log_aT_stderr[ok], full.t_ref_c)
+        arr = tts.fit_arrhenius(full.temperatures_c[ok], full.log_aT[ok], full.log_aT_stderr[ok], full.t_ref_c)
+        extra.update(shift_factors=full.to_dict(), wlf=wlf, arrhenius=arr)
+        cv = leave_one_temperature_out(sweeps)
+        names = sorted(set(cv["shift_functions"]))
+        fix = fix_record("time-temperature superposition: mastercurve of the training temperatures, log aT(T) by "
+                         + "/".join(names or ["WLF"]), "rms_log10_modulus_decades", cv["before"], cv["after"],
+                         "leave-one-temperature-out", **({"c1": wlf["c1"], "c2_k": wlf["c2_k"],
+                                                          "t_ref_c": full.t_ref_c} if wlf.get("success") else {}))
+        extra["held_out"] = cv
+        span = (np.nanmax(full.log_aT) - np.nanmin(full.log_aT)) if ok.any() else np.nan
+        fix_txt = (f" Shifting the {len(sweeps)} frequency sweeps gives log aT from {np.nanmax(full.log_aT):+.2f} to "
+                   f"{np.nanmin(full.log_aT):+.2f} ({span:.1f} decades, Tref = {full.t_ref_c:.1f} degC, "
+                   f"{int((~ok).sum())} NaN)"
+                   + (f"; WLF C1 = {wlf['c1']:.3g} +- {wlf['c1_stderr']:.2g}, C2 = {wlf['c2_k']:.3g} +- "
+                      f"{wlf['c2_k_stderr']:.2g} K" if wlf.get("success") else "")
+                   + f". Leaving each temperature out, the TTS prediction of its sweep errs by {cv['after']:.3g} "
+                     f"decades against {cv['before']:.3g} for the temperature-blind prediction ({cv['n_folds']} "
+                     f"folds, {cv['n_points']} values).")
+    evidence = (f"Curve levels ln(observed/predicted) of {ctx.model} change by {size:+.3g} over "
+                f"{lo:.3g}..{hi:.3g} degC across {len(levels)} curves at {len(distinct)} temperatures "
+                f"({', '.join(sorted(levels['test'].unique()))}; {design}; "
+                f"{'F' if 'joint F' in design else 't'} = {t['statistic']:.2f}, p = {t['p_value']:.2g}).{fix_txt}")
+    return make_finding(EFFECT, t, "F" if "joint F" in design else "t", size, "ln(observed/predicted) over the temperature range",
+                   abs(size) >= MIN_EFFECT, evidence, fix, **extra)

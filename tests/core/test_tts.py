@@ -1,0 +1,113 @@
+"""Time-temperature superposition: synthetic Prony/WLF truth shifted back, real TA LIMS cooling series."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tissuemech import tts
+
+REAL = Path("../shared/data/real")
+LIMS = REAL / "ta_lims" / "ares_g2_frequency_sweep_tts.txt"
+
+# truth: Prony spectrum at Tref (modes 1 us .. 100 s), WLF with the "universal" constants
+TAUS = 10.0 ** np.arange(-6.0, 2.5, 1.0)
+WEIGHTS = 1e6 * 10.0 ** (-0.35 * np.arange(TAUS.size))
+G_EQ = 1e3
+C1, C2, TREF = 8.86, 101.6, 40.0
+
+
+def prony_moduli(omega):
+    wt = np.outer(omega, TAUS)
+    g1 = G_EQ + (WEIGHTS * wt ** 2 / (1 + wt ** 2)).sum(axis=1)
+    g2 = (WEIGHTS * wt / (1 + wt ** 2)).sum(axis=1)
+    return g1, g2
+
+
+def synthetic_sweeps(temps, noise=0.01, seed=0, vertical=None):
+    rng = np.random.default_rng(seed)
+    omega = np.logspace(-1, 2, 16)    # 0.1-100 rad/s, as a typical sweep
+    out = []
+    for k, t in enumerate(temps):
+        la = -C1 * (t - TREF) / (C2 + t - TREF)
+        g1, g2 = prony_moduli(omega * 10 ** la)
+        b = 1.0 if vertical is None else 10 ** vertical[k]
+        g1 = g1 / b * np.exp(noise * rng.standard_normal(omega.size))   # reduced G_r = b_T G
+        g2 = g2 / b * np.exp(noise * rng.standard_normal(omega.size))
+        out.append(tts.Sweep(t, omega, g1, g2, f"T{t:g}"))
+    return out
+
+
+def test_synthetic_wlf_truth_is_shifted_back():
+    temps = np.arange(0.0, 101.0, 10.0)
+    res = tts.shift_factors(synthetic_sweeps(temps), t_ref_c=TREF)
+    truth = tts.wlf_log_aT(temps, C1, C2, TREF)
+    assert res.t_ref_c == TREF
+    assert np.all(np.isfinite(res.log_aT))
+    # 1 % noise on 16-point sweeps: every chained shift within 0.05 decades of the truth
+    np.testing.assert_allclose(res.log_aT, truth, atol=0.05)
+    # the stated uncertainty covers the error (|error| < 4 stderr + a small floor for interpolation bias)
+    assert np.all(np.abs(res.log_aT - truth) <= 4 * res.log_aT_stderr + 0.02)
+    wlf = tts.fit_wlf(res.temperatures_c, res.log_aT, res.log_aT_stderr, res.t_ref_c)
+    assert wlf["success"]
+    assert wlf["c1"] == pytest.approx(C1, rel=0.1)
+    assert wlf["c2_k"] == pytest.approx(C2, rel=0.1)
+    assert np.isfinite(wlf["c1_stderr"]) and wlf["c1_stderr"] > 0
+
+
+def test_vertical_shift_recovers_a_known_modulus_factor():
+    temps = np.arange(20.0, 61.0, 10.0)
+    vert = 0.02 * (temps - TREF) / 10.0          # known log bT
+    res = tts.shift_factors(synthetic_sweeps(temps, noise=0.003, vertical=vert), t_ref_c=TREF, vertical=True)
+    np.testing.assert_allclose(res.log_bT, vert, atol=0.01)
+    np.testing.assert_allclose(res.log_aT, tts.wlf_log_aT(temps, C1, C2, TREF), atol=0.06)
+
+
+def test_arrhenius_fit_recovers_activation_energy():
+    temps = np.arange(20.0, 81.0, 10.0)
+    la = tts.arrhenius_log_aT(temps, 80e3, 50.0)
+    fit = tts.fit_arrhenius(temps, la, np.full(temps.size, 0.01), 50.0)
+    assert fit["ea_j_per_mol"] == pytest.approx(80e3, rel=1e-4)
+    # hand check of the formula at 20 degC: 80e3/(8.314462618 ln10) (1/293.15 - 1/323.15) = 1.3233
+    assert la[0] == pytest.approx(1.3233, abs=1e-3)
+
+
+def test_mastercurve_predicts_a_held_out_temperature():
+    temps = np.arange(0.0, 101.0, 10.0)
+    sw = synthetic_sweeps(temps)
+    held = 5                                      # 50 degC
+    train = [s for k, s in enumerate(sw) if k != held]
+    res = tts.shift_factors(train, t_ref_c=TREF)
+    wlf = tts.fit_wlf(res.temperatures_c, res.log_aT, res.log_aT_stderr, res.t_ref_c)
+    la = tts.wlf_log_aT(temps[held], wlf["c1"], wlf["c2_k"], res.t_ref_c)
+    mx, my = tts.mastercurve(sorted(train, key=lambda s: s.temperature_c), res.log_aT)
+    pred = tts.predict_from_mastercurve(mx, my, sw[held].log_w, la)
+    err = pred - sw[held].log_g
+    assert np.isfinite(err).all()
+    assert np.sqrt(np.mean(err ** 2)) < 0.02      # decades: ~ the 1 % noise (0.0043 decades) + shift error
+
+
+def test_too_few_sweeps_raise():
+    with pytest.raises(ValueError, match=">= 2 temperatures"):
+        tts.shift_factors(synthetic_sweeps([40.0]))
+
+
+@pytest.mark.skipif(not LIMS.exists(), reason="real data (../shared/data/real) absent")
+def test_real_lims_cooling_series_every_temperature_shifted():
+    from tissuemech.io.dispatch import read_export
+
+    blocks = read_export(LIMS)
+    sweeps = [tts.Sweep(float(np.nanmedian(b.data["temperature"])), b.data["angular_frequency"],
+                        b.data["storage_modulus"], b.data["loss_modulus"], b.name) for b in blocks]
+    assert len(sweeps) == 20
+    res = tts.shift_factors(sweeps, t_ref_c=30.0)
+    assert np.all(np.isfinite(res.log_aT)) and np.all(np.isfinite(res.log_aT_stderr))
+    assert res.temperatures_c[0] == pytest.approx(-40, abs=1) and res.temperatures_c[-1] == pytest.approx(150, abs=1)
+    assert np.all(np.diff(res.log_aT) < 0)        # monotonic: colder is slower
+    # RheoJAX's published factors on this series span +8.55 .. -3.98 (12.5 decades); reference-dependent,
+    # so compare the span loosely and the ends within a decade
+    assert res.log_aT[0] - res.log_aT[-1] == pytest.approx(8.55 + 3.98, abs=1.0)
+    assert res.log_aT[0] == pytest.approx(8.55, abs=1.0) and res.log_aT[-1] == pytest.approx(-3.98, abs=1.0)
+    wlf = tts.fit_wlf(res.temperatures_c, res.log_aT, res.log_aT_stderr, res.t_ref_c)
+    assert wlf["success"] and np.isfinite(wlf["c1_stderr"]) and np.isfinite(wlf["c2_k_stderr"])
