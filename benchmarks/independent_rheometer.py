@@ -99,7 +99,8 @@ def ml_spectrum(alpha: float, h: float = 0.25, tol: float = 1e-9) -> tuple[np.nd
     """Discrete spectrum (rates r_j, weights w_j) with ``E_alpha(-x**alpha) ~= sum w_j exp(-r_j x)``.
 
     Trapezoid rule in u = ln r on the Gorenflo-Mainardi spectral density K_alpha (module docstring),
-    0 < alpha < 1; the tails decay like exp(-alpha |u|) and are cut where they fall below ``tol``.
+    0 < alpha < 1; the tails decay like exp(-alpha |u|) and are cut where they fall below ``tol`` (absolute
+    error about 1e-9 with the defaults: step 0.25 in ln r, e.g. 333 modes at alpha = 0.5).
     """
     if not 0.0 < alpha < 1.0:
         raise ValueError("the spectral representation needs 0 < alpha < 1")
