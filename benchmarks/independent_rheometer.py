@@ -268,6 +268,11 @@ def draw_truth(rng: np.random.Generator) -> Truth:
 def draw_design(rng: np.random.Generator, effects: dict) -> list[dict]:
     """Per sample, a random subset of the tests in a random order, with random settings."""
     n_spec = int(rng.integers(1, 7))
+    if "outlier_specimen" in effects:
+        n_spec = max(n_spec, 2)        # an outlier needs other specimens (no extra draw: null designs unchanged)
+    min_samples = 1
+    if "temperature_dependence" in effects:   # at least 3 samples in all, so all 3 temperatures are run
+        min_samples = -(-3 // n_spec)
     tests = []
     f_max = _log_uniform(rng, 1.0, 20.0) if "instrument_inertia" not in effects else _log_uniform(rng, 50.0, 100.0)
     settings = {
@@ -289,7 +294,7 @@ def draw_design(rng: np.random.Generator, effects: dict) -> list[dict]:
     if "nonseparable_relaxation" in effects and "stress_relaxation" not in kinds:
         kinds.append("stress_relaxation")
     for s in range(n_spec):
-        for j in range(int(rng.integers(1, 4))):
+        for j in range(max(int(rng.integers(1, 4)), min_samples)):
             items = []
             for k in kinds:
                 if k == "constant_shear_rate":
