@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import os
+import shlex
 import subprocess
 import sys
 import time
@@ -176,7 +177,8 @@ def main(argv=None) -> int:
         rows = [one(j) for j in jobs]
     wall = time.perf_counter() - t0
     secs = np.array([r["seconds"] for r in rows]) if rows else np.zeros(1)
-    cmd = "PYTHONPATH=src python benchmarks/diagnosis_calibration.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    cmd = "PYTHONPATH=src python " + shlex.join(["benchmarks/diagnosis_calibration.py",
+                                                 *(argv if argv is not None else sys.argv[1:])])
     lines = [f"## {a.title}", "",
              f"- date: {dt.date.today().isoformat()}; machine: {machine()}; `--jobs {a.jobs}`",
              f"- command: `{cmd}`",
