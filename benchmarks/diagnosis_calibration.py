@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
+import json
 import os
 import shlex
 import subprocess
@@ -130,6 +131,11 @@ def null_table(rows: list[dict]) -> list[str]:
         lines.append(f"| {law} | {len(sub)} | {bad} | {', '.join(f'{e} ({c})' for e, c in det.most_common()) or '-'} | "
                      f"{', '.join(f'{e} ({c})' for e, c in unex.most_common(4)) or '-'} | "
                      f"{sum(bool(r['error']) for r in sub)} |")
+    lines += ["", "| truth kernel | datasets | false alarms |", "|---|---|---|"]
+    for kern in ("prony", "fractional"):
+        sub = [r for r in rows if r.get("kernel") == kern]
+        lines.append(f"| {kern} | {len(sub)} | {sum(bool(r['detected'] or r['unexplained'] or r['error']) for r in sub)} |")
+    lines += ["", "Seeds with a false alarm: " + (", ".join(str(r["seed"]) for r in fa) or "none")]
     errs = Counter(r["error"].split(":")[0] + ": " + r["error"].split(":", 1)[1][:80] for r in rows if r["error"])
     if errs:
         lines += ["", "Crashes: " + "; ".join(f"{e} ({c})" for e, c in errs.most_common(5))]
@@ -163,6 +169,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=20261123, help="first seed (null: seed + i; power: seed + 100000 + ...)")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--out", type=Path, default=None, help="markdown file to write (e.g. docs/calibration.md)")
+    ap.add_argument("--rows-json", type=Path, default=None, help="write every dataset's summary here (JSON)")
     ap.add_argument("--title", default="Diagnosis calibration on the independent generator")
     a = ap.parse_args(argv)
     jobs = [(None, 0.0, a.seed + i) for i in range(a.null)]
@@ -189,6 +196,8 @@ def main(argv=None) -> int:
     lines += null_table([r for r in rows if r["effect"] is None]) + [""]
     if a.power_reps:
         lines += power_table([r for r in rows if r["effect"] is not None], a.magnitudes) + [""]
+    if a.rows_json:
+        write_text(json.dumps(rows, indent=1, default=str), a.rows_json)
     text = "\n".join(lines)
     print(text)
     if a.out:
