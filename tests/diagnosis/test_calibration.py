@@ -152,6 +152,16 @@ def test_preconditioning_makes_the_first_test_of_each_sample_stiffer():
     np.testing.assert_allclose(later, 1.0, rtol=1e-9)
 
 
+def test_elapsed_time_drift_scales_moduli_with_the_session_clock():
+    base, _ = ir.generate(129)
+    drift, _ = ir.generate(129, {"elapsed_time_drift": 2.0})
+    for r, d in zip(base, drift):
+        hours = float(r["total_time"][0] - r["time"][0]) / 3600.0       # the session clock at the test start
+        q = "storage_modulus" if "storage_modulus" in r else "shear_stress"
+        # same seed, same noise draws: the ratio is the drift factor 1 + 2 x 10 %/h (up to the torque floor)
+        assert float(np.median(d[q] / r[q])) == pytest.approx(1.0 + 0.2 * hours, rel=1e-2)
+
+
 def test_unknown_effect_is_refused_by_name():
     with pytest.raises(ValueError, match="unknown effects \\['gravity'\\]"):
         ir.generate(1, {"gravity": 1.0})
