@@ -134,7 +134,8 @@ def null_table(rows: list[dict]) -> list[str]:
     lines += ["", "| truth kernel | datasets | false alarms |", "|---|---|---|"]
     for kern in ("prony", "fractional"):
         sub = [r for r in rows if r.get("kernel") == kern]
-        lines.append(f"| {kern} | {len(sub)} | {sum(bool(r['detected'] or r['unexplained'] or r['error']) for r in sub)} |")
+        bad = sum(bool(r["detected"] or r["unexplained"] or r["error"]) for r in sub)
+        lines.append(f"| {kern} | {len(sub)} | {bad} |")
     lines += ["", "Seeds with a false alarm: " + (", ".join(str(r["seed"]) for r in fa) or "none")]
     errs = Counter(r["error"].split(":")[0] + ": " + r["error"].split(":", 1)[1][:80] for r in rows if r["error"])
     if errs:
@@ -166,7 +167,8 @@ def main(argv=None) -> int:
     ap.add_argument("--null", type=int, default=200, help="number of null datasets")
     ap.add_argument("--power-reps", type=int, default=5, help="datasets per cause and magnitude")
     ap.add_argument("--magnitudes", type=float, nargs="+", default=[0.5, 1.0, 2.0])
-    ap.add_argument("--seed", type=int, default=20261123, help="first seed (null: seed + i; power: seed + 100000 + ...)")
+    ap.add_argument("--seed", type=int, default=20261123,
+                    help="first seed (null: seed + i; power: seed + 100000 + 1000 * cause index + i)")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--out", type=Path, default=None, help="markdown file to write (e.g. docs/calibration.md)")
     ap.add_argument("--rows-json", type=Path, default=None, help="write every dataset's summary here (JSON)")
@@ -191,7 +193,8 @@ def main(argv=None) -> int:
              f"- command: `{cmd}`",
              f"- baseline `{BASELINE}` fitted to the ramps and relaxations (target `{TARGET}`, relaxation history "
              f"`{RELAXATION}`), diagnosed by `benchmarks/diagnosis_calibration.diagnose_runs`",
-             f"- {len(rows)} datasets in {wall:.0f} s (per dataset: median {np.median(secs):.1f} s, max {secs.max():.1f} s)",
+             f"- {len(rows)} datasets in {wall:.0f} s "
+             f"(per dataset: median {np.median(secs):.1f} s, max {secs.max():.1f} s)",
              ""]
     lines += null_table([r for r in rows if r["effect"] is None]) + [""]
     if a.power_reps:

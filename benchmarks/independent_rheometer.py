@@ -318,7 +318,7 @@ def _shift_kernel(kernel: Kernel, a_t: float) -> Kernel:
     return Kernel(kernel.g_inf, kernel.g, kernel.tau * a_t, kernel.kind, kernel.alpha, kernel.tau_c * a_t)
 
 
-def _strain_run(kind, st, truth, kernel, factor, gap, effects, rng):
+def _strain_run(kind, st, truth, kernel, factor, gap, effects):
     """Constant-rate ramp or relaxation: reported (time, rim strain, torque) and the internal history."""
     if kind == "constant_shear_rate":
         dur = st["strain_max"] / st["rate"]
@@ -409,7 +409,8 @@ def generate(seed: int, effects: dict | None = None, dataset: str | None = None)
     spec_log = {s: float(rng.normal() * spec_sd) for s in spec_names}
     if "outlier_specimen" in effects and len(spec_names) > 1:
         out = str(rng.choice(spec_names))
-        spec_log[out] += float(np.log1p(EFFECT_SIZES["outlier_specimen"]["factor_minus_1"] * effects["outlier_specimen"]))
+        excess = EFFECT_SIZES["outlier_specimen"]["factor_minus_1"] * effects["outlier_specimen"]
+        spec_log[out] += float(np.log1p(excess))
         truth.specimens["outlier"] = out
     truth.specimens["log_factor"] = spec_log
     temps = [truth.temperature_c]
@@ -436,7 +437,8 @@ def generate(seed: int, effects: dict | None = None, dataset: str | None = None)
             elapsed_h = clock / 3600.0
             factor = float(np.exp(spec_log[smp["specimen"]] + sample_log))
             if "elapsed_time_drift" in effects:
-                factor *= 1.0 + EFFECT_SIZES["elapsed_time_drift"]["per_hour"] * effects["elapsed_time_drift"] * elapsed_h
+                per_h = EFFECT_SIZES["elapsed_time_drift"]["per_hour"] * effects["elapsed_time_drift"]
+                factor *= 1.0 + per_h * elapsed_h
             if "preconditioning" in effects and order == 1:
                 factor *= 1.0 + EFFECT_SIZES["preconditioning"]["first_load_excess"] * effects["preconditioning"]
             run_rng = np.random.default_rng([seed, si, order])
@@ -445,7 +447,7 @@ def generate(seed: int, effects: dict | None = None, dataset: str | None = None)
                      "gap_m": gap, "temperature_c": temp,
                      "started_at": (start + dt.timedelta(seconds=clock)).isoformat(timespec="seconds")}
             if kind in ("constant_shear_rate", "stress_relaxation"):
-                t, rim, torque, rep = _strain_run(kind, st, truth, kernel, factor, gap, effects, run_rng)
+                t, rim, torque, rep = _strain_run(kind, st, truth, kernel, factor, gap, effects)
                 m = torque[rep]
                 if "torque_offset" in effects:
                     if offset_torque is None:   # 5 % (1x) of this dataset's first ramp/relaxation median torque

@@ -49,8 +49,10 @@ def test_prony_ramp_and_hold_matches_closed_form():
     te = e0 * np.clip(t / rise, 0, 1)
     s = ir.qlv_stress(t, te, k)
     hold = t > rise
-    # Boltzmann integral of a linear ramp: g_inf e0 + sum g_i e0 tau_i/rise (1 - exp(-rise/tau_i)) exp(-(t - rise)/tau_i)
-    exact = g_inf * e0 + (e0 / rise * g * tau * -np.expm1(-rise / tau) * np.exp(-(t[hold] - rise)[:, None] / tau)).sum(1)
+    # Boltzmann integral of a linear ramp:
+    # g_inf e0 + sum g_i e0 tau_i/rise (1 - exp(-rise/tau_i)) exp(-(t - rise)/tau_i)
+    decay = np.exp(-(t[hold] - rise)[:, None] / tau)
+    exact = g_inf * e0 + (e0 / rise * g * tau * -np.expm1(-rise / tau) * decay).sum(1)
     np.testing.assert_allclose(s[hold], exact, rtol=1e-10)
     assert s[-1] == pytest.approx(g_inf * e0, rel=1e-6)          # t -> inf: the equilibrium part only
 
@@ -90,8 +92,8 @@ def test_fractional_kernel_matches_closed_form_modulus_and_ml_relaxation():
     np.testing.assert_allclose(dense, k.complex_modulus(w), rtol=1e-6)
 
 
-@pytest.mark.parametrize("law,p", [("neo_hookean", {}), ("mooney_rivlin", {"c01_share": 0.4}), ("ogden1", {"alpha": -7.0}),
-                                   ("gent", {"jm": 0.8}), ("exponential", {"b": 1.5})])
+@pytest.mark.parametrize("law,p", [("neo_hookean", {}), ("mooney_rivlin", {"c01_share": 0.4}),
+                                   ("ogden1", {"alpha": -7.0}), ("gent", {"jm": 0.8}), ("exponential", {"b": 1.5})])
 def test_every_law_has_small_strain_modulus_mu(law, p):
     assert ir.shear_law(law, np.array([1e-7]), 500.0, p)[0] / 1e-7 == pytest.approx(500.0, rel=1e-6)
 
@@ -143,8 +145,8 @@ def test_designs_vary_order_subset_and_counts():
 def test_preconditioning_makes_the_first_test_of_each_sample_stiffer():
     base, _ = ir.generate(112)
     pre, _ = ir.generate(112, {"preconditioning": 1.0})
-    ratio = {(r.attrs["specimen"], r.attrs["sample"], r.attrs["order"]): float(np.median(p["shear_stress"] / r["shear_stress"]))
-             for r, p in zip(base, pre)}
+    ratio = {(r.attrs["specimen"], r.attrs["sample"], r.attrs["order"]):
+             float(np.median(p["shear_stress"] / r["shear_stress"])) for r, p in zip(base, pre)}
     firsts = [v for k, v in ratio.items() if k[2] == 1]
     later = [v for k, v in ratio.items() if k[2] > 1]
     assert firsts and later
