@@ -18,6 +18,9 @@ Counted
 * **power**: for every effect of :data:`independent_rheometer.EFFECTS`, ``--power-reps`` datasets at 0.5x,
   1x and 2x (``--magnitudes``): detected under its own name, and which other cause was named instead.
 
+``--rows-json`` keeps every dataset's result; ``--from-json A.json B.json`` renders the tables of earlier runs
+merged (e.g. a long null study run in parts with different ``--seed``).
+
 Usage::
 
     PYTHONPATH=src .venv/bin/python benchmarks/diagnosis_calibration.py --null 20 --power-reps 1 \\
@@ -172,6 +175,8 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--out", type=Path, default=None, help="markdown file to write (e.g. docs/calibration.md)")
     ap.add_argument("--rows-json", type=Path, default=None, help="write every dataset's summary here (JSON)")
+    ap.add_argument("--from-json", type=Path, nargs="+", default=None,
+                    help="render the tables from earlier --rows-json files (merged) instead of running")
     ap.add_argument("--title", default="Diagnosis calibration on the independent generator")
     a = ap.parse_args(argv)
     jobs = [(None, 0.0, a.seed + i) for i in range(a.null)]
@@ -179,7 +184,11 @@ def main(argv=None) -> int:
         for m in a.magnitudes:
             jobs += [(eff, m, a.seed + 100000 + 1000 * k + i) for i in range(a.power_reps)]
     t0 = time.perf_counter()
-    if a.jobs > 1:
+    if a.from_json:
+        rows = [r for f in a.from_json for r in json.loads(f.read_text(encoding="utf-8"))]
+        a.power_reps = int(any(r["effect"] is not None for r in rows))
+        a.magnitudes = sorted({r["magnitude"] for r in rows if r["effect"] is not None}) or a.magnitudes
+    elif a.jobs > 1:
         with ProcessPoolExecutor(a.jobs) as ex:
             rows = list(ex.map(one, jobs))
     else:
@@ -189,17 +198,20 @@ def main(argv=None) -> int:
     cmd = "PYTHONPATH=src python " + shlex.join(["benchmarks/diagnosis_calibration.py",
                                                  *(argv if argv is not None else sys.argv[1:])])
     lines = [f"## {a.title}", "",
-             f"- date: {dt.date.today().isoformat()}; machine: {machine()}; `--jobs {a.jobs}`",
+             (f"- date: {dt.date.today().isoformat()}; machine: {machine()}; `--jobs {a.jobs}`" if not a.from_json
+              else f"- tables rendered {dt.date.today().isoformat()} from the --rows-json files of earlier runs "
+                   f"(their dates, machines and commands are stated with them)"),
              f"- command: `{cmd}`",
              f"- baseline `{BASELINE}` fitted to the ramps and relaxations (target `{TARGET}`, relaxation history "
              f"`{RELAXATION}`), diagnosed by `benchmarks/diagnosis_calibration.diagnose_runs`",
-             f"- {len(rows)} datasets in {wall:.0f} s "
-             f"(per dataset: median {np.median(secs):.1f} s, max {secs.max():.1f} s)",
+             f"- {len(rows)} datasets" + (f" from {', '.join(str(f) for f in a.from_json)}" if a.from_json
+                                          else f" in {wall:.0f} s")
+             + f" (per dataset: median {np.median(secs):.1f} s, max {secs.max():.1f} s)",
              ""]
     lines += null_table([r for r in rows if r["effect"] is None]) + [""]
     if a.power_reps:
         lines += power_table([r for r in rows if r["effect"] is not None], a.magnitudes) + [""]
-    if a.rows_json:
+    if a.rows_json and not a.from_json:
         write_text(json.dumps(rows, indent=1, default=str), a.rows_json)
     text = "\n".join(lines)
     print(text)
