@@ -18,8 +18,9 @@ Physics
   function of a negative argument is the completely monotone integral
   ``E_alpha(-x**alpha) = int_0^inf K_alpha(r) exp(-r x) dr``,
   ``K_alpha(r) = sin(alpha*pi)/pi * r**(alpha-1) / (r**(2 alpha) + 2 r**alpha cos(alpha*pi) + 1)``
-  (Gorenflo & Mainardi 1997, eq. 3.10; Mainardi 2010, *Fractional calculus and waves in linear
-  viscoelasticity*, eq. 3.33), evaluated by the trapezoid rule in log r (:func:`ml_spectrum`); the result
+  (the spectral representation of Gorenflo & Mainardi 1997, "Fractional calculus: integral and differential
+  equations of fractional order"; also Mainardi 2010, *Fractional calculus and waves in linear
+  viscoelasticity*, ch. 3), evaluated by the trapezoid rule in log r (:func:`ml_spectrum`); the result
   is a dense continuous Prony spectrum, so every kernel runs through the same exact recursive update
   (piecewise-linear tau_e in time, :func:`qlv_stress`).
 * **Plate**: the rim strain is ``theta*R/h``; the strain at radius r is ``gamma_R * r/R``; the torque is
