@@ -208,6 +208,8 @@ def main(argv=None) -> int:
     else:
         rows = [one(j) for j in jobs]
     wall = time.perf_counter() - t0
+    if a.rows_json and not a.from_json:   # first, so that no table bug can lose a long run
+        write_text(json.dumps(rows, indent=1, default=str), a.rows_json)
     secs = np.array([r["seconds"] for r in rows]) if rows else np.zeros(1)
     cmd = "PYTHONPATH=src python " + shlex.join(["benchmarks/diagnosis_calibration.py",
                                                  *(argv if argv is not None else sys.argv[1:])])
@@ -222,11 +224,11 @@ def main(argv=None) -> int:
                                           else f" in {wall:.0f} s")
              + f" (per dataset: median {np.median(secs):.1f} s, max {secs.max():.1f} s)",
              ""]
-    lines += null_table([r for r in rows if r["effect"] is None]) + [""]
+    null_rows = [r for r in rows if r["effect"] is None]
+    if null_rows:
+        lines += null_table(null_rows) + [""]
     if a.power_reps:
         lines += power_table([r for r in rows if r["effect"] is not None], a.magnitudes) + [""]
-    if a.rows_json and not a.from_json:
-        write_text(json.dumps(rows, indent=1, default=str), a.rows_json)
     text = "\n".join(lines)
     print(text)
     if a.out:
