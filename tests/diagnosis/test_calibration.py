@@ -1,0 +1,189 @@
+"""CI subset of the diagnosis calibration (issue #12 item 7; full study: benchmarks/diagnosis_calibration.py).
+
+* the independent generator (benchmarks/independent_rheometer.py) against independent oracles: the torque
+  integral of a linear material, closed-form Prony ramp-and-hold responses, the Mittag-Leffler function at
+  alpha = 1 (exp) and alpha = 1/2 (erfcx), the fractional-Zener complex modulus, small-strain slopes;
+* the run contract (canonical variables, required attributes, reproducibility, no package physics imported);
+* a handful of small seeded null datasets on which the diagnosis must name nothing.
+"""
+from __future__ import annotations
+
+import ast
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.special import erfcx
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+import independent_rheometer as ir  # noqa: E402
+from diagnosis_calibration import alarms, diagnose_runs  # noqa: E402
+
+from tissuemech.canonical import CANONICAL_VARIABLES, REQUIRED_RUN_ATTRS  # noqa: E402
+
+
+# ------------------------------------------------------------------------------------------ oracles
+def test_torque_of_linear_material_is_g_theta_pi_r4_over_2h():
+    g_mod, theta, radius, gap = 850.0, 0.013, 0.0125, 0.0021
+    torque = ir.plate_torque(lambda r: ir.shear_law("neo_hookean", theta * r / gap, g_mod, {}), radius)
+    assert torque.item() == pytest.approx(g_mod * theta * np.pi * radius ** 4 / (2 * gap), rel=1e-12)
+    # the reported stress 2M/(pi R^3) is then the rim stress G theta R / h
+    assert 2 * torque.item() / (np.pi * radius ** 3) == pytest.approx(g_mod * theta * radius / gap, rel=1e-12)
+
+
+def test_torque_of_cubic_stress_needs_the_radial_integral():
+    # tau = c gamma^3 at gamma = gamma_R r/R: M = 2 pi c gamma_R^3 R^3 / 6, i.e. reported stress = (2/3) c gamma_R^3
+    c, g_r, radius = 1e4, 0.3, 0.008
+    torque = ir.plate_torque(lambda r: c * (g_r * r / radius) ** 3, radius)
+    assert 2 * torque.item() / (np.pi * radius ** 3) == pytest.approx(2.0 / 3.0 * c * g_r ** 3, rel=1e-12)
+
+
+def test_prony_ramp_and_hold_matches_closed_form():
+    g_inf, g, tau = 0.3, np.array([0.5, 0.2]), np.array([0.002, 40.0])
+    k = ir.prony_kernel(g_inf, g, tau)
+    rise, e0 = 0.1, 200.0   # elastic stress ramps linearly to e0 [Pa] over rise [s]
+    t = np.unique(np.r_[np.linspace(0, rise, 50), rise + np.geomspace(1e-5, 5000.0, 200)])
+    te = e0 * np.clip(t / rise, 0, 1)
+    s = ir.qlv_stress(t, te, k)
+    hold = t > rise
+    # Boltzmann integral of a linear ramp:
+    # g_inf e0 + sum g_i e0 tau_i/rise (1 - exp(-rise/tau_i)) exp(-(t - rise)/tau_i)
+    decay = np.exp(-(t[hold] - rise)[:, None] / tau)
+    exact = g_inf * e0 + (e0 / rise * g * tau * -np.expm1(-rise / tau) * decay).sum(1)
+    np.testing.assert_allclose(s[hold], exact, rtol=1e-10)
+    assert s[-1] == pytest.approx(g_inf * e0, rel=1e-6)          # t -> inf: the equilibrium part only
+
+
+def test_prony_step_gives_instantaneous_stress_then_relaxes():
+    k = ir.prony_kernel(0.25, np.array([0.45, 0.3]), np.array([0.001, 1000.0]))
+    t = np.array([0.0, 1e-12, 1e-9, 1e6])
+    s = ir.qlv_stress(t, np.array([0.0, 1.0, 1.0, 1.0]), k)
+    assert s[1] == pytest.approx(1.0, rel=1e-8)               # t = 0+: g(0) = g_inf + sum g_i = 1
+    assert s[-1] == pytest.approx(0.25, rel=1e-8)              # t -> inf: g_inf
+    np.testing.assert_allclose(k.relax(np.array([0.0, 1e7])), [1.0, 0.25])
+
+
+def test_mittag_leffler_alpha_one_is_exp_and_alpha_half_is_erfcx():
+    x = np.r_[0.0, np.geomspace(1e-4, 50.0, 40)]
+    np.testing.assert_allclose(ir.mittag_leffler_neg(1.0, x), np.exp(-x), rtol=1e-12, atol=1e-300)
+    # E_{1/2}(-x) = exp(x^2) erfc(x) (Gorenflo & Mainardi): both branches (series x <= 1,
+    # spectrum x > 1, whose tails are cut at 1e-9 absolute)
+    x = np.geomspace(1e-3, 1e3, 60)
+    np.testing.assert_allclose(ir.mittag_leffler_neg(0.5, x), erfcx(x), rtol=1e-7, atol=2e-9)
+
+
+def test_mittag_leffler_series_and_spectrum_agree_at_the_switch():
+    for alpha in (0.2, 0.5, 0.8):
+        r, w = ir.ml_spectrum(alpha)
+        series = ir.mittag_leffler_neg(alpha, np.array([1.0]))[0]
+        assert np.exp(-r) @ w == pytest.approx(series, rel=1e-7)
+
+
+def test_fractional_kernel_matches_closed_form_modulus_and_ml_relaxation():
+    k = ir.fractional_kernel(0.2, 0.4, 0.5)
+    t = np.geomspace(1e-4, 1e4, 30)
+    np.testing.assert_allclose(k.relax(t), 0.2 + 0.8 * ir.mittag_leffler_neg(0.4, (t / 0.5) ** 0.4), rtol=1e-6)
+    # the dense spectrum's Prony modulus vs the closed form G_inf + dG (iwt)^a / (1 + (iwt)^a)
+    w = np.geomspace(1e-3, 1e3, 20)
+    dense = ir.Kernel(k.g_inf, k.g, k.tau).complex_modulus(w)
+    np.testing.assert_allclose(dense, k.complex_modulus(w), rtol=1e-6)
+
+
+@pytest.mark.parametrize("law,p", [("neo_hookean", {}), ("mooney_rivlin", {"c01_share": 0.4}),
+                                   ("ogden1", {"alpha": -7.0}), ("gent", {"jm": 0.8}), ("exponential", {"b": 1.5})])
+def test_every_law_has_small_strain_modulus_mu(law, p):
+    assert ir.shear_law(law, np.array([1e-7]), 500.0, p)[0] / 1e-7 == pytest.approx(500.0, rel=1e-6)
+
+
+def test_ogden_alpha_two_is_neo_hookean_and_gent_stiffens():
+    g = np.linspace(0, 0.8, 9)
+    np.testing.assert_allclose(ir.shear_law("ogden1", g, 300.0, {"alpha": 2.0}), 300.0 * g, rtol=1e-12, atol=1e-12)
+    assert ir.shear_law("gent", np.array([0.5]), 1.0, {"jm": 1.0})[0] == pytest.approx(0.5 / 0.75)
+
+
+# ------------------------------------------------------------------------------------------ contract
+def test_generator_imports_no_package_physics():
+    tree = ast.parse((ROOT / "benchmarks" / "independent_rheometer.py").read_text())
+    mods = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)} | {
+        a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    assert not {m for m in mods if m and m.startswith(("tissuemech.synth", "tissuemech.models", "tissuemech.fitting"))}
+    assert {m for m in mods if m and m.startswith("tissuemech")} == {"tissuemech.canonical"}
+
+
+def test_generated_runs_follow_the_run_contract_and_are_reproducible():
+    runs, truth = ir.generate(107)
+    again, _ = ir.generate(107)
+    assert len(runs) == len(again) > 0
+    for r, q in zip(runs, again):
+        assert set(REQUIRED_RUN_ATTRS) <= set(r.attrs)
+        assert set(r.data_vars) <= set(CANONICAL_VARIABLES)
+        assert r.attrs["radius_m"] == pytest.approx(truth["radius_mm"] * 1e-3)
+        np.testing.assert_array_equal(r["shear_stress"].values, q["shear_stress"].values)
+        # the reported stress is the instrument's 2M/(pi R^3)
+        np.testing.assert_allclose(r["shear_stress"], 2 * r["torque"] / (np.pi * r.attrs["radius_m"] ** 3)
+                                   if r.attrs["test"] in ("constant_shear_rate", "stress_relaxation")
+                                   else r["shear_stress"])
+    assert 4.0 <= truth["radius_mm"] <= 25.0 and all(1.0 <= g <= 4.0 for g in truth["gap_mm"])
+    assert 0.002 <= truth["noise_rel"] <= 0.03
+
+
+def test_designs_vary_order_subset_and_counts():
+    firsts, counts, laws = set(), set(), set()
+    for seed in range(40):
+        rng = np.random.default_rng(seed)
+        laws.add(ir.draw_truth(rng).law)
+        design = ir.draw_design(rng, {})
+        firsts.add(design[0]["tests"][0][0])
+        counts.add(len({d["specimen"] for d in design}))
+    assert firsts == set(ir.TESTS)            # any test can come first
+    assert counts == set(range(1, 7)) and laws == set(ir.LAWS)
+
+
+def test_preconditioning_makes_the_first_test_of_each_sample_stiffer():
+    base, _ = ir.generate(112)
+    pre, _ = ir.generate(112, {"preconditioning": 1.0})
+    ratio = {(r.attrs["specimen"], r.attrs["sample"], r.attrs["order"]):
+             float(np.median(p["shear_stress"] / r["shear_stress"])) for r, p in zip(base, pre)}
+    firsts = [v for k, v in ratio.items() if k[2] == 1]
+    later = [v for k, v in ratio.items() if k[2] > 1]
+    assert firsts and later
+    np.testing.assert_allclose(firsts, 1.3, rtol=0.1)            # 30 % at 1x (same noise draw, hence ~exact)
+    np.testing.assert_allclose(later, 1.0, rtol=1e-9)
+
+
+def test_elapsed_time_drift_scales_moduli_with_the_session_clock():
+    base, _ = ir.generate(129)
+    drift, _ = ir.generate(129, {"elapsed_time_drift": 2.0})
+    for r, d in zip(base, drift):
+        hours = float(r["total_time"][0] - r["time"][0]) / 3600.0       # the session clock at the test start
+        q = "storage_modulus" if "storage_modulus" in r else "shear_stress"
+        # same seed, same noise draws: the ratio is the drift factor 1 + 2 x 10 %/h (up to the torque floor)
+        assert float(np.median(d[q] / r[q])) == pytest.approx(1.0 + 0.2 * hours, rel=1e-2)
+
+
+def test_unknown_effect_is_refused_by_name():
+    with pytest.raises(ValueError, match="unknown effects \\['gravity'\\]"):
+        ir.generate(1, {"gravity": 1.0})
+
+
+# ------------------------------------------------------------------------------------------ null diagnosis
+#: small seeded null datasets (4-10 runs each) whose truths and designs differ from the project's generator
+NULL_SEEDS = [107, 112, 103, 124, 129]
+#: seeds on which the current diagnosis raises something (measured; see docs/calibration.md). A detected
+#: ``baseline_inadequate`` is not a cause and does not fail the test (diagnosis_calibration.NOT_A_CAUSE).
+XFAIL_NULL: dict[int, str] = {
+    129: "one-term Ogden alpha -13.6 (strain-stiffening) with Prony modes at 15 ms, 53 ms, 320 s and 609 s "
+         "(outside the baseline's 0.1-100 s): 9 unexplained entries (strain, log_time, predicted_abs, "
+         "strain x log rate) on constant_shear_rate and stress_relaxation (measured 2026-11-24, current diagnosis)",
+}
+
+
+@pytest.mark.parametrize("seed", [pytest.param(s, marks=pytest.mark.xfail(reason=XFAIL_NULL[s], strict=False))
+                                  if s in XFAIL_NULL else s for s in NULL_SEEDS])
+def test_null_dataset_names_nothing(seed):
+    runs, truth = ir.generate(seed)
+    detected, unexplained = alarms(diagnose_runs(runs))
+    assert detected == [] and unexplained == [], f"{truth['law']}/{truth['kernel']}: {detected} {unexplained}"
