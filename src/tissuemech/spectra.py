@@ -19,9 +19,11 @@ optional fluidity ``1/eta_0``):
     J(t)  = J_g + sum_i j_i (1 - exp(-t/tau_i)) + t/eta_0,
     J'(w) = J_g + sum_i j_i / (1 + (w tau_i)^2),    J''(w) = sum_i j_i w tau_i / (1 + (w tau_i)^2) + 1/(w eta_0).
 
-* **Grid span (stated rule)**: the data window widened by one decade on each side: ``tau`` from
-  ``1/(10 w_max)`` to ``10/w_min`` for frequency data and from ``t_min/10`` to ``10 t_max`` for time data
-  (``t_min`` the smallest positive time). Modes outside that span are not identifiable from the data.
+* **Grid span (stated rule)**: ``tau`` from ``1/(10 w_max)`` to ``10/w_min`` for frequency data (the
+  window widened by one decade on each side: modes just outside it still shape G', G'' polynomially), and
+  from ``t_min`` to ``10 t_max`` for time data (``t_min`` the smallest positive time; no widening below it:
+  a mode one decade faster than the first sample has decayed by ``exp(-10)`` there, cannot be told from
+  zero, and took unbounded weight in trials). Modes outside that span are not identifiable from the data.
 * **Fit**: rows are relative residuals (each datum divided by its magnitude, or by its standard deviation
   when one is given), weights ``>= 0`` by NNLS (``scipy.optimize.nnls``), with Tikhonov regularisation
   ``lambda^2 ||D2 h / s||^2`` on the second differences ``D2`` of the spectrum weights (scaled by the largest
@@ -403,11 +405,11 @@ class Spectrum:
 # ------------------------------------------------------------------------------------------------
 # inversions
 # ------------------------------------------------------------------------------------------------
-def _grid(window: tuple[float, float], taus_s: np.ndarray | None, per_decade: float) -> np.ndarray:
+def _grid(window: tuple[float, float], taus_s: np.ndarray | None, per_decade: float,
+          below: float = EXTEND_DECADES) -> np.ndarray:
     if taus_s is not None:
         return np.asarray(taus_s, float)
-    f = 10.0 ** EXTEND_DECADES
-    return log_spaced_taus(window[0] / f, window[1] * f, per_decade)
+    return log_spaced_taus(window[0] / 10.0 ** below, window[1] * 10.0 ** EXTEND_DECADES, per_decade)
 
 
 def _scales(y: np.ndarray, sd: np.ndarray | None) -> np.ndarray:
@@ -480,7 +482,7 @@ def relaxation_spectrum_from_relaxation(time_s: np.ndarray, modulus_pa: np.ndarr
     t = np.asarray(time_s, float)
     y = np.asarray(modulus_pa, float)
     window = tau_window_from_time(t, 0.0)
-    taus = _grid(window, taus_s, per_decade)
+    taus = _grid(window, taus_s, per_decade, below=0.0)
     if strain is None:
         m = _finite(t, y) & (t > 0)
         part = np.exp(-t[m, None] / taus[None, :])
@@ -511,7 +513,7 @@ def retardation_spectrum_from_creep(time_s: np.ndarray, compliance_per_pa: np.nd
     t = np.asarray(time_s, float)
     y = np.asarray(compliance_per_pa, float)
     window = tau_window_from_time(t, 0.0)
-    taus = _grid(window, taus_s, per_decade)
+    taus = _grid(window, taus_s, per_decade, below=0.0)
     m = _finite(t, y) & (t > 0)
     free = [np.ones(int(m.sum()))] + ([t[m]] if flow else [])
     K = np.hstack([np.column_stack(free), 1.0 - np.exp(-t[m, None] / taus[None, :])])
@@ -634,7 +636,8 @@ def relaxation_predicts_sweep(time_s: np.ndarray, modulus_pa: np.ndarray, omega_
     -------
     dict with ``storage_pred``/``loss_pred`` (Pa), ``in_window`` (bool per frequency: ``1/w`` inside the
     relaxation's time window; outside it the prediction is an extrapolation), ``discrepancy_storage``,
-    ``discrepancy_loss``, ``discrepancy`` (RMS relative differences on in-window points, mean of the two),
+    ``discrepancy_loss`` (RMS of the differences over ``|G*|`` on in-window points), ``discrepancy`` (the
+    RMS of both),
     ``consistent``, ``verdict``, ``spectrum`` (the :class:`Spectrum`).
     """
     spec = relaxation_spectrum_from_relaxation(time_s, modulus_pa, per_decade=per_decade)
@@ -644,7 +647,7 @@ def relaxation_predicts_sweep(time_s: np.ndarray, modulus_pa: np.ndarray, omega_
     gp, gpp = np.asarray(storage_pa, float), np.asarray(loss_pa, float)
     mag = np.hypot(gp, gpp)[inside]
     d1, d2 = _rel_rms(g.real[inside], gp[inside], mag), _rel_rms(g.imag[inside], gpp[inside], mag)
-    d = 0.5 * (d1 + d2)
+    d = float(np.sqrt(0.5 * (d1 ** 2 + d2 ** 2)))
     ok, text = _verdict(d, tolerance)
     if not inside.any():
         ok, text = None, "not testable: no frequency inside the relaxation's time window"
