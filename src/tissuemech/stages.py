@@ -28,7 +28,9 @@ import xarray as xr
 from . import cards as cards_mod
 from . import fitting as F
 from . import ranking as R
-from .canonical import read_netcdf, write_text
+from . import spectra as S
+from .canonical import read_netcdf, write_netcdf, write_text
+from .curves import as_str, select_average
 from .models.registry import available_models, get_model
 
 logger = logging.getLogger(__name__)
@@ -366,3 +368,85 @@ def run_fem_indentation(card_paths: Sequence, out_nc, figure_path, punch_diamete
     write_netcdf(out, out_nc)
     plot_force_depth(series, figure_path, title="TLED flat-punch indentation per material card")
     return out
+
+
+# ------------------------------------------------------------------------------------------------
+# relaxation spectra of the averaged curves (issue 15 item 3): results/<ds>/spectrum.nc
+# ------------------------------------------------------------------------------------------------
+SPECTRUM_TESTS = ("frequency_sweep", "stress_relaxation")
+
+
+def _finite_sd(curve: xr.Dataset, name: str) -> np.ndarray | None:
+    sd = curve.get(f"{name}_sd")
+    if sd is None:
+        return None
+    sd = np.asarray(sd.values, float)
+    return sd if np.all(np.isfinite(sd) & (sd > 0)) else None
+
+
+def spectra_from_averages(averages: xr.Dataset) -> xr.Dataset:
+    """Relaxation spectrum of every averaged frequency sweep and stress relaxation (``tissuemech.spectra``).
+
+    Frequency sweeps: G' and G'' jointly, plus the Kramers-Kronig discrepancy of the sweep; relaxations:
+    the shear stress through the averaged strain history (ramp included). Rows are weighted by the sample
+    SD where every point has one (>= 2 samples), else by the relative misfit.
+
+    Returns
+    -------
+    xarray.Dataset with dims ``curve`` and ``tau`` (per-curve grids padded with NaN): ``tau`` [s],
+    ``weight`` and ``spectrum`` (H(tau)) [Pa], ``equilibrium_modulus`` [Pa], ``lambda``,
+    ``rel_rms_residual``, ``kk_discrepancy`` (NaN for relaxations), ``test``, ``condition``, ``source``.
+    Empty (no ``curve``) when the dataset has neither test.
+    """
+    tests = as_str(averages["test"].values)
+    labels = as_str(averages["condition"].values)
+    rows = []
+    for test, label in zip(tests, labels):
+        if test not in SPECTRUM_TESTS:
+            continue
+        c = select_average(averages, test, label)
+        kk = float("nan")
+        if test == "frequency_sweep":
+            w = (c["angular_frequency"].values if "angular_frequency" in c.coords
+                 else 2.0 * np.pi * c["frequency"].values)  # averages grid sweeps on frequency [Hz]
+            gp, gpp = c["storage_modulus_mean"].values, c["loss_modulus_mean"].values
+            spec = S.relaxation_spectrum_from_modulus(w, gp, gpp, sd_storage_pa=_finite_sd(c, "storage_modulus"),
+                                                      sd_loss_pa=_finite_sd(c, "loss_modulus"))
+            kk = S.kramers_kronig_check(w, gp, gpp)["discrepancy"]
+        else:
+            spec = S.relaxation_spectrum_from_relaxation(c["time"].values, c["shear_stress_mean"].values,
+                                                         strain=c["shear_strain_mean"].values,
+                                                         sd_pa=_finite_sd(c, "shear_stress"))
+        rows.append((test, label, spec, kk))
+    n_tau = max((r[2].tau_s.size for r in rows), default=0)
+
+    def pad(values: np.ndarray) -> np.ndarray:
+        return np.r_[values, np.full(n_tau - values.size, np.nan)]
+
+    return xr.Dataset(
+        {"tau": (("curve", "tau_index"), np.array([pad(r[2].tau_s) for r in rows]).reshape(len(rows), n_tau),
+                 {"units": "s", "long_name": "relaxation time of the inversion grid"}),
+         "weight": (("curve", "tau_index"), np.array([pad(r[2].weights) for r in rows]).reshape(len(rows), n_tau),
+                    {"units": "Pa", "long_name": "discrete relaxation weight h_i"}),
+         "spectrum": (("curve", "tau_index"),
+                      np.array([pad(r[2].continuous) for r in rows]).reshape(len(rows), n_tau),
+                      {"units": "Pa", "long_name": "continuous relaxation spectrum H(tau) = h_i / d ln tau"}),
+         "equilibrium_modulus": ("curve", np.array([r[2].equilibrium for r in rows], float), {"units": "Pa"}),
+         "lambda": ("curve", np.array([r[2].lam for r in rows], float),
+                    {"long_name": "Tikhonov parameter chosen by GCV"}),
+         "rel_rms_residual": ("curve", np.array([r[2].rel_rms_residual for r in rows], float)),
+         "kk_discrepancy": ("curve", np.array([r[3] for r in rows], float),
+                            {"long_name": "Kramers-Kronig discrepancy: joint-spectrum residual over |G*|"}),
+         "test": ("curve", np.array([r[0] for r in rows], dtype=str)),
+         "condition": ("curve", np.array([r[1] for r in rows], dtype=str)),
+         "source": ("curve", np.array([r[2].source for r in rows], dtype=str))},
+        attrs={"method": "NNLS + second-difference Tikhonov, lambda by GCV (tissuemech.spectra)",
+               "grid_rule": "tau 1/(10 w_max)..10/w_min for sweeps, t_min..10 t_max for time data, "
+                            f"{S.PER_DECADE} per decade"})
+
+
+def run_spectrum(averages_path, out_nc) -> xr.Dataset:
+    """Read ``averages.nc``, compute :func:`spectra_from_averages` and write it atomically to ``out_nc``."""
+    ds = spectra_from_averages(read_netcdf(averages_path))
+    write_netcdf(ds, out_nc)
+    return ds

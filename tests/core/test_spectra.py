@@ -188,3 +188,39 @@ def test_real_lims_sweep_spectrum_and_kk():
     kk_bad = sp.kramers_kronig_check(w, gp, 2 * gpp)
     assert kk["discrepancy"] < 0.01          # measured 0.002 (joint residual over |G*|)
     assert kk_bad["discrepancy"] > 10 * kk["discrepancy"]
+
+
+def test_spectra_from_averages_of_sweeps_and_relaxations(tmp_path):
+    from tissuemech import curves
+    from tissuemech.canonical import make_run_dataset, read_netcdf
+    from tissuemech.stages import run_spectrum
+
+    w = np.logspace(-1, 2, 16)
+    gs = sp.prony_complex_modulus(GE, G, TAU, w)
+    t = np.r_[np.linspace(0, 0.1, 11), np.geomspace(0.12, 300, 60)]
+    strain = np.minimum(t / 0.1, 1.0) * 0.01
+    model = get_model("prony3")
+    p = {"G_inf": GE, "G_1": G[0], "G_2": G[1], "G_3": G[2], "tau_1": TAU[0], "tau_2": TAU[1], "tau_3": TAU[2]}
+    runs = []
+    for k, scale in enumerate((0.98, 1.0, 1.02)):
+        runs.append(make_run_dataset(
+            {"angular_frequency": w, "frequency": w / (2 * np.pi), "storage_modulus": scale * gs.real,
+             "loss_modulus": scale * gs.imag},
+            {"test": "frequency_sweep", "specimen": "A", "sample": f"s{k}", "run": f"fs{k}", "strain_pct": 1.0}))
+        runs.append(make_run_dataset(
+            {"time": t, "shear_strain": strain, "shear_stress": scale * model.shear_stress_history(p, t, strain)},
+            {"test": "stress_relaxation", "specimen": "A", "sample": f"s{k}", "run": f"sr{k}", "strain_pct": 1.0}))
+    avg_path = tmp_path / "averages.nc"
+    curves.write_averages(curves.average_runs(runs), avg_path)
+    run_spectrum(avg_path, tmp_path / "spectrum.nc")
+    ds = read_netcdf(tmp_path / "spectrum.nc")
+    assert sorted(map(str, ds["test"].values)) == ["frequency_sweep", "stress_relaxation"]
+    for i in range(ds.sizes["curve"]):
+        tau = ds["tau"].values[i]
+        ok = np.isfinite(tau)
+        g_t = sp.prony_relaxation_modulus(float(ds["equilibrium_modulus"].values[i]), ds["weight"].values[i][ok],
+                                          tau[ok], np.array([0.1, 1.0, 10.0]))
+        np.testing.assert_allclose(g_t, sp.prony_relaxation_modulus(GE, G, TAU, np.array([0.1, 1.0, 10.0])),
+                                   rtol=0.03)
+    fs = int(np.flatnonzero(ds["test"].values == "frequency_sweep")[0])
+    assert ds["kk_discrepancy"].values[fs] < 0.01
