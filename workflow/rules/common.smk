@@ -153,6 +153,8 @@ def all_targets():
             f"results/{name}/averages.nc",
             f"results/{name}/lve.csv",
         ]
+        if set(dataset_tests(name)) & {"frequency_sweep", "stress_relaxation"}:
+            targets.append(f"results/{name}/spectrum.nc")
         if dataset_scopes_of(name):
             targets += [f"results/{name}/ranking.csv", f"results/{name}/fits.csv"]
         if diagnosis_scope(name) and (
