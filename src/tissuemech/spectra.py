@@ -250,8 +250,8 @@ def regularised_nnls(kernel: np.ndarray, data: np.ndarray, sigma: np.ndarray, n_
     Returns
     -------
     dict with ``x`` (solution, data units), ``lam``, ``lambda_grid``, ``gcv`` (one score per candidate;
-    NaN when ``lam`` was fixed), ``dof`` (trace of the influence matrix), ``rel_rms_residual``
-    (RMS of ``(K x - y)/sigma``).
+    NaN when ``lam`` was fixed), ``dof`` (trace of the influence matrix), ``rms_weighted_residual``
+    (RMS of ``(K x - y)/sigma``) and ``rel_rms_residual`` (RMS of ``(K x - y)/|y|``).
     """
     K = np.asarray(kernel, float)
     y = np.asarray(data, float)
@@ -285,9 +285,12 @@ def regularised_nnls(kernel: np.ndarray, data: np.ndarray, sigma: np.ndarray, n_
     gcv = np.array([n * rss / max(n - dof, 1e-12) ** 2 for _, rss, dof in sols])
     k = int(np.nanargmin(gcv)) if lam is None else 0
     u, rss, dof = sols[k]
-    return {"x": u * scale, "lam": float(grid[k]), "lambda_grid": grid,
+    x = u * scale
+    rel = (K @ x - y) / np.maximum(np.abs(y), 1e-12 * scale)
+    return {"x": x, "lam": float(grid[k]), "lambda_grid": grid,
             "gcv": gcv if lam is None else np.full(1, np.nan), "dof": dof,
-            "rel_rms_residual": float(math.sqrt(rss / n))}
+            "rms_weighted_residual": float(math.sqrt(rss / n)),
+            "rel_rms_residual": float(math.sqrt(np.mean(rel ** 2)))}
 
 
 # ------------------------------------------------------------------------------------------------
@@ -305,7 +308,7 @@ class Spectrum:
     weights : discrete weights ``h_i`` (Pa) or ``j_i`` (1/Pa)
     equilibrium, fluidity : see ``kind``
     lam : regularisation parameter used; ``lambda_grid``/``gcv``: the GCV curve
-    rel_rms_residual : RMS relative residual of the fit to the data
+    rel_rms_residual : RMS relative residual ``(fit - data)/|data|`` of the fit
     source : what was inverted (``"G'+G''"``, ``"G(t)"``, ``"J(t)"``, ``"J'+J''"``, ...)
     window_s : ``(tau_min, tau_max)`` of the data window before widening, s
     """

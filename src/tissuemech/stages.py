@@ -388,7 +388,9 @@ def spectra_from_averages(averages: xr.Dataset) -> xr.Dataset:
     """Relaxation spectrum of every averaged frequency sweep and stress relaxation (``tissuemech.spectra``).
 
     Frequency sweeps: G' and G'' jointly, plus the Kramers-Kronig discrepancy of the sweep; relaxations:
-    the shear stress through the averaged strain history (ramp included). Rows are weighted by the sample
+    the shear stress through the averaged strain history when the curve holds the ramp, else
+    ``G(t) = sigma/gamma_0`` as the response to an ideal step at ``t = 0`` (the averaged curve then starts in
+    the hold). Rows are weighted by the sample
     SD where every point has one (>= 2 samples), else by the relative misfit.
 
     Returns
@@ -414,9 +416,16 @@ def spectra_from_averages(averages: xr.Dataset) -> xr.Dataset:
                                                       sd_loss_pa=_finite_sd(c, "loss_modulus"))
             kk = S.kramers_kronig_check(w, gp, gpp)["discrepancy"]
         else:
-            spec = S.relaxation_spectrum_from_relaxation(c["time"].values, c["shear_stress_mean"].values,
-                                                         strain=c["shear_strain_mean"].values,
-                                                         sd_pa=_finite_sd(c, "shear_stress"))
+            t, stress = c["time"].values, c["shear_stress_mean"].values
+            strain = c["shear_strain_mean"].values
+            sd = _finite_sd(c, "shear_stress")
+            if np.nanmin(np.abs(strain)) >= 0.98 * np.nanmax(np.abs(strain)):
+                # the averaged curve holds the hold only: G(t) = sigma/gamma, step at t = 0 (thesis analysis)
+                gamma0 = float(np.nanmean(strain))
+                spec = S.relaxation_spectrum_from_relaxation(t, stress / gamma0,
+                                                             sd_pa=None if sd is None else sd / abs(gamma0))
+            else:  # the ramp is in the curve: invert through the strain history
+                spec = S.relaxation_spectrum_from_relaxation(t, stress, strain=strain, sd_pa=sd)
         rows.append((test, label, spec, kk))
     n_tau = max((r[2].tau_s.size for r in rows), default=0)
 
