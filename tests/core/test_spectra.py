@@ -210,11 +210,17 @@ def test_spectra_from_averages_of_sweeps_and_relaxations(tmp_path):
         runs.append(make_run_dataset(
             {"time": t, "shear_strain": strain, "shear_stress": scale * model.shear_stress_history(p, t, strain)},
             {"test": "stress_relaxation", "specimen": "A", "sample": f"s{k}", "run": f"sr{k}", "strain_pct": 1.0}))
+        hold = np.geomspace(0.01, 300, 60)  # a curve of the hold only: G(t) from an ideal step at t = 0
+        runs.append(make_run_dataset(
+            {"time": hold, "shear_strain": np.full(hold.size, 0.02),
+             "shear_stress": scale * 0.02 * sp.prony_relaxation_modulus(GE, G, TAU, hold)},
+            {"test": "stress_relaxation", "specimen": "A", "sample": f"s{k}", "run": f"h{k}", "strain_pct": 2.0}))
     avg_path = tmp_path / "averages.nc"
     curves.write_averages(curves.average_runs(runs), avg_path)
     run_spectrum(avg_path, tmp_path / "spectrum.nc")
     ds = read_netcdf(tmp_path / "spectrum.nc")
-    assert sorted(map(str, ds["test"].values)) == ["frequency_sweep", "stress_relaxation"]
+    assert sorted(map(str, ds["test"].values)) == ["frequency_sweep", "stress_relaxation", "stress_relaxation"]
+    assert sorted(map(str, ds["source"].values)) == ["G'+G''", "G(t)", "stress history"]
     for i in range(ds.sizes["curve"]):
         tau = ds["tau"].values[i]
         ok = np.isfinite(tau)
