@@ -366,23 +366,19 @@ class Spectrum:
         return kv_complex_compliance(j_g, j, tau, omega_rad_s, fl)
 
     def peaks(self) -> list[dict]:
-        """Modes of the continuous spectrum: one per local maximum of the weights, each with the weights
-        summed between the neighbouring local minima (``weight``, Pa or 1/Pa) and their weighted geometric
-        mean time (``tau_s``); sorted by decreasing weight."""
-        h = np.r_[0.0, self.weights, 0.0]
+        """Modes of the spectrum: one per local maximum of the weights. The grid is split at the smallest
+        weight between consecutive maxima; each part gives ``weight`` (its summed weights, Pa or 1/Pa),
+        ``tau_s`` (their weighted geometric mean time) and ``tau_peak_s`` (the maximum's time). Sorted by
+        decreasing weight."""
+        h = np.asarray(self.weights, float)
+        n = h.size
+        maxima = [i for i in range(n) if h[i] > 0 and (i == 0 or h[i] >= h[i - 1]) and (i == n - 1 or h[i] > h[i + 1])]
+        edges = [0] + [a + 1 + int(np.argmin(h[a + 1:b + 1])) for a, b in zip(maxima[:-1], maxima[1:])] + [n]
         out = []
-        maxima = [i for i in range(1, h.size - 1) if h[i] > 0 and h[i] >= h[i - 1] and h[i] > h[i + 1]]
-        for i in maxima:
-            lo = i
-            while lo > 1 and h[lo - 1] <= h[lo] and h[lo - 1] > 0:
-                lo -= 1
-            hi = i
-            while hi < h.size - 2 and h[hi + 1] < h[hi] and h[hi + 1] > 0:
-                hi += 1
-            w = self.weights[lo - 1:hi]
-            t = self.tau_s[lo - 1:hi]
+        for i, lo, hi in zip(maxima, edges[:-1], edges[1:]):
+            w, t = h[lo:hi], self.tau_s[lo:hi]
             out.append({"tau_s": float(np.exp(np.sum(w * np.log(t)) / w.sum())), "weight": float(w.sum()),
-                        "tau_peak_s": float(self.tau_s[i - 1])})
+                        "tau_peak_s": float(self.tau_s[i])})
         return sorted(out, key=lambda d: -d["weight"])
 
     def to_xarray(self) -> xr.Dataset:

@@ -230,3 +230,13 @@ def test_spectra_from_averages_of_sweeps_and_relaxations(tmp_path):
                                    rtol=0.03)
     fs = int(np.flatnonzero(ds["test"].values == "frequency_sweep")[0])
     assert ds["kk_discrepancy"].values[fs] < 0.01
+
+
+def test_peaks_partition_the_weights():
+    tau = np.geomspace(0.01, 100, 5)
+    spec = sp.Spectrum("relaxation", tau, np.array([1.0, 3.0, 0.5, 2.0, 0.0]), 0.0)
+    peaks = spec.peaks()
+    assert [p["tau_peak_s"] for p in peaks] == [0.1, 10.0]
+    # the minimum (0.5 at 1 s) belongs to one part only: the parts add up to the total
+    assert [p["weight"] for p in peaks] == [4.0, 2.5]
+    assert peaks[1]["tau_s"] == pytest.approx(np.exp((0.5 * np.log(1.0) + 2.0 * np.log(10.0)) / 2.5))
