@@ -44,9 +44,17 @@ the retardation (relaxation) times are the eigenvalues of a symmetric matrix (a 
 rank-one term, ``scipy.linalg.eigh``), the weights follow from the eigenvectors. Round trips on exact Prony
 data agree to ~1e-12 relative (tested to 1e-6). For *data* the route is: data -> regularised spectrum
 (above) -> exact interconversion of that discrete series -> any of ``G(t)``, ``G*(w)``, ``J(t)``,
-``J*(w)``. Its accuracy is that of the spectrum fit inside the data window (:attr:`Spectrum.rel_rms_residual`,
-1 % noise gives ~1 %); outside the window (``w`` beyond ``1/t``-range of the data, or the reverse) the
-result is an extrapolation and is marked as such by the consistency functions.
+``J*(w)``. Its accuracy is that of the spectrum fit inside the data window (:attr:`Spectrum.rel_rms_residual`):
+measured on a 3-mode Prony truth (G', G'' over 6 decades with 1 % noise, 20 noise seeds) J(t) within 0.6 %
+and G(t) within 1.2 % for ``t`` inside the window, mode times within 2 % and mode weights within 2 %. Outside
+the window (``w`` beyond the ``1/t`` range of the data, or the reverse) the result is an extrapolation and
+is marked as such by the consistency functions.
+
+The continuous spectrum itself is identified only in an integral sense: for a power law (springpot,
+``H = S tau^-a / Gamma(a)``) with 1 % noise, H summed over a decade in the middle of a 4-decade sweep is within
+~12-16 %, while pointwise H can oscillate by tens of percent and show holes, most where GCV picks a small
+``lambda`` (GCV is known to under-smooth at times). Use :meth:`Spectrum.peaks` or integrals, not single
+points of H.
 
 Kramers-Kronig consistency
 --------------------------
