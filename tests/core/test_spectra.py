@@ -1,14 +1,21 @@
 """Spectra, interconversion and Kramers-Kronig checks (issue 15 item 3) against independent oracles:
-a known Prony truth, closed-form SLS and Burgers creep, the existing generalized Kelvin-Voigt conversion of
-``models.linear`` and the real TA LIMS sweeps."""
+a known Prony truth, the closed-form spectrum of a power law (springpot), closed-form SLS and Burgers creep,
+the existing generalized Kelvin-Voigt conversion of ``models.linear``, the Booij-Thoone local KK estimate, and
+the real TA LIMS and TRIOS sweeps (skipped when ``../shared`` is absent)."""
 from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.special import gamma
 
+from tissuemech import curves
 from tissuemech import spectra as sp
+from tissuemech.canonical import make_run_dataset, read_netcdf
+from tissuemech.diagnosis.evidence import booij_thoone
+from tissuemech.io.dispatch import read_export
 from tissuemech.models.linear import gkv_relaxation_spectrum
 from tissuemech.models.registry import get_model
+from tissuemech.stages import run_spectrum
 
 REAL = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "real"
 LIMS = REAL / "ta_lims" / "ares_g2_frequency_sweep_tts.txt"
@@ -176,7 +183,6 @@ def test_to_xarray_and_errors():
 
 @pytest.mark.skipif(not LIMS.is_file(), reason="real TA LIMS export not available (../shared absent)")
 def test_real_lims_sweep_spectrum_and_kk():
-    from tissuemech.io.dispatch import read_export
 
     block = read_export(LIMS)[0]  # 150 degC
     d = block.data
@@ -191,9 +197,6 @@ def test_real_lims_sweep_spectrum_and_kk():
 
 
 def test_spectra_from_averages_of_sweeps_and_relaxations(tmp_path):
-    from tissuemech import curves
-    from tissuemech.canonical import make_run_dataset, read_netcdf
-    from tissuemech.stages import run_spectrum
 
     w = np.logspace(-1, 2, 16)
     gs = sp.prony_complex_modulus(GE, G, TAU, w)
@@ -247,7 +250,6 @@ def test_continuous_spectrum_of_a_power_law_matches_closed_form():
 
     The inversion is ill-posed pointwise; what is identified is H integrated over a decade. In the middle
     two decades of a 4-decade sweep with 1 % noise it is within 20 % (measured: 12 % over these seeds)."""
-    from scipy.special import gamma
 
     s_pa, a = 1000.0, 0.3
     w = np.logspace(-2, 2, 25)
@@ -285,8 +287,6 @@ def test_real_inertia_affected_sweep_is_flagged_against_a_clean_one():
     """The TRIOS fungi sweep (raw phase ~180 deg above ~5 rad/s: inertia, data README) is not KK-consistent;
     the local Booij-Thoone estimate (diagnosis.evidence, an independent route) agrees that its G'' is far
     from (pi/2) dG'/dln(w), while the LIMS sweep is consistent by both."""
-    from tissuemech.diagnosis.evidence import booij_thoone
-    from tissuemech.io.dispatch import read_export
 
     def sweep(path, index):
         d = next(b for b in read_export(path) if b.index == index).data
