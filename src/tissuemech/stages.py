@@ -12,6 +12,9 @@ A *scope* is a set of test kinds fitted jointly with a list of candidate models:
 
 Outputs of one scope (``run_fit_scope``): ``<fits_dir>/<model>.nc`` per fitted model, a ranking table, the
 cross-validation records, the recommendation, and material cards of every converged model.
+
+``run_spectrum`` writes ``spectrum.nc``: the relaxation spectrum (``tissuemech.spectra``) of every averaged
+frequency sweep and stress relaxation, with the Kramers-Kronig discrepancy of each sweep.
 """
 from __future__ import annotations
 
