@@ -218,13 +218,30 @@ def test_spectra_from_averages_of_sweeps_and_relaxations(tmp_path):
             {"time": hold, "shear_strain": np.full(hold.size, 0.02),
              "shear_stress": scale * 0.02 * sp.prony_relaxation_modulus(GE, G, TAU, hold)},
             {"test": "stress_relaxation", "specimen": "A", "sample": f"s{k}", "run": f"h{k}", "strain_pct": 2.0}))
+        # creep 40 Pa for 300 s, then recovery, of the SLS II solid (G1, G2, eta1) = (100, 300, 600)
+        tc = np.r_[np.geomspace(0.05, 300, 50), np.geomspace(300.5, 600, 10)]
+        j_sls = 1 / 100 - (1 / 100 - 1 / 400) * np.exp(-tc / (600 * 400 / (100 * 300)))
+        stress_c = np.where(tc <= 300, 40.0, 0.0)
+        strain_c = np.where(tc <= 300, 40.0 * j_sls, 40.0 * j_sls[49] * np.exp(-(tc - 300) / 8.0))
+        runs.append(make_run_dataset(
+            {"time": tc, "shear_strain": scale * strain_c, "shear_stress": stress_c},
+            {"test": "creep_recovery", "specimen": "A", "sample": f"s{k}", "run": f"cr{k}", "stress_pa": 40.0}))
     avg_path = tmp_path / "averages.nc"
     curves.write_averages(curves.average_runs(runs), avg_path)
     run_spectrum(avg_path, tmp_path / "spectrum.nc")
     ds = read_netcdf(tmp_path / "spectrum.nc")
-    assert sorted(map(str, ds["test"].values)) == ["frequency_sweep", "stress_relaxation", "stress_relaxation"]
-    assert sorted(map(str, ds["source"].values)) == ["G'+G''", "G(t)", "stress history"]
-    for i in range(ds.sizes["curve"]):
+    assert sorted(map(str, ds["test"].values)) == ["creep_recovery", "frequency_sweep", "stress_relaxation",
+                                                    "stress_relaxation"]
+    assert sorted(map(str, ds["source"].values)) == ["G'+G''", "G(t)", "J(t)", "stress history"]
+    cr = int(np.flatnonzero(ds["test"].values == "creep_recovery")[0])
+    assert str(ds["kind"].values[cr]) == "retardation" and np.isnan(ds["weight"].values[cr]).all()
+    assert ds["glassy_compliance"].values[cr] == pytest.approx(1 / 400, rel=0.05)
+    ret = ds["retardation_weight"].values[cr]
+    ok = np.isfinite(ret)
+    assert (ret[ok].sum() + ds["glassy_compliance"].values[cr]) == pytest.approx(1 / 100, rel=0.05)
+    tau_peak = ds["tau"].values[cr][ok][np.argmax(ret[ok])]
+    assert 8.0 / 1.5 < tau_peak < 8.0 * 1.5  # retardation time eta1 (G1 + G2)/(G1 G2) = 8 s
+    for i in (i for i in range(ds.sizes["curve"]) if i != cr):
         tau = ds["tau"].values[i]
         ok = np.isfinite(tau)
         g_t = sp.prony_relaxation_modulus(float(ds["equilibrium_modulus"].values[i]), ds["weight"].values[i][ok],
