@@ -276,7 +276,6 @@ def run_fem_torsion(card_paths: Sequence, averages_path, out_nc, out_csv, figure
                  "normal_force_at_max_strain_n": float("nan"), "status": reason}
                 for p in card_paths for rate in rates]
         rates = []
-    from .curves import select_average
 
     for rate in rates:
         i = next(i for i in idx if math.isclose(float(avg["shear_rate_1_per_s"].values[i]), rate))
@@ -320,7 +319,6 @@ def run_fem_torsion(card_paths: Sequence, averages_path, out_nc, out_csv, figure
          "torque_fem": (("case", "point"), np.array([series[k][1] for k in series]), {"units": "N m"}),
          "torque_measured": (("case", "point"), np.array([measured[k] for k in series]), {"units": "N m"})},
         coords={"case": list(series)}) if series else xr.Dataset()
-    from .canonical import write_netcdf
 
     write_netcdf(combined, out_nc)
     plot_torque(series, figure_path, xlabel="rim strain [-]", reference=reference,
@@ -366,7 +364,6 @@ def run_fem_indentation(card_paths: Sequence, out_nc, figure_path, punch_diamete
          "force": (("case", "point"), np.array([s[1] for s in series.values()]), {"units": "N"}),
          "status": ("case", np.array([status[k] for k in series], dtype=str))},
         coords={"case": list(series)}) if series else xr.Dataset()
-    from .canonical import write_netcdf
 
     write_netcdf(out, out_nc)
     plot_force_depth(series, figure_path, title="TLED flat-punch indentation per material card")
