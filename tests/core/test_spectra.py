@@ -314,7 +314,7 @@ def test_real_inertia_affected_sweep_is_flagged_against_a_clean_one():
     d_fungi = sp.kramers_kronig_check(*fungi, tolerance=0.02)
     d_lims = sp.kramers_kronig_check(*lims, tolerance=0.02)
     assert d_lims["consistent"] is True and d_fungi["consistent"] is False
-    assert d_fungi["discrepancy"] > 10 * d_lims["discrepancy"]     # measured 0.072 vs 0.0018
+    assert d_fungi["discrepancy"] > 10 * d_lims["discrepancy"]     # measured 0.074 vs 0.0018
 
     def bt_ratio(w, gp, gpp):  # measured G'' over the local KK estimate, median over the sweep
         return float(np.median(gpp / booij_thoone(w, gp)))
