@@ -153,7 +153,7 @@ def all_targets():
             f"results/{name}/averages.nc",
             f"results/{name}/lve.csv",
         ]
-        if set(dataset_tests(name)) & {"frequency_sweep", "stress_relaxation"}:
+        if set(dataset_tests(name)) & {"frequency_sweep", "stress_relaxation", "creep_recovery"}:
             targets.append(f"results/{name}/spectrum.nc")
         if dataset_scopes_of(name):
             targets += [f"results/{name}/ranking.csv", f"results/{name}/fits.csv"]

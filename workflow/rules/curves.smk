@@ -1,4 +1,4 @@
-# Sample averages per test and condition, LVE limits and their figures.
+# Sample averages per test and condition, LVE limits and their figures, relaxation/retardation spectra.
 
 
 rule average:
