@@ -448,6 +448,8 @@ def relaxation_spectrum_from_modulus(omega_rad_s: np.ndarray, storage_pa: np.nda
     taus_s : explicit grid (default: the stated rule, ``per_decade`` per decade)
     sd_storage_pa, sd_loss_pa : standard deviations (default: relative misfit, i.e. the magnitudes)
     lam : fixed regularisation parameter (default: GCV)
+
+    Non-finite and non-positive moduli (e.g. a G'' lost in the noise) are left out of the fit.
     """
     w = np.asarray(omega_rad_s, float)
     window = tau_window_from_frequency(w, 0.0)
