@@ -564,9 +564,10 @@ def retardation_spectrum_from_compliance(omega_rad_s: np.ndarray, storage_compli
 # consistency checks (for the diagnosis)
 # ------------------------------------------------------------------------------------------------
 def _rel_rms(pred: np.ndarray, meas: np.ndarray, scale: np.ndarray | None = None) -> float:
-    """RMS of ``(pred - meas)/scale`` (``scale`` defaults to ``|meas|``) over finite points."""
+    """RMS of ``(pred - meas)/scale`` (``scale`` defaults to ``|meas|``) over the points a fit can use
+    (finite, positive measured values)."""
     scale = np.abs(meas) if scale is None else np.asarray(scale, float)
-    m = np.isfinite(pred) & np.isfinite(meas) & np.isfinite(scale) & (scale > 0)
+    m = np.isfinite(pred) & np.isfinite(meas) & (meas > 0) & np.isfinite(scale) & (scale > 0)
     return float(np.sqrt(np.mean(((pred[m] - meas[m]) / scale[m]) ** 2))) if m.any() else float("nan")
 
 

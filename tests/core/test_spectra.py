@@ -149,6 +149,11 @@ def test_kramers_kronig_passes_consistent_and_flags_scaled_loss():
     assert "> tolerance" in bad["verdict"]
     none = sp.kramers_kronig_check(w, *_noisy_sweep(w))
     assert none["consistent"] is None and none["verdict"].startswith("not testable")
+    # a G'' lost in the noise (negative) or missing is left out of the fit and of the discrepancy
+    gs = sp.prony_complex_modulus(GE, G, TAU, w)
+    loss = gs.imag.copy()
+    loss[0], loss[1] = np.nan, -1.0
+    assert sp.kramers_kronig_check(w, gs.real, loss)["discrepancy"] < 1e-6
 
 
 def test_relaxation_predicts_sweep_and_reverse():
