@@ -59,6 +59,7 @@ from scipy.optimize import nnls
 from .canonical import write_netcdf
 from .diagnosis.stats import effective_sample_size
 from .models.base import ConstitutiveModel, ParamSpec
+from .spectra import log_spaced_taus  # the one implementation; re-exported (fitting.__all__)
 
 PLATE_TARGETS: tuple[str, ...] = ("thesis", "apparent_stress", "corrected_stress", "torque", "none")
 
@@ -1014,12 +1015,6 @@ def evaluate(model: ConstitutiveModel, params: Mapping[str, float], curves: Sequ
 # ------------------------------------------------------------------------------------------------
 # Prony weights by non-negative least squares (robust start, science.md §4.1)
 # ------------------------------------------------------------------------------------------------
-def log_spaced_taus(t_min_s: float, t_max_s: float, per_decade: float = 1.0) -> np.ndarray:
-    """Relaxation times log-spaced from ``t_min_s`` to ``t_max_s`` (``per_decade`` per decade, >= 1 time)."""
-    n = max(int(round(per_decade * math.log10(t_max_s / t_min_s))) + 1, 1)
-    return np.geomspace(t_min_s, t_max_s, n)
-
-
 def prony_nnls(curves: Sequence[Curve], taus: np.ndarray, elastic: Callable[[np.ndarray], np.ndarray] | None = None,
                noise: NoiseModel | None = None) -> dict[str, np.ndarray | float]:
     """Non-negative Prony weights on fixed relaxation times from shear-history and oscillation curves.

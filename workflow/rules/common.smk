@@ -145,6 +145,13 @@ def has_shear_ramps(name):
     return "constant_shear_rate" in dataset_tests(name)
 
 
+def has_spectrum_tests(name):
+    """Sweeps, relaxations or creep: tests whose averaged curves get a spectrum (rule spectrum)."""
+    from tissuemech.stages import SPECTRUM_TESTS
+
+    return bool(set(dataset_tests(name)) & set(SPECTRUM_TESTS))
+
+
 def all_targets():
     targets = []
     for name in DATASETS:
@@ -153,6 +160,8 @@ def all_targets():
             f"results/{name}/averages.nc",
             f"results/{name}/lve.csv",
         ]
+        if has_spectrum_tests(name):
+            targets.append(f"results/{name}/spectrum.nc")
         if dataset_scopes_of(name):
             targets += [f"results/{name}/ranking.csv", f"results/{name}/fits.csv"]
         if diagnosis_scope(name) and (

@@ -1,4 +1,4 @@
-# Sample averages per test and condition, LVE limits and their figures.
+# Sample averages per test and condition, LVE limits and their figures, relaxation/retardation spectra.
 
 
 rule average:
@@ -57,3 +57,18 @@ rule lve:
         pkg=script_hash("workflow/scripts/lve.py"),
     script:
         "../scripts/lve.py"
+
+
+rule spectrum:
+    input:
+        averages="results/{dataset}/averages.nc",
+    output:
+        spectrum="results/{dataset}/spectrum.nc",
+    log:
+        "logs/{dataset}/spectrum.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/spectrum.tsv"
+    params:
+        pkg=script_hash("workflow/scripts/spectrum.py"),
+    script:
+        "../scripts/spectrum.py"
