@@ -51,33 +51,22 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import independent_rheometer as ir  # noqa: E402
 
 from tissuemech.canonical import write_text  # noqa: E402
-from tissuemech.diagnosis.baseline import fit_runs, predict_runs  # noqa: E402
-from tissuemech.diagnosis.evidence import residual_table  # noqa: E402
-from tissuemech.diagnosis.report import diagnose  # noqa: E402
-from tissuemech.models.registry import get_model  # noqa: E402
+from tissuemech.diagnosis.report import RUNS_BASELINE_TESTS, diagnose_runs as package_diagnose_runs  # noqa: E402
 
 #: the baseline the diagnosis is run with (the synth_pipeline / hidden-effect suite choice)
 BASELINE = "qlv_linear_prony4"
 TARGET = "torque"
 RELAXATION = "measured"
-FITTED_TESTS = ("constant_shear_rate", "stress_relaxation")
+FITTED_TESTS = RUNS_BASELINE_TESTS
 
 
 def diagnose_runs(runs, baseline: str = BASELINE, target: str = TARGET, relaxation: str = RELAXATION) -> dict:
-    """The diagnosis as the package runs it on a user's canonical runs; returns the ``diagnose`` result.
-
-    This is the ONE function to change when the diagnosis API changes.
-    """
+    """The diagnosis as the package runs it on a user's canonical runs
+    (:func:`tissuemech.diagnosis.report.diagnose_runs`: baseline on the runs' own relaxation window, noise from
+    the data, adequacy check, model-level fixes); returns the ``diagnose`` result."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        shear = [r for r in runs if r.attrs["test"] in FITTED_TESTS]
-        fit = fit_runs(baseline, shear, target, relaxation, n_points=16)
-        preds = predict_runs(get_model(baseline), fit.params, runs, target, relaxation)
-        keep = [i for i, p in enumerate(preds) if p]
-        table = residual_table([runs[i] for i in keep], [preds[i] for i in keep], baseline)
-        return diagnose([runs[i] for i in keep], table, baseline,
-                        {"target": target, "relaxation": relaxation, "correlations": {},
-                         "fitted_tests": list(FITTED_TESTS)})
+        return package_diagnose_runs(runs, baseline, target, relaxation, FITTED_TESTS)
 
 
 #: findings about the baseline itself, not causes: reported, never counted as a false alarm (issue #12 item 2)

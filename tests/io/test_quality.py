@@ -35,7 +35,7 @@ def sweep(test="frequency_sweep", specimen="s1", sample="a", raw_phase_deg=None,
 def test_raw_phase_179_deg_at_the_top_frequencies_flags_exactly_those_points():
     phase = np.full(OMEGA.size, 12.0)
     phase[-3:] = 179.0          # three highest frequencies: inertia
-    phase[-4] = 149.0           # just under the 150 deg threshold: kept
+    phase[-4] = 89.0            # just under the 90 deg threshold: kept
     run = with_quality_flags(sweep(raw_phase_deg=phase))
     flags = run[FLAG_VARIABLE].values
     assert np.flatnonzero(flags).tolist() == [7, 8, 9]
@@ -155,8 +155,8 @@ def test_real_trios_fungi_frequency_sweep_flags_its_high_omega_points(shared_rea
     flagged = with_quality_flags(run)
     omega = run["angular_frequency"].values
     hit = (flagged[FLAG_VARIABLE].values & INERTIA_DOMINATED) > 0
-    # hand-read from the sheet (rows sorted 100 -> 0.1 rad/s): raw phase 165.659 deg at 7.94327 rad/s and above it
-    # up to 179.956 deg at 100 rad/s; 135.100 deg at 6.30957 rad/s and 13-49 deg below
-    assert hit.sum() == 12
-    assert omega[hit].min() == pytest.approx(7.94327, rel=1e-5)
-    assert omega[~hit].max() == pytest.approx(6.30957, rel=1e-5)
+    # hand-read from the sheet (rows sorted 100 -> 0.1 rad/s): raw phase 135.100 deg at 6.30957 rad/s and above it
+    # up to 179.956 deg at 100 rad/s; 48.987 deg at 5.01186 rad/s and 13-26 deg below
+    assert hit.sum() == 13
+    assert omega[hit].min() == pytest.approx(6.30957, rel=1e-5)
+    assert omega[~hit].max() == pytest.approx(5.01186, rel=1e-5)

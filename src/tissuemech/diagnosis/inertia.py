@@ -49,13 +49,12 @@ import pandas as pd
 from scipy import stats as sps
 from scipy.optimize import minimize
 
+from ..io.quality import RAW_PHASE_LIMIT_RAD
 from . import stats as st
 from .catalogue import DiagnosisContext, fix_record, make_finding, untested_finding
 from .evidence import run_id
 
 EFFECT = "inertia_dominated_points"
-#: raw phase above which the inertial torque exceeds the sample's in-phase torque (rad; module docstring)
-RAW_PHASE_LIMIT_RAD = np.pi / 2
 #: fewest unflagged points of a run for the held-out score (a quadratic needs 3 + 1 to leave out)
 MIN_CLEAN_POINTS = 5
 OSCILLATION = ("frequency_sweep", "amplitude_sweep")

@@ -62,8 +62,8 @@ from statsmodels.tools.sm_exceptions import MissingDataError
 from ..canonical import read_netcdf, write_netcdf, write_text
 from ..models.registry import available_models, get_model
 from . import stats as st
-from .baseline import (baseline_adequacy, extension_gain, predict_runs, ranked_candidates, read_fit_record,
-                       resolved_window_s, window_taus)
+from .baseline import (baseline_adequacy, extension_gain, fit_runs, predict_runs, ranked_candidates,
+                       read_fit_record, resolved_window_s, spectrum_model, window_taus)
 from .catalogue import DiagnosisContext, curve_levels, explains
 from .causes import CAUSE_IDS, DETECTORS
 from .evidence import estimate_noise, residual_table, residual_table_to_xarray
@@ -405,6 +405,46 @@ def with_model_fixes(result: dict, runs: Sequence[xr.Dataset], table: pd.DataFra
         return result
     fit_info.setdefault("fixes", {})["nonseparable_relaxation"] = fix
     return diagnose(runs, table, result["model"], fit_info, alpha=alpha, noise=noise, adequacy=adequacy)
+
+
+#: tests the runs-only baseline is fitted to (the ramps and relaxations; sweeps and the rest are predicted)
+RUNS_BASELINE_TESTS = ("constant_shear_rate", "stress_relaxation")
+
+
+def diagnose_runs(runs: Sequence[xr.Dataset], baseline: str = "qlv_linear_prony4", target: str = "torque",
+                  relaxation: str = "measured", fitted_tests: Sequence[str] = RUNS_BASELINE_TESTS,
+                  n_points: int = 16, alpha: float = st.ALPHA, extensions: bool = True) -> dict:
+    """Diagnose canonical runs without fit records: the one path from runs alone to a diagnosis.
+
+    The baseline ``baseline`` (a fixed-time QLV key) is rebuilt on the relaxation times the runs resolve
+    (:func:`tissuemech.diagnosis.baseline.resolved_window_s`, one time per decade; never a fixed grid),
+    fitted jointly to the ``fitted_tests`` runs (``target``: plate target of :mod:`tissuemech.fitting`),
+    checked with :func:`~tissuemech.diagnosis.baseline.baseline_adequacy` and diagnosed under the noise
+    model estimated from the runs; model-level fixes are scored when ``extensions``. Used by the
+    calibration benchmark, the hidden-effect tests and the real-data tests. Returns the :func:`diagnose` result
+    with ``fit_info.taus_s`` and ``fit_info.window``.
+    """
+    noise = estimate_noise(runs)
+    window = resolved_window_s(runs)
+    taus = window_taus(window)
+    fitted = [r for r in runs if r.attrs.get("test") in fitted_tests]
+    if not fitted:
+        raise ValueError(f"no run of the fitted tests {list(fitted_tests)} to fit the baseline {baseline!r} to")
+    fit = fit_runs(baseline, fitted, target, relaxation, n_points=n_points, taus_s=taus if taus.size else None)
+    model = spectrum_model(baseline, taus)
+    preds = predict_runs(model, fit.params, runs, target, relaxation)
+    keep = [i for i, p in enumerate(preds) if p]
+    kept = [runs[i] for i in keep]
+    table = residual_table(kept, [preds[i] for i in keep], baseline, noise=noise) if keep else pd.DataFrame()
+    record = {"model_key": baseline, "flags": fit.flags, "stderr": fit.stderr, "varying": fit.varying,
+              "converged": fit.success}
+    adequacy = [baseline_adequacy(record, table)]
+    fit_info = {"target": target, "relaxation": relaxation, "fitted_tests": list(fitted_tests),
+                "correlations": {}, "taus_s": [float(t) for t in taus], "window": window, "fixes": {}}
+    result = diagnose(kept, table, baseline, fit_info, alpha=alpha, noise=noise, adequacy=adequacy)
+    if extensions:
+        result = with_model_fixes(result, kept, table, fit_info, alpha=alpha, noise=noise, adequacy=adequacy)
+    return result
 
 
 def _read_ranking(path: str | Path | None) -> pd.DataFrame | None:

@@ -6,7 +6,7 @@ Every run file gets one integer variable ``quality_flags`` (dimension ``point``)
 =====  =========================  ==================================================================================
 bit    meaning                    rule
 =====  =========================  ==================================================================================
-1      ``inertia_dominated``      raw phase (``raw_phase``, rad) above :data:`RAW_PHASE_LIMIT_RAD` (150 deg)
+1      ``inertia_dominated``      |raw phase| (``raw_phase``, rad) above :data:`RAW_PHASE_LIMIT_RAD` (90 deg)
 2      ``torque_below_resolution`` ``|torque|`` below the instrument's declared torque resolution [N m]
 4      ``outside_lve``            frequency-sweep point whose strain amplitude exceeds the G' LVE limit of the
                                   amplitude sweep(s) of the same specimen and sample (:func:`tissuemech.lve.lve_limit`)
@@ -18,11 +18,15 @@ sample plus the inertial torque ``-I omega^2 theta`` of motor and geometry, and 
 section 2.5; nobadscience.com/rheo3.htm, "Locking the phase angle"). Above 90 deg the inertial torque already
 exceeds the sample's elastic torque; close to 180 deg the sample's contribution is a small difference of two
 large numbers and G', G'' depend entirely on the inertia calibration (J Rheol 53:765, 2009, PMC2947155: errors
-grow quadratically with the inertia uncertainty above the coupled resonance). The threshold is the
-instrument maker's rule of thumb as issue 13 cites it (TA Instruments: a raw phase above about 150-175 deg means
-instrument inertia dominates); the primary TA text was not at hand when this was written, so the physical
-argument above is the independent reason for it. We use the conservative end, 150 deg; it is a named constant and
-a keyword of :func:`inertia_flags`. Runs without a raw-phase channel (most
+grow quadratically with the inertia uncertainty above the coupled resonance). The threshold is that physical
+boundary, 90 deg: above it the in-phase torque the instrument measured is negative, i.e. the subtracted
+inertia correction is larger than the whole elastic signal and G' is made of the correction (the
+instrument-inertia limit line where inertial torque equals sample torque; Ewoldt, Johnston & Caretta 2015,
+"Experimental challenges of shear rheology", in *Complex Fluids in Biological Systems*, pp. 207-241).
+Instrument makers' rules of thumb (a raw phase above about 150-175 deg, as issue 13 cites TA Instruments)
+are more lenient; they trust the correction further than the physics lets us check. This is the one
+definition of the threshold: the diagnosis's ``inertia_dominated_points`` uses it too. It is a keyword
+of :func:`inertia_flags`. Runs without a raw-phase channel (most
 RheoCompass and LIMS exports) are *not testable*; they are never flagged on other evidence.
 
 Torque resolution. Only when it is declared: ``dataset.yaml`` ``instrument: {torque_resolution_nm: 1e-8}``
@@ -66,8 +70,9 @@ QUALITY_BITS: dict[int, tuple[str, str]] = {
 }
 INERTIA_DOMINATED, TORQUE_BELOW_RESOLUTION, OUTSIDE_LVE = 1, 2, 4
 
-#: raw-phase threshold [rad] above which a point is inertia-dominated (150 deg, see the module docstring)
-RAW_PHASE_LIMIT_RAD: float = math.radians(150.0)
+#: raw-phase threshold [rad] above which a point is inertia-dominated: the inertial torque exceeds the sample's
+#: in-phase torque (90 deg, see the module docstring); the one definition, used by the diagnosis too
+RAW_PHASE_LIMIT_RAD: float = math.pi / 2
 
 #: name of the flag variable in a run file (defined with the fit-data selection in :mod:`tissuemech.curves`)
 FLAG_VARIABLE = QUALITY_FLAG_VARIABLE
@@ -82,7 +87,7 @@ def inertia_flags(run: xr.Dataset, limit_rad: float = RAW_PHASE_LIMIT_RAD) -> tu
     Parameters
     ----------
     run : canonical run (``raw_phase`` in rad when present).
-    limit_rad : threshold [rad]; default :data:`RAW_PHASE_LIMIT_RAD` (150 deg).
+    limit_rad : threshold [rad]; default :data:`RAW_PHASE_LIMIT_RAD` (90 deg).
 
     Returns
     -------
@@ -227,6 +232,9 @@ def with_quality_flags(
         **{f"bit_{b}": QUALITY_BITS[b][1] for b in bits},
         "raw_phase_limit_deg": math.degrees(raw_phase_limit_rad),
     })
+    if torque_resolution_n_m is not None and not torque_resolution_problem:
+        # the declared resolution travels with the run: the diagnosis's noise model reads it from here
+        out.attrs["torque_resolution_nm"] = float(torque_resolution_n_m)
     out.attrs["quality_checks"] = ", ".join(checked)
     out.attrs["quality_not_testable"] = "; ".join(not_testable)
     for b in bits:
