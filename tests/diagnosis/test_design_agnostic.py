@@ -246,3 +246,11 @@ def test_drift_without_recorded_time_says_it_is_an_order_effect():
     assert f["tested"] and f["time_source"] == "test order" and f["effect_size_unit"] == "1/test"
     assert "cannot be told from a test-order effect" in f["evidence"]
     assert f["effect_size"] == pytest.approx(0.10 * 900 / 3600, abs=0.015)
+
+
+def test_drift_in_a_fixed_test_order_is_reported_as_confounded_with_the_condition():
+    fixed = [[0, 1, 2, 3]] * 4
+    f = detect_elapsed_time_drift(make_runs(fixed, drift_per_h=0.10, seed=12))
+    assert "condition" in f["confounded_with"] and "randomise the test order" in f["evidence"]
+    shuffled_f = detect_elapsed_time_drift(make_runs(DRIFT_DESIGN, drift_per_h=0.10, seed=12))
+    assert "condition" not in shuffled_f["confounded_with"]

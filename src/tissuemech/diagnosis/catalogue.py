@@ -324,15 +324,18 @@ def between_sample_test(levels: pd.DataFrame, y: str, column: str) -> dict | Non
 #: within-sample |correlation| above which two curve-level covariates are reported as confounded
 CONFOUND_CORRELATION = 0.9
 
-#: the design that would separate a curve-level covariate from each confounder
+#: the design that would separate a curve-level covariate from each confounder (``condition``: the test
+#: condition when the covariate is collinear with it within samples, i.e. a fixed test order)
 SEPARATING_DESIGN = {
-    "position": "randomise the test order across samples or repeat a reference test (same kind and condition "
-                "as an early one) at the end of each sample's sequence",
+    "position": "vary the pauses between tests, or start the samples of one session at different times, so "
+                "that elapsed time varies at a fixed position in the sequence (a drift of the instrument or "
+                "specimen follows the clock, an effect of the loading history follows the position)",
     "first_load": "repeat the first test of each sample later in its sequence, or vary which test comes first",
     "temperature_c": "hold the temperature constant over the session, or change it in steps that are not "
                      "monotone in time (e.g. a randomised or up-and-down temperature sequence)",
-    "elapsed_h": "record started_at or total_time and vary the pause between tests (or the start of each "
-                 "sample within the session)",
+    "elapsed_h": "record started_at or total_time and vary the pause between tests",
+    "condition": "randomise the test order across samples, or repeat a reference test (same kind and "
+                 "condition as an early one) at the end of each sample's sequence",
 }
 
 
@@ -345,6 +348,20 @@ def _within_corr(levels: pd.DataFrame, a: str, b: str) -> float:
     if x.std() == 0 or y.std() == 0:
         return np.nan
     return float(np.corrcoef(x, y)[0, 1])
+
+
+def _condition_share(levels: pd.DataFrame, column: str) -> float:
+    """Share of the within-sample variance of ``column`` explained by the test condition (1 for a fixed
+    test order with equal pauses; a squared multiple correlation)."""
+    lv = levels[levels[column].notna()]
+    x = _demean_by(lv, column, "sample")
+    if len(lv) < 3 or x.std() == 0 or lv["condition"].nunique() < 2:
+        return 0.0
+    X = pd.get_dummies(lv[["sample", "condition"]].astype(str), drop_first=True, dtype=float).to_numpy(float)
+    X = np.column_stack([np.ones(len(lv)), X])
+    y = lv[column].to_numpy(float)
+    resid = y - X @ np.linalg.lstsq(X, y, rcond=None)[0]
+    return float(1.0 - np.sum(resid ** 2) / np.sum(x ** 2))
 
 
 def _usable(levels: pd.DataFrame, column: str) -> bool:
@@ -360,11 +377,13 @@ def _level_tests(levels: pd.DataFrame, column: str):
     for covariates that vary between samples, the two-stage :func:`between_sample_test`; the stronger with
     a Bonferroni factor. Returns ``(test, design)`` or ``(None, None)``; ``test`` carries ``controls`` (the
     covariates held fixed) and ``confounded_with`` (covariates whose within-sample correlation with
-    ``column`` reaches :data:`CONFOUND_CORRELATION`, with the design that would separate them in
+    ``column`` reaches :data:`CONFOUND_CORRELATION`, or ``condition`` when the condition explains that
+    share squared of its within-sample variance, with the design that would separate them in
     ``separating_design``). Elapsed time falls back to the position in the sequence when no time was
     recorded. Designs in which the covariate is collinear with the condition within samples (a fixed
     test order) are not used within samples: a misfit that differs by condition would pass for the effect."""
-    if column == "elapsed_h" and not _usable(levels, "elapsed_h"):
+    time_recorded = _usable(levels, "elapsed_h")
+    if column == "elapsed_h" and not time_recorded:
         if not _usable(levels, "position"):
             return None, None
         levels = levels.assign(elapsed_h=levels["position"].astype(float))
@@ -393,12 +412,16 @@ def _level_tests(levels: pd.DataFrame, column: str):
     lp = min(0.0, t["log10_p"] + np.log10(len(found)))
     confounded = []
     if design.startswith("within"):
-        for c in ("position", "first_load", "temperature_c", "elapsed_h"):
-            if c == column or c in t["controls"] or (column == "elapsed_h" and c == "position"
-                                                     and not _usable(levels, "elapsed_h")):
+        # the first load is position 1: only time and temperature can be confounded with it
+        candidates = ("elapsed_h", "temperature_c") if column == "first_load" else (
+            ("position", "first_load", "temperature_c") if time_recorded else ("first_load", "temperature_c"))
+        for c in candidates:
+            if c in t["controls"]:
                 continue
             if c in levels and abs(_within_corr(levels, column, c)) >= CONFOUND_CORRELATION:
                 confounded.append(c)
+        if _condition_share(levels, column) >= CONFOUND_CORRELATION ** 2:
+            confounded.append("condition")
     return dict(t, log10_p=lp, p_value=10 ** lp, confounded_with=confounded,
                 separating_design=[SEPARATING_DESIGN[c] for c in confounded]), design
 
@@ -607,7 +630,8 @@ def _scale_correction_cv(ctx: DiagnosisContext, levels: pd.DataFrame, column: st
 
 def _confound_text(t: dict) -> str:
     names = {"position": "the position in the test sequence", "first_load": "the first load of each sample",
-             "temperature_c": "the logged temperature", "elapsed_h": "elapsed time"}
+             "temperature_c": "the logged temperature", "elapsed_h": "elapsed time",
+             "condition": "the test condition (the test order is nearly fixed)"}
     if not t.get("confounded_with"):
         return ""
     return (" The design cannot separate it from " + " or ".join(names[c] for c in t["confounded_with"])
@@ -627,8 +651,9 @@ def detect_elapsed_time_drift(ctx: DiagnosisContext) -> dict:
     t, design = _level_tests(levels, "elapsed_h")
     if t is None:
         return _untested(eff, "elapsed time (total_time/started_at) and the test order do not vary across "
-                              "curves in a way that is not confounded with the test conditions; "
-                              f"a design that would: {SEPARATING_DESIGN['elapsed_h']}")
+                              "curves in a way that is not confounded with the test conditions; a design that "
+                              f"would: {SEPARATING_DESIGN['condition']}"
+                              + ("" if _usable(levels, "elapsed_h") else f"; {SEPARATING_DESIGN['elapsed_h']}"))
     kappa = float(np.expm1(t["estimate"]))
     use_time = _usable(levels, "elapsed_h")
     unit = "1/h" if use_time else "1/test"
