@@ -20,9 +20,15 @@ regressions of non-separability (strain^2 x log-rate) and wall slip (stress thre
 with the rim-error (strain^2, strain^3) and offset (1/stress) signatures as controls and each other's
 covariate as a control; drift is read from curve levels within samples (sample + condition fixed effects)
 and between samples (two-stage on sample means, :func:`between_sample_test`), never from a fixed test order
-alone; preconditioning by the model-free paired comparison of the first-load amplitude sweep with the
-later frequency sweep of the same sample where the design has it. A cause is named (in :mod:`.report`)
-only when it passes Holm, is practically relevant and its fix does not lose on held-out data.
+alone; preconditioning by the model-free paired comparison of whatever test came first on each sample with
+later repeats of a comparable measurement (:func:`paired_first_load_test`) and by the first-load indicator
+within samples. Curve-level detectors assume no test order, specimen or sample count: the order of the tests
+on a sample comes from ``order``, else ``started_at``, else ``total_time`` (:func:`curve_levels`); drift and
+first load are each controlled for the other, and where the design cannot separate a covariate from the
+test sequence, the first load, the logged temperature or the condition (a fixed order) the finding lists
+them in ``confounded_with`` with the design that would separate them in ``separating_design``. A cause is
+named (in :mod:`.report`) only when it passes Holm, is practically relevant and its fix does not lose on
+held-out data.
 
 Homogeneous multi-mode data (simple shear + uniaxial compression/tension) are diagnosed by
 :mod:`.homogeneous`, which adds the cross-mode id ``tension_compression_asymmetry`` and tests
