@@ -254,3 +254,8 @@ def test_drift_in_a_fixed_test_order_is_reported_as_confounded_with_the_conditio
     assert "condition" in f["confounded_with"] and "randomise the test order" in f["evidence"]
     shuffled_f = detect_elapsed_time_drift(make_runs(DRIFT_DESIGN, drift_per_h=0.10, seed=12))
     assert "condition" not in shuffled_f["confounded_with"]
+
+
+def test_outlier_not_testable_when_specimens_share_no_test():
+    f = detect_outlier_specimen(make_runs([[0], [1], [2], [3]], outlier=3.0))
+    assert not f["tested"] and "confounded" in f["evidence"] and "common test condition" in f["evidence"]

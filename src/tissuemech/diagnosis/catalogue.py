@@ -737,11 +737,14 @@ def detect_preconditioning(ctx: DiagnosisContext) -> dict:
 def specimen_levels(levels: pd.DataFrame) -> pd.Series:
     """Specimen stiffness levels (log scale) with the condition effects removed: least squares of the curve
     levels on specimen + condition fixed effects (the condition misfit is shared by all specimens), each
-    specimen's level centred on the mean of all."""
+    specimen's level centred on the mean of all. Raises ValueError when specimen and condition are
+    confounded (the levels are then not identified)."""
     lv = levels[np.isfinite(levels["log_scale"])]
     spec = pd.get_dummies(lv["specimen"], dtype=float)
     cond = pd.get_dummies(lv["condition"], drop_first=True, dtype=float)
     X = pd.concat([spec, cond], axis=1).to_numpy(float)
+    if np.linalg.matrix_rank(X) < X.shape[1]:
+        raise ValueError("specimen and condition are confounded (specimens measured on disjoint sets of tests)")
     coef, *_ = np.linalg.lstsq(X, lv["log_scale"].to_numpy(float), rcond=None)
     out = pd.Series(coef[:spec.shape[1]], index=spec.columns)
     return out - out.mean()
@@ -757,7 +760,11 @@ def detect_outlier_specimen(ctx: DiagnosisContext) -> dict:
     if n_spec < 3:
         return _untested(eff, f"only {n_spec} specimen(s): an outlier specimen needs at least 3 specimens "
                               "(one to test against the spread of at least two others)")
-    spec = specimen_levels(levels)
+    try:
+        spec = specimen_levels(levels)
+    except ValueError as exc:
+        return _untested(eff, f"{n_spec} specimens, but {exc}: a design that would: run at least one common "
+                              "test condition on every specimen")
     t = st.deletion_outlier_test(spec.to_numpy())
     if int(t["index"]) < 0:
         return _untested(eff, f"{n_spec} specimens: the deletion test could not be formed")
