@@ -71,7 +71,8 @@ def make_runs(sequences, *, seed=0, first_load=0.0, drift_per_h=0.0, outlier=1.0
 
     ``order_attr``/``started_at``: whether the run records its position / its start time (ISO 8601);
     ``pause_s``: seconds between test starts (random 200-1400 s when None); ``temperature_per_h``: a
-    logged temperature channel rising by this many degC per hour (no effect on the stiffness)."""
+    logged temperature channel rising by this many degC per hour, +-0.05 degC per test (no effect on the
+    stiffness)."""
     rng = np.random.default_rng(seed)
     runs, preds = [], []
     spec_scale = np.exp(rng.normal(0.0, specimen_sd, len(sequences)))
@@ -90,7 +91,9 @@ def make_runs(sequences, *, seed=0, first_load=0.0, drift_per_h=0.0, outlier=1.0
                 if q in cols:
                     cols[q] = cols[q] * k * np.exp(rng.normal(0, 0.01, cols[q].size))
             if temperature_per_h is not None:
-                cols["temperature"] = np.full(cols["time"].size, 25.0 + temperature_per_h * t_start / 3600.0)
+                # the bath follows the ramp to within 0.05 degC per test
+                cols["temperature"] = np.full(cols["time"].size, 25.0 + temperature_per_h * t_start / 3600.0
+                                              + rng.normal(0.0, 0.05))
             attrs = {"dataset": "design_agnostic", "run": f"sp{b}-{pos}-{test}@{cond:g}", "test": test,
                      "specimen": f"sp{b}", "sample": "s1", "radius_m": RADIUS, "gap_m": GAP, **extra}
             if order_attr:

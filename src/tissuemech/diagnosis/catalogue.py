@@ -378,8 +378,8 @@ def _usable(levels: pd.DataFrame, column: str) -> bool:
 
 
 def _level_tests(levels: pd.DataFrame, column: str):
-    """Curve-level tests of ``column`` (elapsed time or first load), each controlled for the other where
-    the design allows: within samples with sample and condition fixed effects (clustered by sample) and,
+    """Curve-level tests of ``column`` (elapsed time or first load), each controlled for the other and for
+    the logged temperature where the design allows (the largest estimable set of controls): within samples with sample and condition fixed effects (clustered by sample) and,
     for covariates that vary between samples, the two-stage :func:`between_sample_test`; the stronger with
     a Bonferroni factor. Returns ``(test, design)`` or ``(None, None)``; ``test`` carries ``controls`` (the
     covariates held fixed) and ``confounded_with`` (covariates whose within-sample correlation with
@@ -398,9 +398,10 @@ def _level_tests(levels: pd.DataFrame, column: str):
         if not _usable(levels, "first_load"):
             return None, None
     other = "first_load" if column == "elapsed_h" else "elapsed_h"
-    controls = [other] if other in levels and _usable(levels, other) else []
+    controls = [c for c in (other, "temperature_c") if c in levels and _usable(levels, c)]
     found = []
-    for cols in ([column] + controls, [column]):
+    combos = [[column] + controls] + ([[column, controls[0]]] if len(controls) > 1 else []) + [[column]]
+    for cols in combos:
         res = level_regression(levels, "log_scale", cols, sets=[("sample", "condition")])
         if res is not None:
             t = st.coefficient_test(res, column)
@@ -417,17 +418,14 @@ def _level_tests(levels: pd.DataFrame, column: str):
     t, design = min(found, key=lambda f: f[0]["log10_p"])
     lp = min(0.0, t["log10_p"] + np.log10(len(found)))
     confounded = []
-    if design.startswith("within"):
-        # the first load is position 1: only time and temperature can be confounded with it
-        candidates = ("elapsed_h", "temperature_c") if column == "first_load" else (
-            ("position", "first_load", "temperature_c") if time_recorded else ("first_load", "temperature_c"))
-        for c in candidates:
-            if c in t["controls"]:
-                continue
-            if c in levels and abs(_within_corr(levels, column, c)) >= CONFOUND_CORRELATION:
-                confounded.append(c)
-        if _condition_share(levels, column) >= CONFOUND_CORRELATION ** 2:
-            confounded.append("condition")
+    # the first load is position 1: only time and temperature can be confounded with it
+    candidates = ("elapsed_h", "temperature_c") if column == "first_load" else (
+        ("position", "first_load", "temperature_c") if time_recorded else ("first_load", "temperature_c"))
+    for c in candidates:  # a control nearly collinear with the covariate still cannot be separated from it
+        if c in levels and abs(_within_corr(levels, column, c)) >= CONFOUND_CORRELATION:
+            confounded.append(c)
+    if _condition_share(levels, column) >= CONFOUND_CORRELATION ** 2:
+        confounded.append("condition")
     return dict(t, log10_p=lp, p_value=10 ** lp, confounded_with=confounded,
                 separating_design=[SEPARATING_DESIGN[c] for c in confounded]), design
 
