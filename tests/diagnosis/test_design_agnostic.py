@@ -252,9 +252,16 @@ def test_drift_without_recorded_time_says_it_is_an_order_effect():
 
 
 def test_drift_in_a_fixed_test_order_is_reported_as_confounded_with_the_condition():
+    # the same 4 tests in the same order on 4 samples: elapsed time after the first load is the condition
+    # (up to the random pauses), so the drift is not read, and the evidence names the design that would
     fixed = [[0, 1, 2, 3]] * 4
     f = detect_elapsed_time_drift(make_runs(fixed, drift_per_h=0.10, seed=12))
-    assert "condition" in f["confounded_with"] and "randomise the test order" in f["evidence"]
+    assert not f["tested"] and "randomise the test order" in f["evidence"]
+    # the design it names: the same fixed order with the first and an early test repeated at the end separates time
+    # from the condition, and the drift is read
+    f6 = detect_elapsed_time_drift(make_runs([[0, 1, 2, 3, 0, 2]] * 6, drift_per_h=0.10, seed=12))
+    assert f6["tested"] and "condition" not in f6["confounded_with"], f6["evidence"]
+    assert f6["p_value"] < 0.01 and f6["effect_size"] == pytest.approx(0.10, abs=0.05)
     shuffled_f = detect_elapsed_time_drift(make_runs(DRIFT_DESIGN, drift_per_h=0.10, seed=12))
     assert "condition" not in shuffled_f["confounded_with"]
 

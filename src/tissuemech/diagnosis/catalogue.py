@@ -339,7 +339,8 @@ SEPARATING_DESIGN = {
     "first_load": "repeat the first test of each sample later in its sequence, or vary which test comes first",
     "temperature_c": "hold the temperature constant over the session, or change it in steps that are not "
                      "monotone in time (e.g. a randomised or up-and-down temperature sequence)",
-    "elapsed_h": "record started_at or total_time and vary the pause between tests",
+    "elapsed_h": "record started_at or total_time and run at least three tests per sample, so that a time "
+                 "trend can be read from the tests after the first load",
     "condition": "randomise the test order across samples, or repeat a reference test (same kind and "
                  "condition as an early one) at the end of each sample's sequence",
 }
@@ -385,7 +386,9 @@ def _level_tests(levels: pd.DataFrame, column: str):
     covariates held fixed) and ``confounded_with`` (covariates whose within-sample correlation with
     ``column`` reaches :data:`CONFOUND_CORRELATION`, or ``condition`` when the condition explains that
     share squared of its within-sample variance, with the design that would separate them in
-    ``separating_design``). Elapsed time falls back to the position in the sequence when no time was
+    ``separating_design``). Elapsed time is read within samples only with the first-load control when the
+    first loads are known (a within-sample trend needs two curves after the first load; otherwise the slope
+    is the first-load contrast). Elapsed time falls back to the position in the sequence when no time was
     recorded. Designs in which the covariate is collinear with the condition within samples (a fixed
     test order) are not used within samples: a misfit that differs by condition would pass for the effect."""
     time_recorded = _usable(levels, "elapsed_h")
@@ -401,6 +404,10 @@ def _level_tests(levels: pd.DataFrame, column: str):
     controls = [c for c in (other, "temperature_c") if c in levels and _usable(levels, c)]
     found = []
     combos = [[column] + controls] + ([[column, controls[0]]] if len(controls) > 1 else []) + [[column]]
+    if column == "elapsed_h" and "first_load" in controls:
+        # a trend within a sample needs two curves after its first load: without them the within-sample
+        # slope is the first-load contrast itself (preconditioning), so it is only read with that control
+        combos = [c for c in combos if "first_load" in c]
     for cols in combos:
         res = level_regression(levels, "log_scale", cols, sets=[("sample", "condition")])
         if res is not None:
