@@ -387,8 +387,8 @@ def _level_tests(levels: pd.DataFrame, column: str):
     ``column`` reaches :data:`CONFOUND_CORRELATION`, or ``condition`` when the condition explains that
     share squared of its within-sample variance, with the design that would separate them in
     ``separating_design``). Elapsed time is read within samples only with the first-load control when the
-    first loads are known (a within-sample trend needs two curves after the first load; otherwise the slope
-    is the first-load contrast). Elapsed time falls back to the position in the sequence when no time was
+    first loads are known and not absorbed by the condition effects (a within-sample trend needs two curves
+    after the first load; otherwise the slope is the first-load contrast). Elapsed time falls back to the position in the sequence when no time was
     recorded. Designs in which the covariate is collinear with the condition within samples (a fixed
     test order) are not used within samples: a misfit that differs by condition would pass for the effect."""
     time_recorded = _usable(levels, "elapsed_h")
@@ -402,6 +402,8 @@ def _level_tests(levels: pd.DataFrame, column: str):
             return None, None
     other = "first_load" if column == "elapsed_h" else "elapsed_h"
     controls = [c for c in (other, "temperature_c") if c in levels and _usable(levels, c)]
+    if "first_load" in controls and levels.groupby("condition")["first_load"].nunique().max() == 1:
+        controls.remove("first_load")  # each condition always or never first: the condition effects absorb it
     found = []
     combos = [[column] + controls] + ([[column, controls[0]]] if len(controls) > 1 else []) + [[column]]
     if column == "elapsed_h" and "first_load" in controls:
