@@ -203,12 +203,13 @@ def deletion_outlier_test(values: np.ndarray) -> dict:
     """Studentized leave-one-out test for the most extreme of ``values`` (e.g. per-specimen log-scales).
 
     For each value, t = (x_b - mean_-b) / (sd_-b sqrt(1 + 1/(n-1))) ~ t_{n-2} under a common normal
-    population (the prediction-interval test); the most extreme is reported with a Bonferroni factor n.
+    population (the prediction-interval test; defined from n = 3, where it has 1 df); the most extreme is
+    reported with a Bonferroni factor n.
     Returns ``statistic`` (t), ``p_value``, ``index`` of the extreme value, ``modified_z`` of it.
     """
     x = np.asarray(values, float)
     n = x.size
-    if n < 4:
+    if n < 3:
         return _pack(0.0, 0.0, index=-1, modified_z=0.0)
     ts = np.empty(n)
     for b in range(n):
