@@ -196,7 +196,9 @@ def curve_covariates(table: pd.DataFrame, runs=()) -> pd.DataFrame:
     :func:`covariate_columns` whose within-curve range is < 5 % of their range across curves (curve mean),
     the run temperature ``temperature_c`` (logged channel median, else the attribute; from ``runs``), the
     specimen and every text ``covariate_*`` attribute of ``runs`` as factors (``factor:<name>``)."""
-    rows = table[np.isfinite(table["log_ratio"])] if "log_ratio" in table else table
+    if table.empty or "curve" not in table:
+        return pd.DataFrame()
+    rows = table[np.isfinite(table["log_ratio"].astype(float))] if "log_ratio" in table else table
     if rows.empty:
         return pd.DataFrame()
     g = rows.groupby("curve", sort=False)

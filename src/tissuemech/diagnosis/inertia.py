@@ -147,8 +147,9 @@ def detect_inertia_dominated_points(ctx: DiagnosisContext) -> dict:
                 f"(one-sided Wilcoxon signed-rank p = {test['p_value']:.2g}).")
     fix = fix_record("exclude inertia-dominated points (raw phase > 90 deg)", "rms_log10_modulus_held_out_clean_points",
                      before, after, "leave-one-clean-point-out", n_excluded=len(named))
+    # test and fix use the raw phase and a smooth description of each run, never the baseline's predictions
     return make_finding(EFFECT, test, "W", share, "share of oscillation points", len(named) >= 1, evidence, fix,
-                        points=named)
+                        points=named, baseline_free=True)
 
 
 # ------------------------------------------------------------------------------------------------

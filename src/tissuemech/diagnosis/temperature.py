@@ -214,6 +214,9 @@ def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
                          "leave-one-temperature-out", **({"c1": wlf["c1"], "c2_k": wlf["c2_k"],
                                                           "t_ref_c": full.t_ref_c} if wlf.get("success") else {}))
         extra["held_out"] = cv
+        # the fix is scored without the baseline (mastercurve vs temperature-blind prediction of held-out sweeps),
+        # so it stands even when no fitted model is adequate (report.diagnose: baseline-free causes)
+        extra["baseline_free"] = True
         span = (np.nanmax(full.log_aT) - np.nanmin(full.log_aT)) if ok.any() else np.nan
         fix_txt = (f" Shifting the {len(sweeps)} frequency sweeps gives log aT from {np.nanmax(full.log_aT):+.2f} to "
                    f"{np.nanmin(full.log_aT):+.2f} ({span:.1f} decades, Tref = {full.t_ref_c:.1f} degC, "
