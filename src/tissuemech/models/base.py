@@ -120,3 +120,20 @@ class ConstitutiveModel:
     def uniaxial_nominal_stress(self, p: Params, stretch: np.ndarray) -> np.ndarray:
         """Incompressible uniaxial nominal (1st Piola-Kirchhoff) stress P11(lambda) in Pa."""
         self._unsupported("uniaxial")
+
+
+class InstantaneousLawModel(ConstitutiveModel):
+    """A model built on an instantaneous elastic law (QLV, Pipkin-Rogers, fractional QLV).
+
+    Subclasses set ``instantaneous`` (a hyperelastic :class:`ConstitutiveModel`) and implement
+    ``instantaneous_params(p)``; the instantaneous (t = 0+) normal stress differences are the law's own.
+    """
+
+    def instantaneous_params(self, p: Params) -> dict[str, float]:
+        raise NotImplementedError
+
+    def normal_stress_differences(self, p: Params, strain: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Instantaneous (t = 0+) N1, N2 of the instantaneous law (Pa)."""
+        if not self.supports("normal_stress"):
+            self._unsupported("normal_stress")
+        return self.instantaneous.normal_stress_differences(self.instantaneous_params(p), np.asarray(strain, float))

@@ -25,7 +25,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from numba import njit
 
-from .base import ConstitutiveModel, ParamSpec, Params
+from .base import ConstitutiveModel, InstantaneousLawModel, ParamSpec, Params
 from .qlv import (available_instantaneous_tags, check_param_names, default_taus,
                   elastic_stress_nd, initial_shear_modulus, instantaneous_law, prony_ratio_specs,
                   stress_controlled_strain, stress_controlled_strain_by_history, sub_params, tau_specs)
@@ -60,7 +60,7 @@ def _creep_by_history(model: ConstitutiveModel, p: Params, time_s: np.ndarray, s
 # ==========================================================================================================
 # 1.1 Pipkin-Rogers / modified superposition with strain-dependent Prony weights
 # ==========================================================================================================
-class PipkinRogersModel(ConstitutiveModel):
+class PipkinRogersModel(InstantaneousLawModel):
     """Strain-dependent Prony weights (Pipkin-Rogers first order == modified superposition in 1-D).
 
     Step response ``R(gamma, t) = R_inf(gamma) + sum_i R_i(gamma) exp(-t/tau_i)`` with
@@ -165,12 +165,6 @@ class PipkinRogersModel(ConstitutiveModel):
 
     def shear_stress_history(self, p: Params, time_s: np.ndarray, strain: np.ndarray) -> np.ndarray:
         return self.shear_stress_histories(p, time_s, np.asarray(strain, float)[None, :])[0]
-
-    def normal_stress_differences(self, p: Params, strain: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Instantaneous (t = 0+) N1, N2 of the instantaneous law (Pa)."""
-        if not self.supports("normal_stress"):
-            self._unsupported("normal_stress")
-        return self.instantaneous.normal_stress_differences(self.instantaneous_params(p), np.asarray(strain, float))
 
     def normal_stress_difference_histories(self, p: Params, time_s: np.ndarray,
                                            strain: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

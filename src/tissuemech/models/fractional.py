@@ -52,7 +52,7 @@ import numpy as np
 from pymittagleffler import mittag_leffler as garrappa_mittag_leffler
 from scipy.special import gamma as gamma_fn
 
-from .base import ConstitutiveModel, ParamSpec, Params
+from .base import ConstitutiveModel, InstantaneousLawModel, ParamSpec, Params
 from .qlv import (available_instantaneous_tags, check_param_names, elastic_stress_nd, initial_shear_modulus,
                   instantaneous_law, invert_monotone, sub_params)
 
@@ -318,7 +318,7 @@ FZENER_QLV_SPECS = (
 )
 
 
-class FractionalZenerQLVModel(ConstitutiveModel):
+class FractionalZenerQLVModel(InstantaneousLawModel):
     """Fung QLV whose reduced relaxation function is a fractional Zener (see the module docstring).
 
     Parameters
@@ -385,12 +385,6 @@ class FractionalZenerQLVModel(ConstitutiveModel):
         """Small-strain G* = G0 G_r*(omega), G0 = sigma_e'(0)."""
         g0 = initial_shear_modulus(self.instantaneous, self.instantaneous_params(p))
         return g0 * _zener_gstar(*self.reduced_parts(p), np.asarray(angular_frequency_rad_s, float))
-
-    def normal_stress_differences(self, p: Params, strain: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Instantaneous (t = 0+) N1, N2 of the instantaneous law (Pa)."""
-        if not self.supports("normal_stress"):
-            self._unsupported("normal_stress")
-        return self.instantaneous.normal_stress_differences(self.instantaneous_params(p), np.asarray(strain, float))
 
     def normal_stress_difference_histories(self, p: Params, time_s: np.ndarray,
                                            strain: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -29,7 +29,7 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 from numba import njit
 
-from .base import ConstitutiveModel, ParamSpec, Params
+from .base import ConstitutiveModel, InstantaneousLawModel, ParamSpec, Params
 from .recursion import qlv_stress_batch, relaxation_factors
 
 #: thesis relaxation times (log-spaced decades) used as the default fixed Prony times, s
@@ -282,7 +282,7 @@ class LinearElasticShear(ConstitutiveModel):
 # ----------------------------------------------------------------------------------------------------------
 # QLV
 # ----------------------------------------------------------------------------------------------------------
-class QLVModel(ConstitutiveModel):
+class QLVModel(InstantaneousLawModel):
     """Fung QLV: reduced Prony relaxation function on an instantaneous elastic law.
 
     Parameters
@@ -396,12 +396,6 @@ class QLVModel(ConstitutiveModel):
         g0 = initial_shear_modulus(self.instantaneous, self.instantaneous_params(p))
         iwt = 1j * np.asarray(angular_frequency_rad_s, float)[None, :] * taus[:, None]
         return g0 * (g_inf + np.sum(g[:, None] * iwt / (1.0 + iwt), axis=0))
-
-    def normal_stress_differences(self, p: Params, strain: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Instantaneous (t = 0+) N1, N2 of the instantaneous law (Pa)."""
-        if not self.supports("normal_stress"):
-            self._unsupported("normal_stress")
-        return self.instantaneous.normal_stress_differences(self.instantaneous_params(p), np.asarray(strain, float))
 
     def normal_stress_difference_histories(self, p: Params, time_s: np.ndarray,
                                            strain: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
