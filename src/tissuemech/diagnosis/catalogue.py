@@ -283,7 +283,7 @@ FIXED_EFFECT_SETS = (("sample", "condition"), ("sample", "test"), ("sample",), (
 def level_regression(levels: pd.DataFrame, y: str, columns: Sequence[str], require_condition: bool = False,
                      sets: Sequence[tuple[str, ...]] | None = None):
     """Curve-level OLS ``y ~ columns + fixed effects`` (first usable set of :data:`FIXED_EFFECT_SETS`),
-    standard errors clustered by sample (HC3 with fewer than 4 samples). Returns the result (with
+    standard errors clustered by sample (t with G - 1 df, :func:`tissuemech.diagnosis.stats.cluster_regression`). Returns the result (with
     ``fixed_effects`` set) or None when no set leaves the columns estimable.
 
     ``require_condition``: only sets with condition fixed effects are tried when the condition varies

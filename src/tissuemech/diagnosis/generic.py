@@ -131,7 +131,10 @@ def structure_tests(table: pd.DataFrame) -> list[dict]:
     """
     out = []
     rows = table[np.isfinite(table["log_ratio"])]
-    rows = rows[rows["predicted_abs"] > 5.0 * rows["sigma"]]
+    # rows whose *observed* magnitude stands above the noise (evidence.residual_table ``above_noise``); a
+    # filter on the predicted magnitude would select rows by the baseline's own misfit
+    if "above_noise" in rows:
+        rows = rows[rows["above_noise"].astype(bool)]
     covs = covariate_columns(rows)
     for (test, quantity), block in rows.groupby(["test", "quantity"]):
         # specimen-to-specimen variability is expected (log-normal population); an unusual specimen is the
