@@ -6,7 +6,8 @@ import pandas as pd
 import pytest
 
 from tissuemech.diagnosis import stats as st
-from tissuemech.diagnosis.catalogue import raw_phase_inertia
+from tissuemech.diagnosis.catalogue import DiagnosisContext, raw_phase_inertia
+from tissuemech.diagnosis.inertia import detect_inertial_ringing, hold_rise_sds
 
 
 def test_few_curves_of_autocorrelated_residuals_do_not_reject_at_alpha():
@@ -46,3 +47,44 @@ def test_raw_phase_inertia_recovers_the_instrument_inertia():
     assert raw_phase_inertia(table, none)["i_raw_kg_m2"] == pytest.approx(0.0, abs=1e-12)
     # without a raw phase channel the consistency check is not testable (NaN), never a default
     assert np.isnan(raw_phase_inertia(table, frame.drop(columns="channel_raw_phase"))["i_raw_kg_m2"])
+
+
+def _relaxation_rows(residual_of, observed_of, n_curves=6, seed=3):
+    rng = np.random.default_rng(seed)
+    t = np.r_[np.arange(0.01, 0.5, 0.01), np.geomspace(0.5, 100.0, 40)]
+    rows = []
+    for c in range(n_curves):
+        level = 100.0 * (1 + 0.2 * c)
+        obs = observed_of(t, level) + 0.002 * level * rng.standard_normal(t.size)
+        res = residual_of(t, level)
+        rows.append(pd.DataFrame({"curve": f"sr{c}", "test": "stress_relaxation", "quantity": "shear_stress",
+                                  "time_in_test": t, "observed": obs, "predicted": obs - res, "residual": res,
+                                  "sigma": 0.002 * level, "strain": 0.1}))
+    return pd.concat(rows, ignore_index=True)
+
+
+def test_coherent_residual_bump_over_a_monotone_stress_is_not_ringing():
+    # the measured stress relaxes monotonically (two exponential modes); the baseline misses it near the step
+    # by the same damped-sine-shaped amount in every curve: coherent, significant, but no stress rises again
+    def monotone(t, level):
+        return level * (1.0 + 0.5 * np.exp(-t / 0.05) + 0.3 * np.exp(-t / 0.3))
+
+    def bump(t, level):
+        return 0.12 * level * np.exp(-(t - t[0]) / 0.2) * np.sin(2 * np.pi * t / 0.4)
+    f = detect_inertial_ringing(DiagnosisContext(runs=[], table=_relaxation_rows(bump, monotone)))
+    assert f["tested"] and f["p_value"] < 1e-3        # the coherence test alone would name it
+    assert f["hold_rise_share"] == 0.0 and not f["practical"]
+    assert "not a ring" in f["evidence"]
+
+
+def test_a_ringing_stress_rises_again_during_the_hold():
+    def ring(t, level):
+        return 0.3 * level * np.exp(-(t - t[0]) / 0.1) * np.sin(2 * np.pi * t / 0.1)
+
+    def ringing(t, level):
+        return level * (1.0 + 0.2 * np.exp(-t / 1.0)) + ring(t, level)
+    table = _relaxation_rows(ring, ringing)
+    rise, n = hold_rise_sds(table[table["curve"] == "sr0"])
+    assert n == 89 and rise > 20          # 0.3 x level ring against 0.2 % noise
+    f = detect_inertial_ringing(DiagnosisContext(runs=[], table=table))
+    assert f["practical"] and f["hold_rise_share"] == 1.0
