@@ -51,16 +51,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import independent_rheometer as ir  # noqa: E402
 
 from tissuemech.canonical import write_text  # noqa: E402
-from tissuemech.diagnosis.report import RUNS_BASELINE_TESTS, diagnose_runs as package_diagnose_runs  # noqa: E402
+from tissuemech.diagnosis.report import (RUNS_BASELINE_CANDIDATES, RUNS_BASELINE_TESTS,  # noqa: E402
+                                         diagnose_runs as package_diagnose_runs)
 
-#: the baseline the diagnosis is run with (the synth_pipeline / hidden-effect suite choice)
-BASELINE = "qlv_linear_prony4"
+#: the candidate baselines the diagnosis chooses from by AICc (the package's runs-only default)
+BASELINE = RUNS_BASELINE_CANDIDATES
 TARGET = "torque"
 RELAXATION = "measured"
 FITTED_TESTS = RUNS_BASELINE_TESTS
 
 
-def diagnose_runs(runs, baseline: str = BASELINE, target: str = TARGET, relaxation: str = RELAXATION) -> dict:
+def diagnose_runs(runs, baseline=BASELINE, target: str = TARGET, relaxation: str = RELAXATION) -> dict:
     """The diagnosis as the package runs it on a user's canonical runs
     (:func:`tissuemech.diagnosis.report.diagnose_runs`: baseline on the runs' own relaxation window, noise from
     the data, adequacy check, model-level fixes); returns the ``diagnose`` result."""
@@ -96,7 +97,7 @@ def one(job: tuple) -> dict:
         out.update(law=truth["law"], kernel=truth["kernel"], n_runs=len(runs))
         res = diagnose_runs(runs)
         det, unex = alarms(res)
-        out.update(detected=det, unexplained=unex, baseline=baseline_flags(res), error=None)
+        out.update(detected=det, unexplained=unex, baseline=baseline_flags(res), model=res["model"], error=None)
     except Exception as exc:  # noqa: BLE001 -- a crash is a result of the study, recorded with its message
         out.update(detected=[], unexplained=[], baseline=[], error=f"{type(exc).__name__}: {exc}",
                    trace=traceback.format_exc(limit=3))
@@ -207,7 +208,7 @@ def main(argv=None) -> int:
               else f"- tables rendered {dt.date.today().isoformat()} from the --rows-json files of earlier runs "
                    f"(their dates, machines and commands are stated with them)"),
              f"- command: `{cmd}`",
-             f"- baseline `{BASELINE}` fitted to the ramps and relaxations (target `{TARGET}`, relaxation history "
+             f"- baseline chosen by AICc among `{', '.join(BASELINE)}`, fitted to the ramps and relaxations (target `{TARGET}`, relaxation history "
              f"`{RELAXATION}`), diagnosed by `benchmarks/diagnosis_calibration.diagnose_runs`",
              f"- {len(rows)} datasets" + (f" from {', '.join(str(f) for f in a.from_json)}" if a.from_json
                                           else f" in {wall:.0f} s")
