@@ -54,7 +54,7 @@ from tissuemech.canonical import write_text  # noqa: E402
 from tissuemech.diagnosis.report import (RUNS_BASELINE_CANDIDATES, RUNS_BASELINE_TESTS,  # noqa: E402
                                          diagnose_runs as package_diagnose_runs)
 
-#: the baseline the diagnosis is run with (the synth_pipeline / hidden-effect suite choice)
+#: the candidate baselines the diagnosis chooses from by AICc (the package's runs-only default)
 BASELINE = RUNS_BASELINE_CANDIDATES
 TARGET = "torque"
 RELAXATION = "measured"
@@ -97,7 +97,7 @@ def one(job: tuple) -> dict:
         out.update(law=truth["law"], kernel=truth["kernel"], n_runs=len(runs))
         res = diagnose_runs(runs)
         det, unex = alarms(res)
-        out.update(detected=det, unexplained=unex, baseline=baseline_flags(res), error=None)
+        out.update(detected=det, unexplained=unex, baseline=baseline_flags(res), model=res["model"], error=None)
     except Exception as exc:  # noqa: BLE001 -- a crash is a result of the study, recorded with its message
         out.update(detected=[], unexplained=[], baseline=[], error=f"{type(exc).__name__}: {exc}",
                    trace=traceback.format_exc(limit=3))
@@ -208,7 +208,7 @@ def main(argv=None) -> int:
               else f"- tables rendered {dt.date.today().isoformat()} from the --rows-json files of earlier runs "
                    f"(their dates, machines and commands are stated with them)"),
              f"- command: `{cmd}`",
-             f"- baseline: the lowest-AICc adequate one of `{', '.join(BASELINE)}` fitted to the ramps and relaxations (target `{TARGET}`, relaxation history "
+             f"- baseline chosen by AICc among `{', '.join(BASELINE)}`, fitted to the ramps and relaxations (target `{TARGET}`, relaxation history "
              f"`{RELAXATION}`), diagnosed by `benchmarks/diagnosis_calibration.diagnose_runs`",
              f"- {len(rows)} datasets" + (f" from {', '.join(str(f) for f in a.from_json)}" if a.from_json
                                           else f" in {wall:.0f} s")

@@ -283,7 +283,7 @@ FIXED_EFFECT_SETS = (("sample", "condition"), ("sample", "test"), ("sample",), (
 def level_regression(levels: pd.DataFrame, y: str, columns: Sequence[str], require_condition: bool = False,
                      sets: Sequence[tuple[str, ...]] | None = None):
     """Curve-level OLS ``y ~ columns + fixed effects`` (first usable set of :data:`FIXED_EFFECT_SETS`),
-    standard errors clustered by sample (HC3 with fewer than 4 samples). Returns the result (with
+    standard errors clustered by sample (t with G - 1 df, :func:`tissuemech.diagnosis.stats.cluster_regression`). Returns the result (with
     ``fixed_effects`` set) or None when no set leaves the columns estimable.
 
     ``require_condition``: only sets with condition fixed effects are tried when the condition varies
@@ -864,7 +864,11 @@ def detect_outlier_specimen(ctx: DiagnosisContext) -> dict:
 # frequency sweep: inertia
 # ------------------------------------------------------------------------------------------------
 def detect_instrument_inertia(ctx: DiagnosisContext) -> dict:
-    """G' residual of the frequency sweep regressed on the inertial torque term omega^2 2h/(pi R^4)."""
+    """G' residual of the frequency sweep regressed on the inertial torque term omega^2 2h/(pi R^4).
+
+    Where the sweeps log a raw phase, the fitted inertia error must also be consistent with it (science.md
+    2.5): |dI| may not exceed the instrument inertia the raw phase implies (:func:`raw_phase_inertia`);
+    otherwise the omega^2 trend is a misfit of the spectrum and the finding is not practical."""
     eff = "instrument_inertia"
     fs = ctx.table[(ctx.table["test"] == "frequency_sweep") & (ctx.table["quantity"] == "storage_modulus")]
     if fs.empty or fs["frequency_sq"].nunique() < 4:
@@ -910,8 +914,17 @@ def detect_instrument_inertia(ctx: DiagnosisContext) -> dict:
         kk_txt = (f" Booij-Thoone check in the top quarter of frequencies: measured G'' / ((pi/2) dG'/dln w) "
                   f"= {np.nanmedian(ratios):.2g}.")
     raw_txt = ""
-    if "channel_raw_phase" in fs:
-        raw_txt = f" Raw phase reaches {np.degrees(fs['channel_raw_phase'].max()):.0f} deg."
+    consistent = True
+    i_raw = raw_phase_inertia(ctx.table, frame)
+    if np.isfinite(i_raw["i_raw_kg_m2"]):
+        # science.md 2.5: an uncorrected inertia error dI is part of the instrument's inertial torque, which
+        # the raw phase measures; an estimate |dI| above the whole inertia the raw phase shows is a
+        # misfit of the spectrum, not inertia
+        consistent = bool(abs(delta_i) <= i_raw["i_raw_kg_m2"])
+        raw_txt = (f" Raw phase reaches {i_raw['max_raw_phase_deg']:.0f} deg; the inertial torque it implies "
+                   f"(I omega^2/b = G' - G''/tan(raw phase), top quarter of omega^2/b) is I ~ "
+                   f"{i_raw['i_raw_kg_m2']:.3g} kg m^2, "
+                   + ("consistent with" if consistent else "smaller than") + " the fitted |dI|.")
 
     # held-out: leave-one-sample-out fit of dI, applied to the held-out sample's sweep
     frame = frame.assign(rel=frame["residual"] / frame["predicted_abs"])
@@ -931,8 +944,40 @@ def detect_instrument_inertia(ctx: DiagnosisContext) -> dict:
                 f"{f_max:.3g} Hz where |G'| ~ {gmax:.3g} Pa.{kk_txt}{raw_txt}")
     fix = fix_record("fitted inertia term G'_app = G' - dI omega^2 2h/(pi R^4)", "rms_rel_residual_storage_modulus",
                before, after, f"leave-one-{group}-out", delta_inertia_kg_m2=delta_i, n_held_out_points=len(frame))
-    practical = abs(artefact_at_fmax) >= 0.05 * gmax
+    practical = abs(artefact_at_fmax) >= 0.05 * gmax and consistent
     return make_finding(eff, t, "t", delta_i, "kg m^2", practical, evidence, fix)
+
+
+def raw_phase_inertia(table: pd.DataFrame, frame: pd.DataFrame) -> dict:
+    """Instrument inertia implied by the raw phase of the frequency sweeps (science.md 2.5).
+
+    The raw torque is (G* - I omega^2/b) b theta, so tan(raw phase) = G'' / (G' - I omega^2/b) and
+    I omega^2/b = G' - G''/tan(raw phase) [Pa], with G', G'' the reported (inertia-corrected) moduli.
+    ``frame``: the storage-modulus rows of the sweeps with ``x_inertia`` = omega^2/b [1/(m^3 s^2)] and
+    ``channel_raw_phase`` [rad]; ``table``: the residual table (for the loss-modulus rows).
+
+    Returns ``i_raw_kg_m2`` (median of (I omega^2/b)/(omega^2/b) over the top quarter of omega^2/b, where the
+    inertial torque is largest; NaN without a raw phase channel or G'') and ``max_raw_phase_deg``.
+    """
+    out = {"i_raw_kg_m2": np.nan, "max_raw_phase_deg": np.nan}
+    if "channel_raw_phase" not in frame:
+        return out
+    loss = table[(table["test"] == "frequency_sweep") & (table["quantity"] == "loss_modulus")]
+    both = frame[["curve", "frequency_sq", "observed", "x_inertia", "channel_raw_phase"]].merge(
+        loss[["curve", "frequency_sq", "observed"]].rename(columns={"observed": "loss"}), on=["curve", "frequency_sq"])
+    both = both[np.isfinite(both["channel_raw_phase"]) & np.isfinite(both["loss"]) & (both["x_inertia"] > 0)]
+    if both.empty:
+        return out
+    phi = np.abs(both["channel_raw_phase"].to_numpy(float))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inertial_pa = both["observed"].to_numpy(float) - both["loss"].to_numpy(float) / np.tan(phi)
+    top = both["x_inertia"].to_numpy(float) >= np.quantile(both["x_inertia"], 0.75)
+    i_pts = inertial_pa[top] / both["x_inertia"].to_numpy(float)[top]
+    i_pts = i_pts[np.isfinite(i_pts)]
+    if i_pts.size:
+        out["i_raw_kg_m2"] = float(np.median(i_pts))
+    out["max_raw_phase_deg"] = float(np.degrees(phi.max()))
+    return out
 
 
 # ------------------------------------------------------------------------------------------------
@@ -1384,7 +1429,9 @@ def detect_finite_rise_time(ctx: DiagnosisContext) -> dict:
     step-analysed Prony spectrum of each small-strain relaxation vs from the ramp-aware one (paired over
     tests; model-free, so it also says whether a ramp-aware baseline was needed); (b) when the baseline was
     fitted as a step (``fit_info["relaxation"] == "step"``), its early-hold residuals (t <= 10 t_r) against
-    the later hold. Bonferroni over the components."""
+    the later hold. Bonferroni over the components. Tested only when the baseline was fitted as a step: a
+    baseline fitted through the measured strain history (``"measured"``) does not commit the error, so the
+    cause cannot explain its misfit (the finding is then untested, with that reason)."""
     eff = "finite_rise_time"
     sr = [r for r in ctx.runs_of("stress_relaxation") if all(k in r for k in ("time", "shear_stress", "shear_strain"))]
     if len(sr) < 3:
@@ -1401,6 +1448,15 @@ def detect_finite_rise_time(ctx: DiagnosisContext) -> dict:
         return untested_finding(eff, "the relaxation data contain no ramp (ideal step in the export): the rise time "
                               "cannot be checked from these files")
     step_baseline = ctx.fit_info.get("relaxation", "measured") == "step"
+    if not step_baseline:
+        # the cause is an analysis error (a ramp treated as a step), not a property of the data: a baseline
+        # fitted through the measured strain history does not commit it, so it cannot explain that
+        # baseline's misfit. The model-free cross-test below would still show that *a* step analysis of
+        # these data is biased whenever the fast modes are comparable to the rise time (true of any
+        # sample), which is no finding about this diagnosis.
+        return untested_finding(eff, f"not applicable: the baseline was fitted through the measured strain "
+                                     f"history (relaxation ramps of {t_r:.3g} s are modelled, not treated as "
+                                     f"steps)")
     parts, texts, fix = [], [], None
     sweep = _measured_sweep(ctx)
     tmax = max(float(r["time"].values.max()) for r in small)

@@ -106,13 +106,17 @@ def cluster_regression(y: np.ndarray, X: pd.DataFrame, groups: np.ndarray | None
     """OLS/WLS of ``y`` on the columns of ``X`` (an intercept is added) with cluster-robust covariance.
 
     Residuals within one curve are autocorrelated, so standard errors are clustered by ``groups``
-    (usually the curve) with the small-sample t reference (``use_t``). With fewer than 4 clusters the
-    heteroscedasticity-robust HC3 covariance is used instead (cluster estimates are unusable then).
+    (usually the curve); :func:`coefficient_test` then refers t to Student-t with G - 1 degrees of freedom
+    (G clusters), which keeps the test valid, if wide, down to G = 2. The points of a curve are never
+    treated as independent: with 2 or 3 clusters the cluster covariance is still used (an HC3 covariance,
+    used here before, treated hundreds of autocorrelated points of a few curves as independent and gave most
+    of the false alarms on null data, docs/calibration.md). Without groups, or with one group, the HC3
+    covariance is used (the caller has no curve structure to respect).
     """
     y = np.asarray(y, float)
     Xc = sm.add_constant(X.astype(float), has_constant="add")
     model = sm.WLS(y, Xc, weights=weights) if weights is not None else sm.OLS(y, Xc)
-    if groups is not None and len(pd.unique(np.asarray(groups))) >= 4:
+    if groups is not None and len(pd.unique(np.asarray(groups))) >= 2:
         codes = pd.factorize(np.asarray(groups))[0]
         return model.fit(cov_type="cluster", cov_kwds={"groups": codes}, use_t=True)
     return model.fit(cov_type="HC3", use_t=True)
