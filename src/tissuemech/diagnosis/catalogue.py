@@ -679,8 +679,8 @@ def _temperature_confound(ctx: DiagnosisContext, levels: pd.DataFrame) -> str:
             f"{int(ok.sum())} curves, {lv.loc[ok, 'temperature_c'].min():.3g}..{lv.loc[ok, 'temperature_c'].max():.3g} "
             f"degC), so a drift at constant conditions cannot be separated from the temperature change; the "
             f"temperature, which has a physical model (time-temperature superposition scored on a held-out "
-            f"temperature), is tested as temperature_dependence. A reference temperature repeated at the start "
-            f"and the end of the session would separate them.")
+            f"temperature), is tested as temperature_dependence; a design that would separate them: repeat a "
+            f"reference temperature at the start and the end of the session.")
 
 
 def _confound_text(t: dict) -> str:
@@ -705,7 +705,9 @@ def detect_elapsed_time_drift(ctx: DiagnosisContext) -> dict:
         return untested_finding(eff, "fewer than 6 curves: the per-curve scale cannot be regressed on elapsed time")
     confound = _temperature_confound(ctx, levels)
     if confound:
-        return untested_finding(eff, confound) | {"confounded_with": ["temperature"]}
+        return untested_finding(eff, confound) | {
+            "confounded_with": ["temperature_c"],
+            "separating_design": ["repeat a reference temperature at the start and the end of the session"]}
     t, design = _level_tests(levels, "elapsed_h")
     if t is None:
         return untested_finding(eff, "elapsed time (total_time/started_at) and the test order do not vary across "
