@@ -29,7 +29,7 @@ run: install
 	$(VENV)/bin/snakemake --report results/report.html
 
 test: install
-	$(PY) -m pytest -q -n 2 --dist loadgroup
+	$(PY) -m pytest -q -n 2 --dist loadgroup --durations=25
 
 test-fast: install
 	$(PY) -m pytest -q -m "not slow"

@@ -103,15 +103,27 @@ def test_nominal_strain_is_used_when_the_export_has_no_strain_column():
     assert (flagged[FLAG_VARIABLE].values == OUTSIDE_LVE).all()
 
 
-def test_flagged_points_are_left_out_of_the_averages_unless_configured_otherwise():
+def flagged_sweeps(n_inertia: int, storage_by_sample) -> list:
+    """One frequency sweep per sample, raw phase 179 deg at the top ``n_inertia`` frequencies (12 deg below),
+    G' set by ``storage_by_sample[sample](run)``, quality-flagged."""
     phase = np.full(OMEGA.size, 12.0)
-    phase[-3:] = 179.0
+    phase[-n_inertia:] = 179.0
     runs = []
-    for sample, g in (("a", 1000.0), ("b", 1200.0)):
+    for sample, set_storage in storage_by_sample.items():
         run = sweep(sample=sample, raw_phase_deg=phase)
-        run["storage_modulus"].values[-3:] = -5e4     # what inertia does to G' at high frequency
-        run["storage_modulus"].values[:-3] = g
+        set_storage(run["storage_modulus"].values)
         runs.append(with_quality_flags(run))
+    return runs
+
+
+def test_flagged_points_are_left_out_of_the_averages_unless_configured_otherwise():
+    def storage(g):
+        def set_storage(values):
+            values[-3:] = -5e4     # what inertia does to G' at high frequency
+            values[:-3] = g
+        return set_storage
+
+    runs = flagged_sweeps(3, {"a": storage(1000.0), "b": storage(1200.0)})
     excluded = average_runs(runs)
     kept = average_runs(runs, exclude_flagged=False)
     assert excluded.attrs["n_flagged_points_excluded"] == 6 and excluded.attrs["exclude_flagged"] == 1
@@ -123,13 +135,12 @@ def test_flagged_points_are_left_out_of_the_averages_unless_configured_otherwise
 
 
 def test_raw_run_figure_draws_flagged_points_hollow_with_a_legend_entry():
-    phase = np.full(OMEGA.size, 12.0)
-    phase[-2:] = 179.0
-    runs = []
-    for sample, g in (("a", 1000.0), ("b", 1500.0)):
-        run = sweep(sample=sample, raw_phase_deg=phase)
-        run["storage_modulus"].values[:] = g * (1 + 0.1 * np.log10(OMEGA + 1))
-        runs.append(with_quality_flags(run))
+    def storage(g):
+        def set_storage(values):
+            values[:] = g * (1 + 0.1 * np.log10(OMEGA + 1))
+        return set_storage
+
+    runs = flagged_sweeps(2, {"a": storage(1000.0), "b": storage(1500.0)})
     curve = select_average(average_runs(runs), "frequency_sweep")
     ax = figure_average(curve, "storage_modulus", runs).axes[0]
     hollow = [line for line in ax.lines if line.get_marker() == "o" and line.get_markerfacecolor() == "none"

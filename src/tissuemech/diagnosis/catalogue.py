@@ -169,7 +169,9 @@ def make_finding(effect: str, test: dict, statistic_name: str, effect_size: floa
 def fix_record(model: str, metric: str, before: float, after: float, cv: str, **parameters) -> dict:
     gain = (before - after) / before if before > 0 and np.isfinite(after) else np.nan
     return {"model": model, "metric": metric, "before": float(before), "after": float(after),
-            "gain": float(gain), "cv": cv, "parameters": {k: float(v) for k, v in parameters.items()}}
+            "gain": float(gain), "cv": cv,
+            "parameters": {k: (float(v) if isinstance(v, (int, float, np.floating)) else v)
+                           for k, v in parameters.items()}}
 
 
 def _rms(x) -> float:

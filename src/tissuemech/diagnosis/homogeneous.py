@@ -54,7 +54,7 @@ from .. import fitting as F
 from ..models.hyperelastic import stability_flags
 from ..models.registry import get_model
 from . import stats as st
-from .catalogue import CATALOGUE_IDS
+from .catalogue import CATALOGUE_IDS, fix_record, untested_finding
 
 ASYMMETRY_ID = "tension_compression_asymmetry"
 I2_ID = "unidentified_i2_dependence"
@@ -262,19 +262,6 @@ def profile_interval(grid: np.ndarray, delta: np.ndarray, best: float, level: fl
 # ------------------------------------------------------------------------------------------------
 # the diagnosis
 # ------------------------------------------------------------------------------------------------
-def _untested(effect: str, why: str) -> dict:
-    return {"effect": effect, "tested": False, "statistic": np.nan, "statistic_name": "", "p_value": np.nan,
-            "log10_p": np.nan, "effect_size": np.nan, "effect_size_unit": "", "practical": False,
-            "evidence": why, "fix": None}
-
-
-def _fix(model: str, metric: str, before: float, after: float, cv: str, **parameters) -> dict:
-    gain = (before - after) / before if before > 0 and np.isfinite(after) else np.nan
-    return {"model": model, "metric": metric, "before": float(before), "after": float(after), "gain": float(gain),
-            "cv": cv, "parameters": {k: (float(v) if isinstance(v, (int, float, np.floating)) else v)
-                                      for k, v in parameters.items()}}
-
-
 def _params_txt(p: Mapping[str, float], law: Law) -> str:
     return ", ".join(f"{k} = {v:.4g}" for k, v in p.items() if k not in law.fixed)
 
@@ -355,7 +342,7 @@ def diagnose_homogeneous(runs: Sequence[xr.Dataset], alpha: float = st.ALPHA, se
         _ogden_note(by_mode, fits, i2)
     for eff in CATALOGUE_IDS:
         if eff != I2_ID:
-            findings.append(_untested(eff, "not applicable: homogeneous simple-shear/uniaxial specimens (no "
+            findings.append(untested_finding(eff, "not applicable: homogeneous simple-shear/uniaxial specimens (no "
                                            "parallel plates, no time, rate or instrument channels)"))
     generic = _structure_tests(by_mode, ext, fits[ext.key, "all_modes"].params)
 
@@ -406,7 +393,7 @@ def _asymmetry_finding(by_mode, fits, base: Law, ext: Law, rotations) -> dict:
     rc, sc = log_ratios(base, p, _curves(by_mode, ["compression"]))
     rt, s_t = log_ratios(base, p, _curves(by_mode, ["tension"]))
     if rc.size < 3 or rt.size < 3:
-        return _untested(ASYMMETRY_ID, "fewer than 3 compression or tension points above the noise")
+        return untested_finding(ASYMMETRY_ID, "fewer than 3 compression or tension points above the noise")
     delta = float(rc.mean() - rt.mean())
     se = float(np.sqrt(np.sum(sc ** 2) / rc.size ** 2 + np.sum(s_t ** 2) / rt.size ** 2))
     z = delta / se
@@ -421,7 +408,7 @@ def _asymmetry_finding(by_mode, fits, base: Law, ext: Law, rotations) -> dict:
     uni = [r for r in rotations if r["held_out"] != "shear"]
     before = float(np.mean([r["shear_only_baseline"] for r in uni]))
     after = float(np.mean([r[ext.key] for r in uni]))
-    fix = _fix(f"{ext.key} ({ext.formula}) calibrated on shear + the other uniaxial mode", "held_out_nrmse",
+    fix = fix_record(f"{ext.key} ({ext.formula}) calibrated on shear + the other uniaxial mode", "held_out_nrmse",
                before, after, "; ".join(r["label"] for r in uni) + f" (before: {base.key} calibrated on shear alone)",
                **{r["label"]: r[ext.key] for r in uni})
     e_c = 100 * np.expm1(rc.mean())
@@ -478,7 +465,7 @@ def _i2_finding(by_mode, fits, base: Law, ext: Law, rotations, seed: int, n_grid
     share = c01 / (c10 + c01) if (c10 + c01) != 0 else np.inf
     before = float(np.mean([r[base.key] for r in rotations]))
     after = float(np.mean([r[ext.key] for r in rotations]))
-    fix = _fix(f"{ext.key} ({ext.formula}) fitted to all modes jointly", "held_out_nrmse (mean over rotations)",
+    fix = fix_record(f"{ext.key} ({ext.formula}) fitted to all modes jointly", "held_out_nrmse (mean over rotations)",
                before, after, "; ".join(r["label"] for r in rotations) + f" (before: {base.key} on the same modes)",
                delta_aicc=fa.aicc - fb.aicc, C01_pa=c01, C10_pa=c10, C01_ci95_low_pa=lo, C01_ci95_high_pa=hi,
                **{r["label"]: r[ext.key] for r in rotations})
