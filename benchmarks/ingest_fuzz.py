@@ -5,8 +5,10 @@
 Spreads the mutants evenly over the exports (bundled ``raw/*/`` files, ``tests/io/fixtures`` and, when
 present, ``../shared/data/real``; the headerless Budday curves are left out: they need sample-sheet options)
 and prints the count of each outcome: ``crash`` (exception other than IngestError) and ``wrong`` (silently
-wrong values) must be 0; ``rows_dropped`` (a row or trailing block missing in a format that declares no point
-count) and ``undetectable`` (byte corruption of a checksum-less .xls that still parses) are reported apart.
+wrong values) and ``lost`` (points missing that the mutant file still holds) must be 0; ``file_shorter`` (the
+mutation deleted a data row or cut the file's tail, and the reader returned every point left, in a format that
+declares no point count) and ``undetectable`` (byte corruption of a checksum-less .xls that still parses) are
+reported apart.
 """
 from __future__ import annotations
 
@@ -46,11 +48,11 @@ def main() -> None:
             for kind, detail, outcome, message in fuzz_file(path, Path(tmp), per_file, args.seed):
                 totals[outcome] += 1
                 by_kind[(kind, outcome)] += 1
-                if outcome in ("crash", "wrong"):
+                if outcome in ("crash", "wrong", "lost"):
                     examples.append(f"{path.name}: {kind} ({detail}) -> {outcome}: {message}")
     print(f"{sum(totals.values())} mutants of {len(files)} exports ({per_file} each), seed {args.seed}, "
           f"{time.perf_counter() - start:.0f} s")
-    for outcome in ("error", "same", "scaled", "rows_dropped", "undetectable", "crash", "wrong"):
+    for outcome in ("error", "same", "scaled", "file_shorter", "undetectable", "lost", "crash", "wrong"):
         print(f"  {outcome:13s} {totals[outcome]}")
     for (kind, outcome), n in sorted(by_kind.items()):
         print(f"    {kind:15s} {outcome:13s} {n}")

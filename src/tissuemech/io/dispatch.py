@@ -10,6 +10,7 @@ import zipfile
 from pathlib import Path
 
 from .blocks import Block, decode_text
+from .consistency import check_redundant_columns
 from .errors import IngestError
 from .lims import looks_like_lims, read_lims
 from .rheocompass import looks_like_rheocompass, read_rheocompass, read_rheocompass_xlsx
@@ -77,6 +78,10 @@ def read_export(path, **options) -> list[Block]:
     path = Path(path)
     if not path.is_file():
         raise IngestError(path, "file not found")
+    return check_redundant_columns(path, _read_blocks(path, options))
+
+
+def _read_blocks(path: Path, options: dict) -> list[Block]:
     head = path.read_bytes()[:8]
     if head[:4] == b"PK\x03\x04" or head[:8] == _OLE2:
         kind = detect_format(path)

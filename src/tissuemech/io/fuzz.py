@@ -10,9 +10,12 @@ Outcomes (:func:`judge`):
 * ``error``: :class:`~tissuemech.io.errors.IngestError` (what a damaged file must give);
 * ``same``: the blocks equal the original's (the mutation did not touch data);
 * ``scaled``: after a prefix flip, exactly the flipped column changed, by the right factor;
-* ``rows_dropped``: every column is there and each point equals an original point, in order, but trailing
-  or deleted rows (or trailing blocks) are missing. A format that declares no point count cannot tell this from a short
-  test; counted apart and reported;
+* ``file_shorter``: the mutation removed data from the file itself and the reader returned every point the
+  mutant still holds: after ``delete_line`` exactly one point is missing (the deleted row), after ``truncate``
+  only a tail is missing (the blocks kept are a prefix of the original's, and only the last kept block is
+  shortened, to a prefix of its rows). A format that declares no point count cannot tell such a file from a
+  shorter test, and nothing in the file is lost;
+* ``lost``: points are missing that the mutation did not remove from the file (a defect: silently lost data);
 * ``crash``: any exception other than IngestError (a defect);
 * ``wrong``: values, columns, block names or indices differ from the original (a defect), except after byte
   corruption of a binary workbook, which has no checksum: that is ``undetectable``.
@@ -127,8 +130,10 @@ def judge(original: list, path: Path, kind: str, **options) -> tuple[str, str]:
     names = [(b.index, b.name) for b in blocks]
     if names != [(b.index, b.name) for b in original][: len(names)]:
         return undetectable, "blocks differ: " + ", ".join(f"{b.index}:{b.name}" for b in blocks)[:200]
-    outcome = "same" if len(blocks) == len(original) else "rows_dropped"  # trailing blocks cut off
-    for new, old in zip(blocks, original):
+    missing_blocks = len(original) - len(blocks)
+    shortened = []                                    # (block position, points kept, points in the original)
+    outcome = "same"
+    for pos, (new, old) in enumerate(zip(blocks, original)):
         if list(new.data.columns) != list(old.data.columns):
             return undetectable, f"block {old.name!r}: columns {list(new.data.columns)} vs {list(old.data.columns)}"
         ratio = np.ones(len(old.data.columns))
@@ -145,10 +150,29 @@ def judge(original: list, path: Path, kind: str, **options) -> tuple[str, str]:
             outcome = "scaled" if (ratio != 1).any() or outcome == "scaled" else outcome
             continue
         if a.shape[0] < b.shape[0] and _is_subsequence(a, b):
-            outcome = "rows_dropped"
+            shortened.append((pos, a.shape[0], b.shape[0], _frames_equal(a, b[: a.shape[0]])))
             continue
         return undetectable, f"block {old.name!r}: values differ"
-    return outcome, ""
+    if not missing_blocks and not shortened:
+        return outcome, ""
+    return _judge_missing(kind, missing_blocks, shortened, len(blocks), original)
+
+
+def _judge_missing(kind: str, missing_blocks: int, shortened: list, kept_blocks: int,
+                   original: list) -> tuple[str, str]:
+    """``file_shorter`` when the missing points are exactly what the mutation took out of the file, else ``lost``."""
+    n_missing = sum(total - kept for _, kept, total, _ in shortened) + sum(
+        len(b.data) for b in original[kept_blocks:])
+    where = ", ".join(f"block {original[pos].name!r}: {kept} of {total} points" for pos, kept, total, _ in shortened)
+    if missing_blocks:
+        where = (where + ", " if where else "") + f"{missing_blocks} trailing block(s) missing"
+    if kind == "delete_line" and n_missing == 1 and not missing_blocks:
+        return "file_shorter", f"the deleted row ({where})"
+    if kind == "truncate":
+        only_last = all(pos == kept_blocks - 1 and prefix for pos, _, _, prefix in shortened)
+        if only_last:
+            return "file_shorter", f"the cut-off tail ({where})"
+    return "lost", f"{n_missing} point(s) missing that the {kind} mutation left in the file ({where})"
 
 
 def _expected(column: str) -> str:
