@@ -123,8 +123,59 @@ def test_covariate(block: pd.DataFrame, cov: str) -> dict | None:
             "n_curves": int(b["curve"].nunique()), "n_points": int(len(b))}
 
 
-def structure_tests(table: pd.DataFrame) -> list[dict]:
+#: the within-curve coordinate along which a test kind's shape is a property of the linear relaxation spectrum
+#: alone: a frequency sweep in the linear range is G*(omega), fixed by G(t) (interconversion), so a misfit
+#: shape along omega shared by every sweep is a statement about the baseline's spectrum, not a covariate effect
+SPECTRUM_COORDINATE = {"frequency_sweep": "frequency_sq"}
+#: largest polynomial degree (in log omega) of the shared cross-test shape
+SHARED_SHAPE_DEGREE = 3
+
+
+def shared_shape(block: pd.DataFrame, coordinate: str) -> tuple[np.ndarray, dict] | None:
+    """The misfit shape shared by every curve of a block along its spectrum coordinate, and a summary.
+
+    Fits the per-curve demeaned log-residual with a Legendre polynomial (degree <= :data:`SHARED_SHAPE_DEGREE`,
+    at most the number of distinct coordinate values minus 2) in the log of the coordinate, common to all
+    curves, with curve-clustered covariance. Returns ``(shape, summary)``: ``shape`` (per row, log units,
+    mean zero per curve) and ``summary`` with ``range_log`` (max - min of the shape over the block),
+    ``degree``, ``n_curves``, ``wald_p`` (joint test of the shape coefficients, NaN when not computable); None
+    when the block cannot carry a shape (fewer than :data:`MIN_CURVES` curves or 4 coordinate values).
+    """
+    x = np.log(block[coordinate].to_numpy(float))
+    y = block["log_ratio"].to_numpy(float)
+    ok = np.isfinite(x) & np.isfinite(y)
+    if block.loc[ok, "curve"].nunique() < MIN_CURVES or np.unique(x[ok]).size < 4:
+        return None
+    degree = int(min(SHARED_SHAPE_DEGREE, np.unique(x[ok]).size - 2))
+    codes = pd.factorize(block["curve"])[0]
+    lo, hi = np.nanmin(x[ok]), np.nanmax(x[ok])
+    z = np.where(ok, 2.0 * (x - lo) / (hi - lo) - 1.0, 0.0)
+    basis = np.polynomial.legendre.legvander(z, degree)[:, 1:]
+    basis_d = np.column_stack([_demean(np.where(ok, b, 0.0), codes) for b in basis.T])
+    yd = _demean(np.where(ok, y, 0.0), codes)
+    names = [f"P{k}" for k in range(1, degree + 1)]
+    res = st.cluster_regression(yd[ok], pd.DataFrame(basis_d[ok], columns=names), groups=codes[ok])
+    coef = res.params[names].to_numpy(float)
+    shape = np.where(ok, _demean(np.where(ok, basis @ coef, 0.0), codes), 0.0)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            wald_p = float(res.wald_test(", ".join(f"{n} = 0" for n in names), scalar=True).pvalue)
+    except (ValueError, np.linalg.LinAlgError):
+        wald_p = np.nan
+    grid = np.polynomial.legendre.legvander(np.linspace(-1, 1, 64), degree)[:, 1:] @ coef
+    return shape, {"range_log": float(grid.max() - grid.min()), "degree": degree,
+                   "n_curves": int(block.loc[ok, "curve"].nunique()), "wald_p": wald_p}
+
+
+def structure_tests(table: pd.DataFrame, predicted_tests=(), shapes: list | None = None) -> list[dict]:
     """Every covariate test on every (test kind, quantity) block of the residual table.
+
+    ``predicted_tests``: test kinds the baseline was *not* fitted to (cross-test predictions). In such a block
+    of a kind in :data:`SPECTRUM_COORDINATE`, the misfit shape shared by every curve along the coordinate
+    (:func:`shared_shape`) is removed before the covariates are tested, so that only structure that differs
+    between curves is tested there; the shape is appended to ``shapes`` (when given) with ``test`` and
+    ``quantity``, as a statement about the baseline's spectrum.
 
     Returns a list of dicts with ``test``, ``quantity``, ``covariate``, ``level``, ``statistic``,
     ``p_value``, ``log10_p``, ``effect_size``, ``practical``, ``n_curves``, ``n_points``.
@@ -140,6 +191,15 @@ def structure_tests(table: pd.DataFrame) -> list[dict]:
     rows = rows[rows["predicted_abs"] > 5.0 * rows["sigma"]]
     covs = covariate_columns(rows)
     for (test, quantity), block in rows.groupby(["test", "quantity"]):
+        coordinate = SPECTRUM_COORDINATE.get(str(test))
+        if coordinate and str(test) in set(predicted_tests) and coordinate in block:
+            found = shared_shape(block, coordinate)
+            if found is not None:
+                shape, summary = found
+                block = block.assign(log_ratio=block["log_ratio"].to_numpy(float) - shape)
+                if shapes is not None:
+                    shapes.append({"test": str(test), "quantity": str(quantity), "coordinate": coordinate,
+                                   **summary})
         # specimen-to-specimen variability is expected (log-normal population); an unusual specimen is the
         # catalogue's outlier_specimen, so the specimen factor is not scanned here
         results = [test_covariate(block, c) for c in covs]

@@ -30,7 +30,10 @@ dataset=None, alpha=ALPHA, ranking=None) -> dict``
 Output JSON (``diagnosis.json``)
 --------------------------------
 ``decision_rule`` (the sentence of :data:`DECISION_RULE`); ``noise_model`` (:func:`estimate_noise` plus
-``relative_level`` eps); ``baseline`` {``model``, ``adequate``, ``tried``: adequacy of every candidate};
+``relative_level`` eps); ``baseline`` {``model``, ``adequate``, ``tried``: adequacy of every candidate,
+``cross_test_shape``: the misfit shape shared by every frequency sweep the baseline predicted without being
+fitted to it (:func:`tissuemech.diagnosis.generic.shared_shape`: ``range_log``, ``degree``, ``wald_p``,
+``evidence``), removed before the covariate scan of those curves};
 ``findings``: ``baseline_inadequate`` first when a candidate was rejected (``models``, ``evidence``), then one
 entry per catalogue id, detected first (strongest first): ``effect``, ``detected``,
 ``tested``, ``statistic`` (+ ``statistic_name``), ``p_value`` (uncorrected), ``p_holm``, ``effect_size``
@@ -180,7 +183,10 @@ def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "mode
     findings = run_detectors(ctx)
     # a baseline without residuals on these runs (e.g. an inadequate model that predicts none of them) has
     # no structure to scan
-    generic = structure_tests(table) if len(table) else []
+    fitted = set(fit_info.get("fitted_tests") or ())
+    predicted_tests = sorted(set(table["test"]) - fitted) if fitted and len(table) else []
+    shapes: list[dict] = []
+    generic = structure_tests(table, predicted_tests, shapes) if len(table) else []
     tested = [f for f in findings if f.get("tested") and np.isfinite(f.get("p_value", np.nan))]
     pvals = [f["p_value"] for f in tested] + [g["p_value"] for g in generic]
     # family-wise error <= alpha over every test: alpha/2 to the catalogue and alpha/2 to the generic scan
@@ -220,7 +226,6 @@ def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "mode
     rest = [f for f in findings if not f["detected"]]
     rest.sort(key=lambda f: f["log10_p"] if np.isfinite(f.get("log10_p", np.nan)) else 1.0)
     unexplained = []
-    fitted = set(fit_info.get("fitted_tests") or ())
     confounded = confounded_covariates(table, runs)
     sets = [c["covariates"] for c in confounded]
 
@@ -262,11 +267,23 @@ def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "mode
     return {"model": model, "fit_info": {k: v for k, v in fit_info.items() if k != "fixes"}, "alpha": alpha,
             "decision_rule": DECISION_RULE,
             "noise_model": {**noise, "relative_level": eps},
-            "baseline": {"model": model, "adequate": usable, "tried": list(adequacy)},
+            "baseline": {"model": model, "adequate": usable, "tried": list(adequacy),
+                         "cross_test_shape": [dict(sh, evidence=_shape_evidence(sh, model)) for sh in shapes]},
             "n_tests": len(pvals), "findings": head + detected + rest, "unexplained": unexplained,
             "significant_fix_not_evaluated": not_evaluated,
             "not_identifiable": not_identifiable, "confounded": confounded, "structure_tests": generic,
             "serial": serial_structure(table) if len(table) else []}
+
+
+def _shape_evidence(shape: dict, model: str) -> str:
+    size = 100 * (np.exp(shape["range_log"]) - 1)
+    return (f"the {shape['test']} {shape['quantity']} predicted by {model} (not fitted to these curves) misfits by a "
+            f"shape along the frequency shared by all {shape['n_curves']} curves ({size:.1f} % from its lowest to "
+            f"its highest point, degree-{shape['degree']} polynomial in log frequency, Wald p = "
+            f"{shape['wald_p']:.2g}): the baseline's relaxation spectrum does not carry over to these tests. "
+            f"It is removed before the covariate scan of these curves, which then tests only structure that "
+            f"differs between curves; it is not a covariate effect, and instrument inertia, the catalogue's "
+            f"frequency-shaped cause, is tested separately.")
 
 
 def top_finding(result: dict) -> str | None:

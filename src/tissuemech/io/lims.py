@@ -96,6 +96,10 @@ def _geometry(path: Path, lines: list[str]) -> dict:
     return meta
 
 
+#: rows that belong inside a [Step] section
+_STEP_KEYS = ("step name", "number of points", "variables", "units", "data point")
+
+
 def read_lims(path, text: str | None = None) -> list[Block]:
     """Every ``[Step]`` of a TA LIMS export as canonical blocks (see module docstring)."""
     path = Path(path)
@@ -104,6 +108,10 @@ def read_lims(path, text: str | None = None) -> list[Block]:
     starts = [i for i, line in enumerate(lines) if line.strip().lower() == "[step]"]
     if not starts:
         raise IngestError(path, "no [Step] block in a TA LIMS export")
+    for j, line in enumerate(lines[: starts[0]]):
+        if line.split("\t")[0].strip().lower() in _STEP_KEYS:
+            raise IngestError(path, f"{line.split(chr(9))[0].strip()!r} row before the first [Step] header "
+                                    f"([Step] line missing?)", line=j + 1)
     meta_common = {"format": "ta_lims", **_geometry(path, lines[: starts[0]])}
     blocks = []
     for b, s in enumerate(starts):
@@ -125,7 +133,10 @@ def _step(path: Path, lines: list[str], start: int, end: int, index: int, meta_c
             keys[key] = (j + 1, cells)
     if "step name" in keys and not (len(keys["step name"][1]) > 1 and keys["step name"][1][1].strip()):
         raise IngestError(path, "'Step name' row without a name (row cut short?)", line=keys["step name"][0])
-    name = keys["step name"][1][1].strip() if "step name" in keys else f"step {index}"
+    if "step name" not in keys:
+        # every LIMS step is named (the name carries the test and its temperature, instrument_formats.md 2.4)
+        raise IngestError(path, "[Step] without a 'Step name' row (line deleted?)", line=start + 1)
+    name = keys["step name"][1][1].strip()
     for needed in ("variables", "units"):
         if needed not in keys:
             raise IngestError(path, f"step {name!r} has no '{needed.capitalize()}' row (truncated file?)",

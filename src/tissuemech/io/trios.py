@@ -148,6 +148,10 @@ def _step_block(path, name, index, cols, units, rows, line_no, meta_common) -> B
                  meta=dict(meta_common, labels=labels, first_data_line=line_no[0]))
 
 
+#: a TRIOS step sheet's name: the step and its 1-based position in the procedure ("Frequency sweep - 2")
+_STEP_SHEET = re.compile(r".+ - \d+$")
+
+
 def read_trios_xls(path) -> list[Block]:
     """Every step sheet of a TRIOS Excel (.xls, BIFF8) export.
 
@@ -178,7 +182,11 @@ def _read_xls(path: Path) -> list[Block]:
                     geometry.update(measuring_system(str(vals[1])))
             continue
         if sheet.nrows < 4:
-            continue
+            if _STEP_SHEET.match(sheet.name):
+                # TRIOS names each step's sheet "<step> - <k>"; one without a header and data lost them
+                raise IngestError(path, f"step sheet {sheet.name!r} has {sheet.nrows} row(s): no header and data "
+                                        f"(damaged workbook?)")
+            continue  # Excel's empty default sheets ("Sheet1")
         name = str(sheet.cell_value(0, 0)).strip() or sheet.name
         cols = [str(v).strip() for v in sheet.row_values(1)]
         units = [str(v).strip() for v in sheet.row_values(2)]
