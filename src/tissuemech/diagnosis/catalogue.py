@@ -870,9 +870,11 @@ def detect_outlier_specimen(ctx: DiagnosisContext) -> dict:
 def detect_instrument_inertia(ctx: DiagnosisContext) -> dict:
     """G' residual of the frequency sweep regressed on the inertial torque term omega^2 2h/(pi R^4).
 
-    Where the sweeps log a raw phase, the fitted inertia error must also be consistent with it (science.md
-    2.5): |dI| may not exceed the instrument inertia the raw phase implies (:func:`raw_phase_inertia`);
-    otherwise the omega^2 trend is a misfit of the spectrum and the finding is not practical."""
+    Where the sweeps log a raw phase, an over-correction (dI < 0) must also be consistent with it (science.md
+    2.5): the raw phase with the reported moduli gives the inertia the instrument corrected for, I_cal
+    (:func:`raw_phase_inertia`), and an over-correction cannot exceed it (|dI| <= I_cal); otherwise the
+    omega^2 trend is a misfit of the spectrum and the finding is not practical. An under-correction (dI > 0)
+    has no such bound: the true inertia is I_cal + dI."""
     eff = "instrument_inertia"
     fs = ctx.table[(ctx.table["test"] == "frequency_sweep") & (ctx.table["quantity"] == "storage_modulus")]
     if fs.empty or fs["frequency_sq"].nunique() < 4:
@@ -894,8 +896,19 @@ def detect_instrument_inertia(ctx: DiagnosisContext) -> dict:
     frame = frame.assign(residual=frame["observed"] - scale * frame["predicted"],
                          predicted=scale * frame["predicted"], predicted_abs=np.abs(scale * frame["predicted"]))
     y = frame["residual"].to_numpy()
-    # log(omega) control: a smooth misfit of the spectrum is not an omega^2 artefact
-    X = frame[["x_inertia", "logw"]]
+    fitted_tests = set(ctx.fit_info.get("fitted_tests") or ())
+    cross_test = bool(fitted_tests) and "frequency_sweep" not in fitted_tests
+    if cross_test:
+        # the sweeps are predicted from tests the baseline was fitted to: a misfit of the spectrum is a
+        # relative shape along log omega shared by every sweep (generic.shared_shape), so the control is that
+        # shape (predicted x Legendre polynomials in log omega); the additive omega^2/b term must be seen over it
+        shape_cols = _relative_shape_columns(frame)
+        frame = frame.assign(**shape_cols)
+        controls = list(shape_cols)
+    else:
+        # log(omega) control: a smooth misfit of the spectrum is not an omega^2 artefact
+        controls = ["logw"]
+    X = frame[["x_inertia", *controls]]
     res = st.cluster_regression(y / frame["sigma"], X.div(frame["sigma"], axis=0).assign(
         inv_sigma=1.0 / frame["sigma"].to_numpy()), groups=frame["curve"].to_numpy())
     t = st.coefficient_test(res, "x_inertia")
@@ -921,30 +934,45 @@ def detect_instrument_inertia(ctx: DiagnosisContext) -> dict:
     consistent = True
     i_raw = raw_phase_inertia(ctx.table, frame)
     if np.isfinite(i_raw["i_raw_kg_m2"]):
-        # science.md 2.5: an uncorrected inertia error dI is part of the instrument's inertial torque, which
-        # the raw phase measures; an estimate |dI| above the whole inertia the raw phase shows is a
-        # misfit of the spectrum, not inertia
-        consistent = bool(abs(delta_i) <= i_raw["i_raw_kg_m2"])
-        raw_txt = (f" Raw phase reaches {i_raw['max_raw_phase_deg']:.0f} deg; the inertial torque it implies "
-                   f"(I omega^2/b = G' - G''/tan(raw phase), top quarter of omega^2/b) is I ~ "
-                   f"{i_raw['i_raw_kg_m2']:.3g} kg m^2, "
-                   + ("consistent with" if consistent else "smaller than") + " the fitted |dI|.")
+        # science.md 2.5: the raw torque carries the whole inertia I, the reported G' is corrected by I_cal,
+        # so G'_rep - G''/tan(raw phase) = I_cal omega^2/b: the raw phase shows the corrected part. An
+        # over-correction dI = I - I_cal < 0 is at most I_cal in size; an under-correction is unbounded by it
+        consistent = bool(delta_i >= 0 or abs(delta_i) <= i_raw["i_raw_kg_m2"])
+        raw_txt = (f" Raw phase reaches {i_raw['max_raw_phase_deg']:.0f} deg; the inertia the instrument "
+                   f"corrected for (I_cal omega^2/b = G' - G''/tan(raw phase), top quarter of omega^2/b) is "
+                   f"I_cal ~ {i_raw['i_raw_kg_m2']:.3g} kg m^2; the fitted dI is "
+                   + ("an under-correction (true inertia I_cal + dI)" if delta_i >= 0 else
+                      "an over-correction " + ("within" if consistent else "larger than") + " I_cal") + ".")
 
     # held-out: leave-one-sample-out fit of dI, applied to the held-out sample's sweep
     frame = frame.assign(rel=frame["residual"] / frame["predicted_abs"])
 
+    shape = [c for c in controls if c != "logw"]
+
     def fit(train):
-        return float(np.linalg.lstsq(train[["x_inertia"]].to_numpy(), train["residual"].to_numpy(), rcond=None)[0][0])
+        return np.linalg.lstsq(train[["x_inertia", *shape]].to_numpy(), train["residual"].to_numpy(), rcond=None)[0]
 
     def error(test, par):
-        corr = 0.0 if par is None else par * test["x_inertia"].to_numpy()
+        corr = 0.0 if par is None else test[["x_inertia", *shape]].to_numpy() @ par
         return (test["residual"].to_numpy() - corr) / test["predicted_abs"].to_numpy()
 
     group = _cv_group_column(frame)
-    before, after = _group_cv(frame, group, fit, error)
+    if shape:
+        # "before" is the baseline with the shared spectrum shape fitted on the training groups (a statement
+        # about the baseline, reported by the generic scan), "after" adds the inertia term
+        def shape_only(train):
+            coef = np.linalg.lstsq(train[shape].to_numpy(), train["residual"].to_numpy(), rcond=None)[0]
+            return np.r_[0.0, coef]
+
+        before = _group_cv(frame, group, shape_only, error)[1]
+        after = _group_cv(frame, group, fit, error)[1]
+    else:
+        before, after = _group_cv(frame, group, fit, error)
+    control_txt = ("the shared relative spectrum shape of the predicted sweeps as control" if shape
+                   else "log-omega control")
     evidence = (f"Frequency-sweep G' residuals of {ctx.model} follow -dI omega^2/b (b = pi R^4/(2h)) with "
                 f"dI = {delta_i:.3g} kg m^2 (t = {t['statistic']:.2f}, {frame['curve'].nunique()} sweeps, "
-                f"clustered by sweep, log-omega control): an inertial error of {artefact_at_fmax:+.3g} Pa at "
+                f"clustered by sweep, {control_txt}): an inertial error of {artefact_at_fmax:+.3g} Pa at "
                 f"{f_max:.3g} Hz where |G'| ~ {gmax:.3g} Pa.{kk_txt}{raw_txt}")
     fix = fix_record("fitted inertia term G'_app = G' - dI omega^2 2h/(pi R^4)", "rms_rel_residual_storage_modulus",
                before, after, f"leave-one-{group}-out", delta_inertia_kg_m2=delta_i, n_held_out_points=len(frame))
@@ -952,11 +980,30 @@ def detect_instrument_inertia(ctx: DiagnosisContext) -> dict:
     return make_finding(eff, t, "t", delta_i, "kg m^2", practical, evidence, fix)
 
 
-def raw_phase_inertia(table: pd.DataFrame, frame: pd.DataFrame) -> dict:
-    """Instrument inertia implied by the raw phase of the frequency sweeps (science.md 2.5).
+#: largest polynomial degree (in log omega) of a misfit shape of the relaxation spectrum shared by every
+#: predicted frequency sweep: the control of the inertia test here and the shape the generic scan removes
+#: (:func:`tissuemech.diagnosis.generic.shared_shape`)
+SPECTRUM_SHAPE_DEGREE = 3
 
-    The raw torque is (G* - I omega^2/b) b theta, so tan(raw phase) = G'' / (G' - I omega^2/b) and
-    I omega^2/b = G' - G''/tan(raw phase) [Pa], with G', G'' the reported (inertia-corrected) moduli.
+
+def _relative_shape_columns(frame: pd.DataFrame, degree: int = SPECTRUM_SHAPE_DEGREE) -> dict[str, np.ndarray]:
+    """predicted x P_k(z), k = 1..degree, with z the log angular frequency scaled to [-1, 1] over the frame:
+    a relative misfit shape along log omega shared by every sweep (degree at most distinct omegas - 2)."""
+    logw = 0.5 * np.log(frame["frequency_sq"].to_numpy(float))
+    degree = int(min(degree, np.unique(logw).size - 2))
+    z = 2.0 * (logw - logw.min()) / max(logw.max() - logw.min(), 1e-12) - 1.0
+    basis = np.polynomial.legendre.legvander(z, degree)[:, 1:]
+    pred = frame["predicted"].to_numpy(float)
+    return {f"shape_P{k + 1}": pred * basis[:, k] for k in range(degree)}
+
+
+def raw_phase_inertia(table: pd.DataFrame, frame: pd.DataFrame) -> dict:
+    """Inertia the instrument corrected for, from the raw phase of the frequency sweeps (science.md 2.5).
+
+    The raw torque is (G* - I omega^2/b) b theta with the whole inertia I, so tan(raw phase) =
+    G'' / (G' - I omega^2/b) with the true G'. The reported G' is corrected with the calibrated I_cal,
+    G'_rep = G' - (I - I_cal) omega^2/b, so G'_rep - G''/tan(raw phase) = I_cal omega^2/b [Pa]: with the
+    reported moduli the raw phase gives I_cal (= I when the correction is exact).
     ``frame``: the storage-modulus rows of the sweeps with ``x_inertia`` = omega^2/b [1/(m^3 s^2)] and
     ``channel_raw_phase`` [rad]; ``table``: the residual table (for the loss-modulus rows).
 

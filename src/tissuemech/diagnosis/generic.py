@@ -38,7 +38,7 @@ import statsmodels.api as sm
 
 from ..tts import run_temperature_c
 from . import stats as st
-from .catalogue import between_sample_test, level_regression
+from .catalogue import SPECTRUM_SHAPE_DEGREE, between_sample_test, level_regression
 from .evidence import run_id
 
 #: smallest structured misfit (log-residual change over the covariate range) worth reporting
@@ -127,14 +127,12 @@ def test_covariate(block: pd.DataFrame, cov: str) -> dict | None:
 #: alone: a frequency sweep in the linear range is G*(omega), fixed by G(t) (interconversion), so a misfit
 #: shape along omega shared by every sweep is a statement about the baseline's spectrum, not a covariate effect
 SPECTRUM_COORDINATE = {"frequency_sweep": "frequency_sq"}
-#: largest polynomial degree (in log omega) of the shared cross-test shape
-SHARED_SHAPE_DEGREE = 3
 
 
 def shared_shape(block: pd.DataFrame, coordinate: str) -> tuple[np.ndarray, dict] | None:
     """The misfit shape shared by every curve of a block along its spectrum coordinate, and a summary.
 
-    Fits the per-curve demeaned log-residual with a Legendre polynomial (degree <= :data:`SHARED_SHAPE_DEGREE`,
+    Fits the per-curve demeaned log-residual with a Legendre polynomial (degree <= :data:`SPECTRUM_SHAPE_DEGREE`,
     at most the number of distinct coordinate values minus 2) in the log of the coordinate, common to all
     curves, with curve-clustered covariance. Returns ``(shape, summary)``: ``shape`` (per row, log units,
     mean zero per curve) and ``summary`` with ``range_log`` (max - min of the shape over the block),
@@ -146,7 +144,7 @@ def shared_shape(block: pd.DataFrame, coordinate: str) -> tuple[np.ndarray, dict
     ok = np.isfinite(x) & np.isfinite(y)
     if block.loc[ok, "curve"].nunique() < MIN_CURVES or np.unique(x[ok]).size < 4:
         return None
-    degree = int(min(SHARED_SHAPE_DEGREE, np.unique(x[ok]).size - 2))
+    degree = int(min(SPECTRUM_SHAPE_DEGREE, np.unique(x[ok]).size - 2))
     codes = pd.factorize(block["curve"])[0]
     lo, hi = np.nanmin(x[ok]), np.nanmax(x[ok])
     z = np.where(ok, 2.0 * (x - lo) / (hi - lo) - 1.0, 0.0)
