@@ -1158,18 +1158,30 @@ def write_fit_netcdf(result: FitResult, path) -> None:
     write_netcdf(fit_to_dataset(result), path)
 
 
-def fits_csv_row(result: FitResult, dataset: str = "") -> dict:
-    """One tidy ``fits.csv`` row: criteria, flags, ranges and ``param_<name>``/``se_<name>`` columns."""
-    row = {"dataset": dataset, "model": result.model_key, "family": result.family, "scope": result.scope,
-           "target": result.target, "relaxation": result.relaxation, "success": result.success, "n": result.n, "n_eff": round(result.n_eff, 2),
-           "k": result.k, "chisqr": result.chisqr, "redchi": result.redchi, "rmse": result.rmse, "nrmse": result.nrmse,
-           "aic": result.aic, "aicc": result.aicc, "bic": result.bic, "aicc_eff": result.aicc_eff,
-           "bic_eff": result.bic_eff, "condition_number": result.condition_number, "n_flags": len(result.flags), "flags": "; ".join(result.flags),
-           "curves": "; ".join(result.curve_labels)}
-    row.update(result.ranges)
-    for name, v in result.params.items():
-        row[f"param_{name}"] = v
-        row[f"se_{name}"] = result.stderr[name]
+#: scalar attributes of a fit record copied to ``fits.csv`` (in this order, after ``dataset``/``file``/``model``)
+FITS_CSV_ATTRS = ("family", "scope", "target", "relaxation", "success", "n", "n_eff", "k", "chisqr", "redchi", "rmse",
+                  "nrmse", "aic", "aicc", "bic", "aicc_eff", "bic_eff", "condition_number", "nfev", "n_starts",
+                  "message")
+
+
+def fits_csv_row(record: xr.Dataset, dataset: str = "", file: str = "") -> dict:
+    """One tidy ``fits.csv`` row of a fit record (:func:`fit_to_dataset`, or a ``fits/<scope>/<model>.nc`` read
+    back): criteria, flags, ranges and ``param_<name>``/``se_<name>`` columns. The one ``fits.csv`` schema:
+    ``dataset, file, model, <FITS_CSV_ATTRS>, n_flags, flags ("; "), curves ("; "), <ranges>, param_*, se_*``.
+    """
+    attrs = record.attrs
+    flags = json.loads(attrs.get("flags", "[]"))
+    row = {"dataset": dataset, "file": str(file), "model": str(attrs.get("model_key", ""))}
+    for name in FITS_CSV_ATTRS:
+        v = attrs.get(name, np.nan)
+        row[name] = bool(int(v)) if name == "success" else v
+    row["n_flags"] = len(flags)
+    row["flags"] = "; ".join(flags)
+    row["curves"] = "; ".join(str(c) for c in record["curve_label"].values) if "curve_label" in record else ""
+    row.update(json.loads(attrs.get("ranges", "{}")))
+    for name, value, se in zip(record["param"].values, record["value"].values, record["stderr"].values):
+        row[f"param_{name}"] = float(value)
+        row[f"se_{name}"] = float(se)
     return row
 
 
@@ -1177,5 +1189,5 @@ __all__ = [
     "PLATE_TARGETS", "TEST_RESPONSE", "Curve", "amplitude_sweep_lve_curve", "curve_from_run", "curves_from_averages", "geometry_from_runs", "relaxation_history",
     "thin", "select_strain", "with_relaxation_history", "curve_ranges", "plate_factor", "target_observations", "predict",
     "NoiseModel", "FitProblem", "FitResult", "fit", "evaluate", "information_criteria", "log_spaced_taus",
-    "prony_nnls", "prony_start", "fit_to_dataset", "write_fit_netcdf", "fits_csv_row",
+    "prony_nnls", "prony_start", "fit_to_dataset", "write_fit_netcdf", "fits_csv_row", "FITS_CSV_ATTRS",
 ]

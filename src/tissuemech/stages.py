@@ -173,20 +173,13 @@ def run_fit_scope(averages_path, scope: str, spec: Mapping, target: str, seed: i
 
 def collect_scopes(ranking_paths: Sequence, fits_dirs: Sequence, dataset: str, ranking_out, fits_out,
                    figure_out=None) -> pd.DataFrame:
-    """Merge the per-scope rankings into ``ranking.csv`` and every fit record into the tidy ``fits.csv``."""
+    """Merge the per-scope rankings into ``ranking.csv`` and every fit record into the tidy ``fits.csv``
+    (one row per record, :func:`tissuemech.fitting.fits_csv_row`)."""
     tables = [pd.read_csv(p) for p in ranking_paths if Path(p).stat().st_size > 0]
     ranking = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
     write_text(ranking.to_csv(index=False), ranking_out)
-    rows = []
-    for folder in fits_dirs:
-        for path in sorted(Path(folder).glob("*.nc")):
-            ds = read_netcdf(path)
-            row = {"dataset": dataset, "file": str(path)}
-            row.update({k: v for k, v in ds.attrs.items() if isinstance(v, (int, float, str))})
-            for name, value, se in zip(ds["param"].values, ds["value"].values, ds["stderr"].values):
-                row[f"param_{name}"] = float(value)
-                row[f"se_{name}"] = float(se)
-            rows.append(row)
+    rows = [F.fits_csv_row(read_netcdf(path), dataset, file=str(path))
+            for folder in fits_dirs for path in sorted(Path(folder).glob("*.nc"))]
     write_text(pd.DataFrame(rows).to_csv(index=False), fits_out)
     if figure_out is not None and not ranking.empty and "model" in ranking:
         shown = ranking.dropna(subset=["model"]).copy()

@@ -281,8 +281,9 @@ def test_fit_netcdf_and_csv_row(tmp_path):
     assert ds["correlation"].shape == (2, 2) and abs(ds["correlation"].values[0, 1]) <= 1
     assert json.loads(ds.attrs["flags"]) == res.flags
     assert ds["weighted_residual"].size == res.n
-    row = F.fits_csv_row(res, dataset="demo")
+    row = F.fits_csv_row(ds, dataset="demo", file=str(path))  # the fits.csv row of the record read back
     frame = pd.DataFrame([row])
+    assert row["model"] == "reduced_polynomial2" and row["success"] is res.success
     for col in ("aicc", "bic", "n_eff", "param_C10", "se_C20", "strain_max", "target", "flags"):
         assert col in frame
     assert not list(tmp_path.glob("fits/.*tmp"))  # atomic write leaves no temporary

@@ -8,6 +8,7 @@ from doubles import ProxyReducedPolynomial
 
 from tissuemech import fitting as F
 from tissuemech import ranking as R
+from tissuemech.canonical import read_netcdf
 from tissuemech.models.qlv import LinearElasticShear, QLVModel, qlv_params
 from tissuemech.models.registry import get_model
 
@@ -153,47 +154,57 @@ def test_time_dependence_from_relaxation_and_sweep():
     assert R.time_dependence([fs])["rate_dependent"] is False
 
 
-def test_run_fit_stage_writes_fits_ranking_cards(tmp_path):
-    qlv = get_model("qlv_linear_prony4")
-    truth = qlv_params(qlv, {"G0": 200.0}, G_PRONY)
-    curves = csr_curves(qlv, truth, gmax=0.05, seed=6)
-    scopes = (R.Scope("csr", ("constant_shear_rate",), models=("qlv_linear_prony4",), target="none"),
-              R.Scope("flow", ("flow_curve",), ("viscous",)))  # no data: skipped
-    summary = R.run_fit_stage(curves, tmp_path, dataset="demo", scopes=scopes)
-    assert summary["scopes"] == ["csr"] and summary["n_fits"] == 1
-    fits = pd.read_csv(tmp_path / "fits.csv")
-    assert list(fits["model"]) == ["qlv_linear_prony4"] and (fits["dataset"] == "demo").all()
-    ranking = pd.read_csv(tmp_path / "ranking.csv")
-    assert list(ranking["rank"]) == [1] and ranking["recommendation"].notna().all()
-    assert (tmp_path / "fits" / "csr" / "qlv_linear_prony4.nc").exists()
-    assert (tmp_path / "cards" / "csr" / "qlv_linear_prony4.inp").exists()
-    assert (tmp_path / "ranking_csr.png").exists() and (tmp_path / "recommendations.json").exists()
-    assert len(pd.read_csv(tmp_path / "cv.csv")) == len(RATES)
-    with pytest.raises(KeyError, match="unknown model 'no_such_model'"):  # a config typo is an error
-        R.run_fit_stage(curves, tmp_path / "x", scopes=(R.Scope("csr", ("constant_shear_rate",), models=("no_such_model",)),))
-
-
-def test_run_fit_stage_files_reads_averages_and_geometry(tmp_path):
-    from tissuemech.canonical import make_run_dataset, write_netcdf
+def _write_csr_averages(folder, rates, truth, model):
+    """Canonical CSR runs (2 samples per rate, 12.5 mm plate, apparent rim stress of the model) and their
+    ``averages.nc``, as the workflow's average rule writes it."""
+    from tissuemech.canonical import make_run_dataset
     from tissuemech.curves import average_runs, write_averages
     from tissuemech.models import plate
 
-    qlv = get_model("qlv_linear_prony4")
-    truth = qlv_params(qlv, {"G0": 200.0}, G_PRONY)
     runs = []
-    for i, rate in enumerate((0.01, 0.1)):
+    for i, rate in enumerate(rates):
         for s in range(2):
             t = np.linspace(0, 0.05 / rate, 31)
-            y = plate.forward_plate(qlv, truth, t, rate * t, 0.0125) * (1 + 0.002 * s)
-            ds = make_run_dataset({"time": t[1:], "shear_strain": rate * t[1:], "shear_stress": y[1:]},
-                                  {"test": "constant_shear_rate", "shear_rate_1_per_s": rate, "radius_m": 0.0125,
-                                   "gap_m": 0.003, "specimen": "b1", "sample": f"s{s}", "run": f"r{i}{s}"})
-            write_netcdf(ds, tmp_path / "runs" / f"r{i}{s}.nc")
-            runs.append(ds)
-    write_averages(average_runs(runs), tmp_path / "averages.nc")
-    summary = R.run_fit_stage_files(tmp_path / "averages.nc", tmp_path / "out", runs_dir=tmp_path / "runs",
-                                    dataset="demo", scopes=(R.Scope("csr", ("constant_shear_rate",),
-                                                                    models=("qlv_linear_prony4",)),))
-    assert summary["scopes"] == ["csr"]
-    fits = pd.read_csv(tmp_path / "out" / "fits.csv")
+            y = plate.forward_plate(model, truth, t, rate * t, 0.0125) * (1 + 0.002 * s)
+            runs.append(make_run_dataset({"time": t[1:], "shear_strain": rate * t[1:], "shear_stress": y[1:]},
+                                         {"test": "constant_shear_rate", "shear_rate_1_per_s": rate,
+                                          "radius_m": 0.0125, "gap_m": 0.003, "specimen": "b1", "sample": f"s{s}",
+                                          "run": f"r{i}{s}"}))
+    write_averages(average_runs(runs), folder / "averages.nc")
+    return folder / "averages.nc"
+
+
+def test_fit_stage_writes_fits_ranking_cards(tmp_path):
+    """The workflow's fit stage (``stages``: scopes from the config, ``run_fit_scope`` per scope,
+    ``collect_scopes``) on averaged CSR runs: fit records, cards, ranking with its recommendation, CV records,
+    the one ``fits.csv`` schema; plate geometry from the averages; the generating parameter is recovered."""
+    from tissuemech import stages
+
+    qlv = get_model("qlv_linear_prony4")
+    truth = qlv_params(qlv, {"G0": 200.0}, G_PRONY)
+    averages = _write_csr_averages(tmp_path, RATES, truth, qlv)
+    config = {"models": {"constant_shear_rate": ["qlv_linear_prony4"], "flow_curve": ["newton"]}}
+    scopes = stages.dataset_scopes(["constant_shear_rate"], config)
+    assert list(scopes) == ["constant_shear_rate"]  # flow curves: no data, no scope
+    with pytest.raises(KeyError, match="no_such_model"):  # a config typo is an error
+        stages.dataset_scopes(["constant_shear_rate"], {"models": {"constant_shear_rate": ["no_such_model"]}})
+    curves = stages.scope_curves(read_netcdf(averages), ["constant_shear_rate"])
+    assert {c.radius_m for c in curves} == {0.0125} and {c.gap_m for c in curves} == {0.003}
+
+    scope = "constant_shear_rate"
+    fits_dir, cards_dir = tmp_path / "fits" / scope, tmp_path / "cards" / scope
+    table = stages.run_fit_scope(averages, scope, scopes[scope], target="apparent_stress", seed=0, multistart=1,
+                                 fits_dir=fits_dir, cards_dir=cards_dir, ranking_path=tmp_path / "ranking" / f"{scope}.csv",
+                                 dataset="demo")
+    assert list(table["rank"]) == [1] and table["recommendation"].notna().all()
+    assert (fits_dir / "qlv_linear_prony4.nc").exists() and (cards_dir / "qlv_linear_prony4.inp").exists()
+    assert (tmp_path / "ranking" / f"{scope}.recommendation.json").exists()
+    assert len(pd.read_csv(tmp_path / "ranking" / f"{scope}.cv.csv")) == len(RATES)
+
+    stages.collect_scopes([tmp_path / "ranking" / f"{scope}.csv"], [fits_dir], "demo", tmp_path / "ranking.csv",
+                          tmp_path / "fits.csv", tmp_path / "ranking.png")
+    fits = pd.read_csv(tmp_path / "fits.csv")
+    assert list(fits["model"]) == ["qlv_linear_prony4"] and (fits["dataset"] == "demo").all()
     assert fits.loc[0, "target"] == "apparent_stress" and fits.loc[0, "param_G0"] == pytest.approx(200.0, rel=0.02)
+    assert list(pd.read_csv(tmp_path / "ranking.csv")["rank"]) == [1]
+    assert (tmp_path / "ranking.png").exists()
