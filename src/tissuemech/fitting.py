@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -850,6 +851,32 @@ def _flags(problem: FitProblem, best, names: list[str]) -> tuple[list[str], np.n
     return flags, corr
 
 
+#: the ``at_bound`` flag of :func:`fit` (parameter, side, bound)
+_AT_BOUND = re.compile(r"at_bound: (\S+) at its (lower|upper) bound (\S+)")
+
+
+def at_bound_parameters(flags: Iterable[str]) -> list[str]:
+    """Varying parameters a fit left at a bound, from its flags (``at_bound: <name> at its <side> bound <b>``).
+
+    A Prony weight ``beta_i`` at its lower bound 0 is not listed: that relaxation mode is simply absent (the
+    NNLS answer "not needed"), not a collapse of the fit.
+    """
+    out = []
+    for f in flags:
+        m = _AT_BOUND.match(str(f))
+        if m and not (re.fullmatch(r"beta_\d+", m.group(1)) and m.group(2) == "lower" and float(m.group(3)) == 0.0):
+            out.append(m.group(1))
+    return sorted(set(out))
+
+
+def has_covariance(flags: Iterable[str], stderr: Mapping[str, float], varying: Sequence[str]) -> bool:
+    """Whether a fit has a covariance: no ``no_covariance`` flag and a finite standard error of some varying
+    parameter (true for a fit with nothing varying)."""
+    if any(str(f).startswith("no_covariance") for f in flags):
+        return False
+    return not varying or any(np.isfinite(stderr.get(n, np.nan)) for n in varying)
+
+
 def _random_start(problem: FitProblem, rng: np.random.Generator) -> dict[str, float]:
     """One random start around the model's defaults: log parameters within +-1 decade of the default, positive
     linear ones within a factor 10, others within +-max(|default|, 1); narrow finite bounds (less than ten
@@ -1190,4 +1217,5 @@ __all__ = [
     "thin", "select_strain", "with_relaxation_history", "curve_ranges", "plate_factor", "target_observations", "predict",
     "NoiseModel", "FitProblem", "FitResult", "fit", "evaluate", "information_criteria", "log_spaced_taus",
     "prony_nnls", "prony_start", "fit_to_dataset", "write_fit_netcdf", "fits_csv_row", "FITS_CSV_ATTRS",
+    "at_bound_parameters", "has_covariance",
 ]

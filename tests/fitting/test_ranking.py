@@ -63,6 +63,8 @@ def test_rate_dependent_small_strain_selects_qlv_by_cv_and_rule():
     assert "rate/time-dependent (csr_rates)" in rec["statement"]
     assert set(cv["design"]) == {"leave_one_condition_out"} and (cv["status"] == "ok").all()
     assert np.isclose(table["akaike_weight"].sum(), 1.0)
+    # the one recommendation column: exactly one row, the recommended model
+    assert table.loc[table["recommended"], "model"].tolist() == ["qlv_linear_prony4"]
 
 
 def test_rate_independent_large_strain_selects_hyperelastic():
@@ -142,6 +144,54 @@ def test_rule_choice_stands_when_the_top_model_is_not_decisively_better():
     assert rec["recommended"] == "beyond" and "The data say otherwise" in rec["statement"]
 
 
+def test_a_fit_at_a_bound_or_without_covariance_is_never_recommended():
+    """The ranking may put a flagged fit first; the recommendation passes over it and says why, and names none
+    when no fit qualifies."""
+    table = pd.DataFrame({"model": ["qlv_a", "qlv_b", "qlv_c"], "family": ["qlv"] * 3, "aicc": [1.0, 5.0, 9.0],
+                          "cv_nrmse": [0.05, 0.06, 0.07], "strain_max": [0.5] * 3, "rank_criterion": ["cv_nrmse"] * 3,
+                          "converged": [True] * 3, "at_bound": ["G0", "", ""], "has_covariance": [True, False, True],
+                          "recommendable": [False, False, True]})
+    qlv = get_model("qlv_linear_prony4")
+    curves = csr_curves(qlv, qlv_params(qlv, {"G0": 200.0}, G_PRONY), gmax=0.5, seed=5)
+    rec = R.recommend(table, curves)
+    assert rec["recommended"] == "qlv_c"
+    assert "qlv_a (G0 at a bound)" in rec["statement"] and "qlv_b (no covariance)" in rec["statement"]
+    table["recommendable"] = False
+    rec = R.recommend(table, curves)
+    assert rec["recommended"] is None and "No model is recommended" in rec["statement"]
+
+
+def test_at_bound_parameters_and_covariance_from_flags():
+    flags = ["at_bound: G0 at its upper bound 1e+06", "at_bound: beta_2 at its lower bound 0",
+             "at_bound: beta_3 at its upper bound 1000", "correlated: a~b (rho=+0.990)"]
+    assert F.at_bound_parameters(flags) == ["G0", "beta_3"]  # an absent Prony mode (beta_i = 0) is no collapse
+    assert F.has_covariance([], {"a": 1.0, "b": np.nan}, ["a", "b"])
+    assert not F.has_covariance([], {"a": np.nan}, ["a"])
+    assert not F.has_covariance(["no_covariance: the Jacobian is singular"], {"a": 1.0}, ["a"])
+
+
+def test_select_cards_takes_the_recommended_card_of_each_scope(tmp_path):
+    from tissuemech import stages
+
+    for scope, model, law in (("constant_shear_rate", "neo_hookean", "neo_hookean"),
+                              ("constant_shear_rate", "ogden1", "ogden1"),
+                              ("stress_relaxation", "maxwell", "maxwell"),
+                              ("viscoelastic_joint", "qlv_rp3_prony4", "reduced_polynomial3")):
+        (tmp_path / "cards" / scope).mkdir(parents=True, exist_ok=True)
+        (tmp_path / "cards" / scope / f"{model}.json").write_text(f'{{"model": "{model}", "elastic_law": "{law}"}}')
+    ranking = tmp_path / "ranking.csv"
+    # ogden1 ranks first in its scope but the ranking recommends neo_hookean; no FEM law for maxwell
+    pd.DataFrame({"scope": ["constant_shear_rate", "constant_shear_rate", "stress_relaxation", "viscoelastic_joint",
+                            "creep_recovery"],
+                  "model": ["ogden1", "neo_hookean", "maxwell", "qlv_rp3_prony4", None],
+                  "rank": [1, 2, 1, 1, np.nan], "recommended": [False, True, True, True, False]}).to_csv(ranking)
+    chosen = stages.select_cards(ranking, tmp_path / "cards")
+    assert [(p.parent.name, p.stem) for p in chosen] == [("viscoelastic_joint", "qlv_rp3_prony4"),
+                                                         ("constant_shear_rate", "neo_hookean")]
+    assert R.recommended_models(ranking) == {"constant_shear_rate": "neo_hookean", "stress_relaxation": "maxwell",
+                                             "viscoelastic_joint": "qlv_rp3_prony4"}
+
+
 def test_time_dependence_from_relaxation_and_sweep():
     t = np.geomspace(0.1, 100, 30)
     relax = F.Curve(test="stress_relaxation", condition="s", response="shear_history", inputs={"time": t, "shear_strain": 0.01 + 0 * t},
@@ -196,7 +246,7 @@ def test_fit_stage_writes_fits_ranking_cards(tmp_path):
     table = stages.run_fit_scope(averages, scope, scopes[scope], target="apparent_stress", seed=0, multistart=1,
                                  fits_dir=fits_dir, cards_dir=cards_dir, ranking_path=tmp_path / "ranking" / f"{scope}.csv",
                                  dataset="demo")
-    assert list(table["rank"]) == [1] and table["recommendation"].notna().all()
+    assert list(table["rank"]) == [1] and table["recommendation"].notna().all() and table["recommended"].all()
     assert (fits_dir / "qlv_linear_prony4.nc").exists() and (cards_dir / "qlv_linear_prony4.inp").exists()
     assert (tmp_path / "ranking" / f"{scope}.recommendation.json").exists()
     assert len(pd.read_csv(tmp_path / "ranking" / f"{scope}.cv.csv")) == len(RATES)
@@ -207,4 +257,5 @@ def test_fit_stage_writes_fits_ranking_cards(tmp_path):
     assert list(fits["model"]) == ["qlv_linear_prony4"] and (fits["dataset"] == "demo").all()
     assert fits.loc[0, "target"] == "apparent_stress" and fits.loc[0, "param_G0"] == pytest.approx(200.0, rel=0.02)
     assert list(pd.read_csv(tmp_path / "ranking.csv")["rank"]) == [1]
+    assert R.recommended_models(tmp_path / "ranking.csv") == {scope: "qlv_linear_prony4"}
     assert (tmp_path / "ranking.png").exists()
