@@ -58,9 +58,9 @@ import xarray as xr
 from scipy.optimize import nnls
 
 from .canonical import write_netcdf
-from .diagnosis.stats import effective_sample_size
 from .models.base import ConstitutiveModel, ParamSpec
 from .spectra import log_spaced_taus  # the one implementation; re-exported (fitting.__all__)
+from .stats import effective_sample_size, information_criteria
 
 PLATE_TARGETS: tuple[str, ...] = ("thesis", "apparent_stress", "corrected_stress", "torque", "none")
 
@@ -806,19 +806,6 @@ class FitResult:
         return self.success and not self.flags
 
 
-def information_criteria(chisqr: float, n: float, k: int) -> dict[str, float]:
-    """AIC, AICc and BIC of a (weighted) least-squares fit (``science.md`` §4.2).
-
-    AIC = n ln(chi2/n) + 2k; AICc = AIC + 2k(k+1)/(n-k-1) (infinite when n <= k+1); BIC = n ln(chi2/n) + k ln n.
-    """
-    chisqr = max(float(chisqr), np.finfo(float).tiny)
-    base = n * math.log(chisqr / n)
-    aic = base + 2.0 * k
-    aicc = aic + (2.0 * k * (k + 1) / (n - k - 1) if n - k - 1 > 0 else np.inf)
-    bic = base + k * math.log(n)
-    return {"aic": float(aic), "aicc": float(aicc), "bic": float(bic)}
-
-
 def _flags(problem: FitProblem, best, names: list[str]) -> tuple[list[str], np.ndarray]:
     flags = []
     if not best.success:
@@ -1215,7 +1202,7 @@ def fits_csv_row(record: xr.Dataset, dataset: str = "", file: str = "") -> dict:
 __all__ = [
     "PLATE_TARGETS", "TEST_RESPONSE", "Curve", "amplitude_sweep_lve_curve", "curve_from_run", "curves_from_averages", "geometry_from_runs", "relaxation_history",
     "thin", "select_strain", "with_relaxation_history", "curve_ranges", "plate_factor", "target_observations", "predict",
-    "NoiseModel", "FitProblem", "FitResult", "fit", "evaluate", "information_criteria", "log_spaced_taus",
+    "NoiseModel", "FitProblem", "FitResult", "fit", "evaluate", "log_spaced_taus",
     "prony_nnls", "prony_start", "fit_to_dataset", "write_fit_netcdf", "fits_csv_row", "FITS_CSV_ATTRS",
     "at_bound_parameters", "has_covariance",
 ]

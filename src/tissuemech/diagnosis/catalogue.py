@@ -51,7 +51,7 @@ import statsmodels.api as sm
 import xarray as xr
 from scipy.optimize import least_squares
 
-from . import stats as st
+from .. import stats as st
 from ..tts import run_temperature_c
 from .evidence import (booij_thoone, condition_label, estimate_noise, fit_prony_relaxation, log_spaced_taus,
                        noise_sd, nominal_strain, prony_complex_modulus, run_id)

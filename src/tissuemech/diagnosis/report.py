@@ -61,7 +61,7 @@ from statsmodels.tools.sm_exceptions import MissingDataError
 
 from ..canonical import read_netcdf, write_netcdf, write_text
 from ..models.registry import available_models, get_model
-from . import stats as st
+from .. import stats as st
 from .baseline import (baseline_adequacy, extension_gain, fit_runs, predict_runs, ranked_candidates,
                        read_fit_record, resolved_window_s, spectrum_model, window_taus)
 from .catalogue import DiagnosisContext, curve_levels, explains
