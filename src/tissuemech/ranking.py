@@ -362,7 +362,7 @@ def recommend(table: pd.DataFrame, curves: Sequence[Curve], noise: NoiseModel | 
     beyond-QLV model beating the best QLV by ΔAICc > 10 and not worse in CV).
 
     Only fits that are ``recommendable`` (:func:`ranking_table`: converged, with a covariance, no parameter at a
-    bound) can be recommended; the statement names every better-ranked fit passed over and why. Among them the
+    bound) can be recommended; the statement names every fit that is not, and why. Among them the
     rule's family is recommended (best model of that family) unless the top-ranked model of another family is
     *decisively* better: held-out NRMSE below ``decisive_cv_ratio`` times the rule model's, or, without
     cross-validation, ΔAICc > 10. The statement then says that the data say otherwise. When no fit is
@@ -411,7 +411,7 @@ def recommend(table: pd.DataFrame, curves: Sequence[Curve], noise: NoiseModel | 
     statement = (evidence
                  + (f" (best fitted: {rule_best['model']})" if rule_best is not None else " (no such model fitted)")
                  + f". Data ranking ({top['rank_criterion']}): {top['model']} ({top_class.replace('_', ' ')}) first"
-                 + (f" among the recommendable fits; passed over: {'; '.join(passed)}" if passed else "") + ".")
+                 + (f" among the recommendable fits; not recommendable: {'; '.join(passed)}" if passed else "") + ".")
     agree = top_class == rule
     recommended = str(top["model"])
     if not agree and rule_best is not None:
