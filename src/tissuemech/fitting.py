@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -57,9 +58,9 @@ import xarray as xr
 from scipy.optimize import nnls
 
 from .canonical import write_netcdf
-from .diagnosis.stats import effective_sample_size
 from .models.base import ConstitutiveModel, ParamSpec
 from .spectra import log_spaced_taus  # the one implementation; re-exported (fitting.__all__)
+from .stats import effective_sample_size, information_criteria
 
 PLATE_TARGETS: tuple[str, ...] = ("thesis", "apparent_stress", "corrected_stress", "torque", "none")
 
@@ -805,19 +806,6 @@ class FitResult:
         return self.success and not self.flags
 
 
-def information_criteria(chisqr: float, n: float, k: int) -> dict[str, float]:
-    """AIC, AICc and BIC of a (weighted) least-squares fit (``science.md`` §4.2).
-
-    AIC = n ln(chi2/n) + 2k; AICc = AIC + 2k(k+1)/(n-k-1) (infinite when n <= k+1); BIC = n ln(chi2/n) + k ln n.
-    """
-    chisqr = max(float(chisqr), np.finfo(float).tiny)
-    base = n * math.log(chisqr / n)
-    aic = base + 2.0 * k
-    aicc = aic + (2.0 * k * (k + 1) / (n - k - 1) if n - k - 1 > 0 else np.inf)
-    bic = base + k * math.log(n)
-    return {"aic": float(aic), "aicc": float(aicc), "bic": float(bic)}
-
-
 def _flags(problem: FitProblem, best, names: list[str]) -> tuple[list[str], np.ndarray]:
     flags = []
     if not best.success:
@@ -848,6 +836,32 @@ def _flags(problem: FitProblem, best, names: list[str]) -> tuple[list[str], np.n
                 flags.append(f"at_bound: {iname.removeprefix('log10_')} at its {side} bound {bound:g}"
                              + (" (log10)" if iname.startswith("log10_") else ""))
     return flags, corr
+
+
+#: the ``at_bound`` flag of :func:`fit` (parameter, side, bound)
+_AT_BOUND = re.compile(r"at_bound: (\S+) at its (lower|upper) bound (\S+)")
+
+
+def at_bound_parameters(flags: Iterable[str]) -> list[str]:
+    """Varying parameters a fit left at a bound, from its flags (``at_bound: <name> at its <side> bound <b>``).
+
+    A Prony weight ``beta_i`` at its lower bound 0 is not listed: that relaxation mode is simply absent (the
+    NNLS answer "not needed"), not a collapse of the fit.
+    """
+    out = []
+    for f in flags:
+        m = _AT_BOUND.match(str(f))
+        if m and not (re.fullmatch(r"beta_\d+", m.group(1)) and m.group(2) == "lower" and float(m.group(3)) == 0.0):
+            out.append(m.group(1))
+    return sorted(set(out))
+
+
+def has_covariance(flags: Iterable[str], stderr: Mapping[str, float], varying: Sequence[str]) -> bool:
+    """Whether a fit has a covariance: no ``no_covariance`` flag and a finite standard error of some varying
+    parameter (true for a fit with nothing varying)."""
+    if any(str(f).startswith("no_covariance") for f in flags):
+        return False
+    return not varying or any(np.isfinite(stderr.get(n, np.nan)) for n in varying)
 
 
 def _random_start(problem: FitProblem, rng: np.random.Generator) -> dict[str, float]:
@@ -1158,24 +1172,37 @@ def write_fit_netcdf(result: FitResult, path) -> None:
     write_netcdf(fit_to_dataset(result), path)
 
 
-def fits_csv_row(result: FitResult, dataset: str = "") -> dict:
-    """One tidy ``fits.csv`` row: criteria, flags, ranges and ``param_<name>``/``se_<name>`` columns."""
-    row = {"dataset": dataset, "model": result.model_key, "family": result.family, "scope": result.scope,
-           "target": result.target, "relaxation": result.relaxation, "success": result.success, "n": result.n, "n_eff": round(result.n_eff, 2),
-           "k": result.k, "chisqr": result.chisqr, "redchi": result.redchi, "rmse": result.rmse, "nrmse": result.nrmse,
-           "aic": result.aic, "aicc": result.aicc, "bic": result.bic, "aicc_eff": result.aicc_eff,
-           "bic_eff": result.bic_eff, "condition_number": result.condition_number, "n_flags": len(result.flags), "flags": "; ".join(result.flags),
-           "curves": "; ".join(result.curve_labels)}
-    row.update(result.ranges)
-    for name, v in result.params.items():
-        row[f"param_{name}"] = v
-        row[f"se_{name}"] = result.stderr[name]
+#: scalar attributes of a fit record copied to ``fits.csv`` (in this order, after ``dataset``/``file``/``model``)
+FITS_CSV_ATTRS = ("family", "scope", "target", "relaxation", "success", "n", "n_eff", "k", "chisqr", "redchi", "rmse",
+                  "nrmse", "aic", "aicc", "bic", "aicc_eff", "bic_eff", "condition_number", "nfev", "n_starts",
+                  "message")
+
+
+def fits_csv_row(record: xr.Dataset, dataset: str = "", file: str = "") -> dict:
+    """One tidy ``fits.csv`` row of a fit record (:func:`fit_to_dataset`, or a ``fits/<scope>/<model>.nc`` read
+    back): criteria, flags, ranges and ``param_<name>``/``se_<name>`` columns. The one ``fits.csv`` schema:
+    ``dataset, file, model, <FITS_CSV_ATTRS>, n_flags, flags ("; "), curves ("; "), <ranges>, param_*, se_*``.
+    """
+    attrs = record.attrs
+    flags = json.loads(attrs.get("flags", "[]"))
+    row = {"dataset": dataset, "file": str(file), "model": str(attrs.get("model_key", ""))}
+    for name in FITS_CSV_ATTRS:
+        v = attrs.get(name, np.nan)
+        row[name] = bool(int(v)) if name == "success" else v
+    row["n_flags"] = len(flags)
+    row["flags"] = "; ".join(flags)
+    row["curves"] = "; ".join(str(c) for c in record["curve_label"].values) if "curve_label" in record else ""
+    row.update(json.loads(attrs.get("ranges", "{}")))
+    for name, value, se in zip(record["param"].values, record["value"].values, record["stderr"].values):
+        row[f"param_{name}"] = float(value)
+        row[f"se_{name}"] = float(se)
     return row
 
 
 __all__ = [
     "PLATE_TARGETS", "TEST_RESPONSE", "Curve", "amplitude_sweep_lve_curve", "curve_from_run", "curves_from_averages", "geometry_from_runs", "relaxation_history",
     "thin", "select_strain", "with_relaxation_history", "curve_ranges", "plate_factor", "target_observations", "predict",
-    "NoiseModel", "FitProblem", "FitResult", "fit", "evaluate", "information_criteria", "log_spaced_taus",
-    "prony_nnls", "prony_start", "fit_to_dataset", "write_fit_netcdf", "fits_csv_row",
+    "NoiseModel", "FitProblem", "FitResult", "fit", "evaluate", "log_spaced_taus",
+    "prony_nnls", "prony_start", "fit_to_dataset", "write_fit_netcdf", "fits_csv_row", "FITS_CSV_ATTRS",
+    "at_bound_parameters", "has_covariance",
 ]

@@ -26,7 +26,8 @@ import numpy as np
 import pandas as pd
 from scipy import stats as sps
 
-from .fitting import Curve, FitProblem, FitResult, NoiseModel, evaluate, fit, prony_start
+from .fitting import (Curve, FitProblem, FitResult, NoiseModel, at_bound_parameters, evaluate, fit, has_covariance,
+                      prony_start)
 from .models.base import ConstitutiveModel
 
 #: strain up to which the thesis treats brain tissue as linear elastic (10 %)
@@ -203,14 +204,20 @@ def ranking_table(fits: Mapping[str, FitResult], cv: pd.DataFrame | None = None,
     """``ranking.csv`` rows of one scope: criteria, deltas, Akaike weights, CV error, flags, ranges, rank.
 
     Rank order: mean held-out NRMSE when every model was scored by cross-validation, otherwise AICc.
-    Models whose fit did not converge are ranked last.
+    Models whose fit did not converge are ranked last. ``recommendable`` says whether a fit may be recommended
+    (:func:`recommend`): converged, with a covariance (``has_covariance``) and no varying parameter at a bound
+    (``at_bound``, :func:`tissuemech.fitting.at_bound_parameters`).
     """
     rows = []
     for key, r in fits.items():
+        at_bound = at_bound_parameters(r.flags)
+        cov = has_covariance(r.flags, r.stderr, r.varying)
         rows.append({"dataset": dataset, "scope": scope or r.scope, "target": r.target, "model": key,
                      "family": r.family, "k": r.k, "n": r.n, "n_eff": r.n_eff, "chisqr": r.chisqr, "rmse": r.rmse,
                      "nrmse": r.nrmse, "aic": r.aic, "aicc": r.aicc, "bic": r.bic, "aicc_eff": r.aicc_eff,
                      "bic_eff": r.bic_eff, "converged": r.success, "identifiable": _identifiable(r.flags),
+                     "at_bound": "; ".join(at_bound), "has_covariance": cov,
+                     "recommendable": bool(r.success and cov and not at_bound),
                      "n_flags": len(r.flags), "flags": "; ".join(r.flags), **r.ranges})
     table = pd.DataFrame(rows)
     if table.empty:
@@ -335,6 +342,17 @@ def _family_class(row: pd.Series) -> str:
     return fam
 
 
+def _not_recommendable_reason(row: pd.Series) -> str:
+    reasons = []
+    if not bool(row.get("converged", True)):
+        reasons.append("did not converge")
+    if isinstance(row.get("at_bound"), str) and row["at_bound"]:
+        reasons.append(f"{row['at_bound']} at a bound")
+    if not bool(row.get("has_covariance", True)):
+        reasons.append("no covariance")
+    return ", ".join(reasons) or "flagged"
+
+
 def recommend(table: pd.DataFrame, curves: Sequence[Curve], noise: NoiseModel | None = None,
               decisive_cv_ratio: float = 0.8) -> dict:
     """Recommendation for one scope: the thesis rule, the data's ranking, and whether they agree.
@@ -343,16 +361,19 @@ def recommend(table: pd.DataFrame, curves: Sequence[Curve], noise: NoiseModel | 
     tell, a time-dependent model beating every elastic one by ΔAICc > 10); strain-dependent relaxation (a
     beyond-QLV model beating the best QLV by ΔAICc > 10 and not worse in CV).
 
-    The rule's family is recommended (best model of that family) unless the top-ranked model of another
-    family is *decisively* better: held-out NRMSE below ``decisive_cv_ratio`` times the rule model's, or,
-    without cross-validation, ΔAICc > 10. The statement then says that the data say otherwise.
+    Only fits that are ``recommendable`` (:func:`ranking_table`: converged, with a covariance, no parameter at a
+    bound) can be recommended; the statement names every fit that is not, and why. Among them the
+    rule's family is recommended (best model of that family) unless the top-ranked model of another family is
+    *decisively* better: held-out NRMSE below ``decisive_cv_ratio`` times the rule model's, or, without
+    cross-validation, ΔAICc > 10. The statement then says that the data say otherwise. When no fit is
+    recommendable, ``recommended`` is ``None`` and the statement says why.
     """
     if table.empty:
         return {"recommended": None, "statement": "no model was fitted"}
     strain_max = float(np.nanmax(table["strain_max"])) if "strain_max" in table else float("nan")
     rd = time_dependence(curves, noise)
     classes = table.apply(_family_class, axis=1)
-    # best of each family in the table's own rank order
+    # best of each family in the table's own rank order (evidence: every fit, flagged or not)
     best_of = {cls: table[classes == cls].iloc[0] for cls in classes.unique()}
     rate_dep = rd.get("rate_dependent")
     if rate_dep is None:
@@ -366,14 +387,31 @@ def recommend(table: pd.DataFrame, curves: Sequence[Curve], noise: NoiseModel | 
                      and b["cv_nrmse"] > q["cv_nrmse"])
         nonsep = bool(b["aicc"] < q["aicc"] - STRONG_EVIDENCE and cv_ok)
     rule = thesis_rule(strain_max if np.isfinite(strain_max) else 0.0, rate_dep, nonsep)
-    top = table.iloc[0]
+    # the choice: recommendable fits only
+    ok = table["recommendable"].fillna(False).astype(bool).to_numpy() if "recommendable" in table \
+        else np.ones(len(table), bool)
+    pool, pool_classes = table[ok], classes[ok]
+    first = table.iloc[0]
+    evidence = (f"Thesis criteria: max strain {100 * strain_max:.3g} %, "
+                f"{'rate/time-dependent' if rate_dep else 'rate-independent'} ({rd.get('evidence', 'models')})"
+                f"{', strain-dependent relaxation' if nonsep else ''} -> {rule.replace('_', ' ')}")
+    passed = [f"{row['model']} ({_not_recommendable_reason(row)})" for (_, row), good in zip(table.iterrows(), ok)
+              if not good]
+    common = {"rule_family": rule, "strain_max": strain_max, "rate_dependent": rate_dep, "nonseparable": nonsep,
+              "rate_evidence": rd}
+    if pool.empty:
+        statement = (f"{evidence}. Data ranking ({first.get('rank_criterion', 'aicc')}): {first['model']} first. No model is recommended: no fit is converged with a covariance and no "
+                     f"parameter at a bound ({'; '.join(passed)}).")
+        return common | {"rule_model": None, "data_model": None, "data_family": None, "agree": False,
+                         "recommended": None, "statement": statement}
+    best_ok = {cls: pool[pool_classes == cls].iloc[0] for cls in pool_classes.unique()}
+    top = pool.iloc[0]
     top_class = _family_class(top)
-    rule_best = best_of.get(rule)
-    statement = (f"Thesis criteria: max strain {100 * strain_max:.3g} %, "
-                 f"{'rate/time-dependent' if rate_dep else 'rate-independent'} ({rd.get('evidence', 'models')})"
-                 f"{', strain-dependent relaxation' if nonsep else ''} -> {rule.replace('_', ' ')}"
+    rule_best = best_ok.get(rule)
+    statement = (evidence
                  + (f" (best fitted: {rule_best['model']})" if rule_best is not None else " (no such model fitted)")
-                 + f". Data ranking ({top['rank_criterion']}): {top['model']} ({top_class.replace('_', ' ')}) first.")
+                 + f". Data ranking ({top['rank_criterion']}): {top['model']} ({top_class.replace('_', ' ')}) first"
+                 + (f" among the recommendable fits; not recommendable: {'; '.join(passed)}" if passed else "") + ".")
     agree = top_class == rule
     recommended = str(top["model"])
     if not agree and rule_best is not None:
@@ -392,11 +430,10 @@ def recommend(table: pd.DataFrame, curves: Sequence[Curve], noise: NoiseModel | 
             statement += (f" {top['model']} is not decisively better than {rule_best['model']} ({margin}): "
                           f"the rule's choice stands.")
     elif not agree:
-        statement += f" No {rule.replace('_', ' ')} model was fitted in this scope: the data's choice is used."
-    return {"rule_family": rule, "rule_model": None if rule_best is None else str(rule_best["model"]),
-            "data_model": str(top["model"]), "data_family": top_class, "agree": agree, "recommended": recommended,
-            "strain_max": strain_max, "rate_dependent": rate_dep, "nonseparable": nonsep, "rate_evidence": rd,
-            "statement": statement}
+        statement += f" No recommendable {rule.replace('_', ' ')} model was fitted in this scope: the data's choice is used."
+    return common | {"rule_model": None if rule_best is None else str(rule_best["model"]),
+                     "data_model": str(top["model"]), "data_family": top_class, "agree": agree,
+                     "recommended": recommended, "statement": statement}
 
 
 def rank_scope(candidates: Sequence[Candidate], curves: Sequence[Curve], target: str, scope: str,
@@ -412,7 +449,9 @@ def rank_scope(candidates: Sequence[Candidate], curves: Sequence[Curve], target:
     :class:`RegistryFactory`).
 
     Returns ``(ranking table, fits by key, per-fold CV records, recommendation)``; the recommendation
-    statement is also stored in the table's ``recommendation`` column.
+    statement is also stored in the table's ``recommendation`` column, and the boolean ``recommended`` column
+    is True for exactly one model of the scope (:func:`recommend`), or for none when no fit is recommendable
+    (the statement says why).
     """
     failures = {} if failures is None else failures
     usable = [c for c in candidates if c.describes(curves)]
@@ -435,9 +474,33 @@ def rank_scope(candidates: Sequence[Candidate], curves: Sequence[Curve], target:
     table = ranking_table(fits, cv, scope=scope, dataset=dataset)
     rec = recommend(table, curves, noise)
     if not table.empty:
+        # the one "best model of the scope": cards, FEM and diagnosis read this column
         table["recommendation"] = rec["statement"]
         table["recommended"] = table["model"] == rec["recommended"]
     return table, fits, cv, rec
+
+
+def recommended_mask(ranking: pd.DataFrame) -> np.ndarray:
+    """The ``recommended`` column of a ranking table as booleans (missing or empty -> False)."""
+    if "recommended" not in ranking:
+        return np.zeros(len(ranking), bool)
+    col = ranking["recommended"]
+    if col.dtype != bool:  # read back with empty cells, or as text
+        col = col.map(lambda v: str(v).strip().lower() in ("true", "1", "1.0"))
+    return col.to_numpy(bool)
+
+
+def recommended_models(ranking_csv) -> dict[str, str]:
+    """``{scope: model}`` of the rows that ``ranking.csv`` marks ``recommended`` (the ranking stage's one choice per
+    scope, :func:`recommend`); scopes without a recommendation are absent."""
+    ranking = pd.read_csv(ranking_csv)
+    if ranking.empty or not {"scope", "model"} <= set(ranking.columns):
+        return {}
+    rows = ranking[recommended_mask(ranking)]
+    several = rows["scope"][rows["scope"].duplicated()].unique()
+    if len(several):
+        raise ValueError(f"{ranking_csv}: more than one recommended model in scope(s) {sorted(map(str, several))}")
+    return {str(s): str(m) for s, m in zip(rows["scope"], rows["model"])}
 
 
 def _fit_job(cand, curves, target, scope, noise, n_random, seed, relaxation="measured"):
@@ -493,192 +556,5 @@ def plot_ranking(table: pd.DataFrame, path=None):
 __all__ = ["Fold", "Candidate", "leave_one_condition_out", "train_on_tests", "leave_one_specimen_out",
            "fit_candidate", "cross_validate", "paired_comparison", "ranking_table", "rate_dependence",
            "time_dependence", "RegistryFactory",
-           "thesis_rule", "recommend", "rank_scope", "plot_ranking", "LINEAR_STRAIN_LIMIT", "Scope",
-           "DEFAULT_SCOPES", "THESIS_SCOPES", "scope_folds", "scope_curves", "scope_candidates", "run_fit_stage",
-           "run_fit_stage_files"]
-
-
-# ------------------------------------------------------------------------------------------------
-# the whole fit + rank + cards stage of a dataset
-# ------------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Scope:
-    """A data scope: which tests are fitted jointly, by which model families, how, and how they are validated.
-
-    Attributes
-    ----------
-    name : label (file names, ``scope`` columns)
-    tests : canonical test kinds fitted jointly
-    families : model families considered (registry models that can describe every curve)
-    models : explicit registry keys (overrides ``families``)
-    target : plate target (``fitting.PLATE_TARGETS``)
-    max_strain : keep observations up to this rim strain (e.g. 0.10 for the linear-elastic criterion)
-    relaxation : relaxation strain-history treatment (``fitting.relaxation_history``)
-    thin_points : log-spaced points kept per curve
-    folds : cross-validation designs: ``"loco"`` (leave one condition out, per test kind with >= 2
-        conditions), ``"relaxation_to_others"`` (fit relaxation, predict frequency sweep and CSR),
-        ``"loso"`` (leave one specimen out)
-    nominal : keep only curves whose nominal condition matches, e.g. ``{"shear_rate_1_per_s": 0.001}``
-        (relative tolerance 1e-6)
-    """
-
-    name: str
-    tests: tuple[str, ...]
-    families: tuple[str, ...] = ()
-    models: tuple[str, ...] | None = None
-    target: str = "apparent_stress"
-    max_strain: float | None = None
-    relaxation: str = "measured"
-    thin_points: int = 30
-    folds: tuple[str, ...] = ("loco",)
-    nominal: tuple[tuple[str, float], ...] = ()
-
-
-_LVE = ("linear_viscoelastic", "fractional")
-DEFAULT_SCOPES: tuple[Scope, ...] = (
-    Scope("flow", ("flow_curve",), ("viscous",), folds=()),
-    Scope("frequency_sweep", ("frequency_sweep",), _LVE, folds=()),
-    Scope("creep", ("creep_recovery",), _LVE),
-    Scope("relaxation", ("stress_relaxation",), _LVE + ("qlv", "beyond_qlv")),
-    Scope("csr", ("constant_shear_rate",), ("hyperelastic", "qlv", "beyond_qlv")),
-    Scope("csr+relaxation", ("constant_shear_rate", "stress_relaxation"), ("qlv", "beyond_qlv"),
-          folds=("loco", "relaxation_to_others")),
-    # interconversion check (science.md §0): fit relaxation, predict the frequency sweep
-    Scope("relaxation+sweep", ("stress_relaxation", "frequency_sweep"), _LVE + ("qlv",),
-          folds=("relaxation_to_others",)),
-    Scope("simple_shear", ("simple_shear",), ("hyperelastic",), target="none"),
-    Scope("uniaxial", ("uniaxial",), ("hyperelastic",), target="none"),
-)
-
-#: the thesis's own method, for reproducing its tables: apparent rim stress taken as the rim stress,
-#: relaxation treated as a step, the linear modulus from CSR up to 10 % and hyperelastic laws fitted directly
-#: to the slowest CSR ramp (no convolution)
-THESIS_SCOPES: tuple[Scope, ...] = (
-    Scope("thesis_linear_csr", ("constant_shear_rate",), ("hyperelastic",), target="thesis", max_strain=0.10),
-    Scope("thesis_hyperelastic_csr0.001", ("constant_shear_rate",), ("hyperelastic",), target="thesis",
-          folds=(), nominal=(("shear_rate_1_per_s", 0.001),)),
-    Scope("thesis_relaxation_step", ("stress_relaxation",), _LVE + ("qlv",), target="thesis", relaxation="step"),
-)
-
-
-def scope_folds(scope: Scope, curves: Sequence[Curve]) -> list[Fold]:
-    folds: list[Fold] = []
-    if "loco" in scope.folds:
-        for test in scope.tests:
-            folds += leave_one_condition_out(curves, test)
-    if "relaxation_to_others" in scope.folds:
-        folds += train_on_tests(curves, ("stress_relaxation",), ("frequency_sweep", "constant_shear_rate"))
-    if "loso" in scope.folds:
-        folds += leave_one_specimen_out(curves)
-    return folds
-
-
-def scope_curves(scope: Scope, curves: Sequence[Curve]) -> list[Curve]:
-    from .fitting import select_strain, thin, with_relaxation_history
-
-    out = []
-    for c in curves:
-        if c.test not in scope.tests:
-            continue
-        if any(not np.isclose(c.nominal.get(k, np.nan), v, rtol=1e-6) for k, v in scope.nominal):
-            continue
-        if scope.max_strain is not None:
-            try:
-                c = select_strain(c, max_strain=scope.max_strain)
-            except ValueError:
-                continue
-        c = with_relaxation_history(c, scope.relaxation)
-        out.append(thin(c, scope.thin_points) if scope.thin_points else c)
-    return out
-
-
-def scope_candidates(scope: Scope, models: Sequence[str] | None = None) -> list[Candidate]:
-    """Registry models of the scope (explicit keys, else the scope's families), optionally restricted."""
-    from .models.registry import available_models, get_model
-
-    keys = list(scope.models) if scope.models is not None else [
-        k for k in available_models() if get_model(k).family in scope.families]
-    if models is not None:
-        keys = [k for k in keys if k in models]
-    return [Candidate(k, RegistryFactory(k)) for k in keys]
-
-
-def run_fit_stage(curves: Sequence[Curve], out_dir, dataset: str = "", scopes: Sequence[Scope] = DEFAULT_SCOPES,
-                  models: Sequence[str] | None = None, poisson_ratio: float = 0.49, n_random: int = 1,
-                  cv_top: int = 4, seed: int = 0, noise: NoiseModel | None = None, workers: int = 1,
-                  log=None) -> dict:
-    """Fit, rank and export cards for every scope that has data.
-
-    Writes under ``out_dir``: ``fits/<scope>/<model>.nc``, ``fits.csv``, ``ranking.csv``,
-    ``ranking_<scope>.png``, ``cv.csv``, ``recommendations.json`` and ``cards/<scope>/<model>.{json,inp,feb.xml}``
-    (cards for every converged fit). Returns a summary dict (scopes run, recommendations, failures).
-    """
-    import json
-    from pathlib import Path
-
-    from .canonical import write_text
-    from .cards import make_card, write_card_files
-    from .fitting import fits_csv_row, write_fit_netcdf
-
-    out = Path(out_dir)
-    fit_rows, rank_tables, cv_tables, recs, failures = [], [], [], {}, {}
-    for scope in scopes:
-        sc = scope_curves(scope, curves)
-        if not sc or {c.test for c in sc} != set(scope.tests):  # a joint scope needs every one of its tests
-            continue
-        cands = scope_candidates(scope, models)
-        fails: dict[str, str] = {}
-        table, fits, cv, rec = rank_scope(cands, sc, scope.target, scope.name, scope_folds(scope, sc), dataset,
-                                          noise, n_random=n_random, seed=seed, cv_top=cv_top, failures=fails,
-                                          workers=workers, relaxation=scope.relaxation)
-        if fails:
-            failures[scope.name] = fails
-        if table.empty:
-            continue
-        if log:
-            log(f"{scope.name}: {len(fits)} models, best {table.iloc[0]['model']}")
-        factories = {c.key: c.factory for c in cands}
-        for key, res in fits.items():
-            fit_file = out / "fits" / scope.name / f"{key}.nc"
-            write_fit_netcdf(res, fit_file)
-            fit_rows.append(fits_csv_row(res, dataset))
-            if res.success:
-                card = make_card(res, factories[key](), poisson_ratio=poisson_ratio, dataset=dataset,
-                                 fit_file=str(fit_file.relative_to(out)))
-                write_card_files(card, out / "cards" / scope.name, key)
-        rank_tables.append(table)
-        if not cv.empty:
-            cv_tables.append(cv.assign(scope=scope.name))
-        recs[scope.name] = {k: v for k, v in rec.items() if k != "rate_evidence"} | {
-            "rate_evidence": {k: v for k, v in rec.get("rate_evidence", {}).items()}}
-        plot_ranking(table, out / f"ranking_{scope.name.replace('+', '_')}.png")
-    write_text(pd.DataFrame(fit_rows).to_csv(index=False), out / "fits.csv")
-    ranking = pd.concat(rank_tables, ignore_index=True) if rank_tables else pd.DataFrame()
-    write_text(ranking.to_csv(index=False), out / "ranking.csv")
-    write_text((pd.concat(cv_tables, ignore_index=True) if cv_tables else pd.DataFrame()).to_csv(index=False),
-               out / "cv.csv")
-    write_text(json.dumps(recs, indent=2, default=str) + "\n", out / "recommendations.json")
-    return {"scopes": [t["scope"].iloc[0] for t in rank_tables], "recommendations": recs, "failures": failures,
-            "n_fits": len(fit_rows)}
-
-
-def run_fit_stage_files(averages_path, out_dir, runs_dir=None, dataset: str = "", thesis: bool = False,
-                        **kwargs) -> dict:
-    """:func:`run_fit_stage` on ``results/<dataset>/averages.nc`` (the adapter of the workflow's fit rule).
-
-    Plate geometry per test kind comes from the canonical runs in ``runs_dir`` (``*.nc``; averages do not
-    carry it). ``thesis=True`` adds the thesis-method scopes (:data:`THESIS_SCOPES`) to the default ones.
-    """
-    from pathlib import Path
-
-    from .canonical import read_netcdf
-    from .fitting import curves_from_averages, geometry_from_runs
-
-    geometry = {}
-    if runs_dir is not None:
-        geometry = geometry_from_runs(read_netcdf(p) for p in sorted(Path(runs_dir).glob("*.nc")))
-    curves = curves_from_averages(read_netcdf(averages_path), radius_m={k: v[0] for k, v in geometry.items()},
-                                  gap_m={k: v[1] for k, v in geometry.items()})
-    if thesis:
-        kwargs.setdefault("scopes", DEFAULT_SCOPES + THESIS_SCOPES)
-    return run_fit_stage(curves, out_dir, dataset=dataset, **kwargs)
+           "thesis_rule", "recommend", "rank_scope", "recommended_mask", "recommended_models", "plot_ranking",
+           "LINEAR_STRAIN_LIMIT"]

@@ -162,7 +162,7 @@ def run_fit_scope(averages_path, scope: str, spec: Mapping, target: str, seed: i
     if not table.empty:
         table["failures"] = json.dumps(failures) if failures else ""
     else:
-        table = pd.DataFrame([{"dataset": dataset, "scope": scope, "model": None,
+        table = pd.DataFrame([{"dataset": dataset, "scope": scope, "model": None, "recommended": False,
                                "recommendation": rec.get("statement", ""), "failures": json.dumps(failures)}])
     write_text(table.to_csv(index=False), ranking_path)
     write_text(cv.to_csv(index=False) if not cv.empty else "fold,design,model,status\n",
@@ -173,20 +173,15 @@ def run_fit_scope(averages_path, scope: str, spec: Mapping, target: str, seed: i
 
 def collect_scopes(ranking_paths: Sequence, fits_dirs: Sequence, dataset: str, ranking_out, fits_out,
                    figure_out=None) -> pd.DataFrame:
-    """Merge the per-scope rankings into ``ranking.csv`` and every fit record into the tidy ``fits.csv``."""
+    """Merge the per-scope rankings into ``ranking.csv`` and every fit record into the tidy ``fits.csv``
+    (one row per record, :func:`tissuemech.fitting.fits_csv_row`)."""
     tables = [pd.read_csv(p) for p in ranking_paths if Path(p).stat().st_size > 0]
     ranking = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
+    if not ranking.empty:
+        ranking["recommended"] = R.recommended_mask(ranking)
     write_text(ranking.to_csv(index=False), ranking_out)
-    rows = []
-    for folder in fits_dirs:
-        for path in sorted(Path(folder).glob("*.nc")):
-            ds = read_netcdf(path)
-            row = {"dataset": dataset, "file": str(path)}
-            row.update({k: v for k, v in ds.attrs.items() if isinstance(v, (int, float, str))})
-            for name, value, se in zip(ds["param"].values, ds["value"].values, ds["stderr"].values):
-                row[f"param_{name}"] = float(value)
-                row[f"se_{name}"] = float(se)
-            rows.append(row)
+    rows = [F.fits_csv_row(read_netcdf(path), dataset, file=str(path))
+            for folder in fits_dirs for path in sorted(Path(folder).glob("*.nc"))]
     write_text(pd.DataFrame(rows).to_csv(index=False), fits_out)
     if figure_out is not None and not ranking.empty and "model" in ranking:
         shown = ranking.dropna(subset=["model"]).copy()
@@ -203,33 +198,35 @@ TORSION_SCOPES = (JOINT_SCOPE, "constant_shear_rate", "stress_relaxation", "ampl
                   "simple_shear")
 
 
-def select_cards(ranking_csv, cards_root, scopes: Sequence[str] = TORSION_SCOPES, per_scope: int = 2) -> list[Path]:
-    """Card JSON files of the best-ranked converged models of the given scopes that the FEM can run.
+def select_cards(ranking_csv, cards_root, scopes: Sequence[str] = TORSION_SCOPES) -> list[Path]:
+    """Card JSON files of the recommended model (``ranking.csv`` column ``recommended``) of each of the given
+    scopes, in the order of ``scopes``, where the FEM can run it.
 
     A card is runnable when it names an elastic law the TLED materials know (``fem.materials.available_laws``).
+    A scope without a recommendation, without the card or with a law the FEM lacks contributes no card (logged):
+    the FEM never falls back to another model than the ranking's choice.
     """
     from .fem.materials import available_laws
 
-    ranking = pd.read_csv(ranking_csv)
+    chosen_models = R.recommended_models(ranking_csv)
     laws = available_laws()
     chosen: list[Path] = []
     for scope in scopes:
-        rows = ranking[(ranking.get("scope") == scope) & ranking["model"].notna()] if "scope" in ranking else []
-        taken = 0
-        for _, row in (rows.iterrows() if len(rows) else []):
-            path = Path(cards_root) / scope / f"{row['model']}.json"
-            if not path.is_file():
-                continue
-            card = json.loads(path.read_text())
-            law = card.get("elastic_law") or card.get("model")
-            if law == "linear_elastic_shear" or law == "linear_elastic":
-                law = "neo_hookean"
-            if law not in laws:
-                continue
-            chosen.append(path)
-            taken += 1
-            if taken >= per_scope:
-                break
+        model = chosen_models.get(scope)
+        if model is None:
+            continue
+        path = Path(cards_root) / scope / f"{model}.json"
+        if not path.is_file():
+            logger.warning("select_cards: no card %s for the recommended model of %s", path, scope)
+            continue
+        card = json.loads(path.read_text())
+        law = card.get("elastic_law") or card.get("model")
+        if law in ("linear_elastic_shear", "linear_elastic"):
+            law = "neo_hookean"  # its finite-strain extension in the FEM (_card_for_fem)
+        if law not in laws:
+            logger.warning("select_cards: %s/%s: the FEM has no law %r", scope, model, law)
+            continue
+        chosen.append(path)
     return chosen
 
 

@@ -31,6 +31,7 @@ from matplotlib.ticker import MaxNLocator, NullFormatter
 
 from .canonical import read_netcdf, write_text
 from .pipeline import progress
+from .ranking import recommended_models
 from .plots import _new_figure, _positive, axis_label, figure_curves, figure_table, safe_name, save_figure
 
 # ------------------------------------------------------------------------------------------------------
@@ -198,7 +199,8 @@ def plot_scope_fits(averages_path, fits_dir, tests: Sequence[str], out_dir) -> l
 def card_table(cards_root, ranking_csv=None) -> pd.DataFrame:
     """One row per material card ``<cards_root>/<scope>/<model>.json``: law, moduli, Prony terms, fit quality.
 
-    With ``ranking_csv`` the rows carry the model's rank in its scope and are sorted by scope and rank.
+    With ``ranking_csv`` the rows carry the model's rank in its scope and whether the ranking recommends it
+    (column ``recommended``, :func:`tissuemech.ranking.recommended_models`), sorted by scope and rank.
     """
     rows = []
     for path in sorted(Path(cards_root).glob("*/*.json")):
@@ -223,11 +225,14 @@ def card_table(cards_root, ranking_csv=None) -> pd.DataFrame:
             table = table.merge(ranking[["scope", "model", "rank"]], on=["scope", "model"], how="left")
             table = table.sort_values(["scope", "rank"], kind="stable").reset_index(drop=True)
             table.insert(2, "rank", table.pop("rank"))
+            chosen = recommended_models(ranking_csv)
+            table.insert(3, "recommended", [chosen.get(s) == m for s, m in zip(table["scope"], table["model"])])
     return table
 
 
 def plot_cards(cards_root, ranking_csv, out_dir, out_csv) -> list[Path]:
-    """``out_csv`` (every card) and ``<out_dir>/<scope>.png/.svg``: the cards of a scope, best fit shaded."""
+    """``out_csv`` (every card) and ``<out_dir>/<scope>.png/.svg``: the cards of a scope, the recommended one
+    (``ranking.csv``) shaded; without a ranking, the lowest NRMSE."""
     table = card_table(cards_root, ranking_csv)
     write_text(table.to_csv(index=False), out_csv)
     out_dir = Path(out_dir)
@@ -235,8 +240,11 @@ def plot_cards(cards_root, ranking_csv, out_dir, out_csv) -> list[Path]:
     written: list[Path] = []
     for scope, rows in table.groupby("scope", sort=True):
         shown = rows.drop(columns=["scope"]).reset_index(drop=True)
-        fig = figure_table(shown, highlight_column="rank" if "rank" in shown else "nrmse",
-                           title=f"material cards: {scope} (shaded: best ranked)")
+        if "recommended" in shown:
+            fig = figure_table(shown, highlight_column="recommended" if shown["recommended"].any() else None,
+                               lowest_is_best=False, title=f"material cards: {scope} (shaded: recommended)")
+        else:
+            fig = figure_table(shown, highlight_column="nrmse", title=f"material cards: {scope} (shaded: lowest NRMSE)")
         written += save_figure(fig, out_dir / safe_name(str(scope)), dpi=110)
     return written
 

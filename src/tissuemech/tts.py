@@ -47,6 +47,8 @@ import numpy as np
 import xarray as xr
 from scipy.optimize import least_squares, minimize_scalar
 
+from .stats import information_criteria
+
 #: gas constant, J/(mol K)
 GAS_CONSTANT = 8.314462618
 #: 0 degC in K
@@ -353,7 +355,8 @@ def _fit_shift_model(func, temps, log_at, stderr, params: lmfit.Parameters, t_re
     res = model.fit(np.asarray(log_at, float)[ok], params, temperature_c=np.asarray(temps, float)[ok], weights=w)
     resid = res.best_fit - np.asarray(log_at, float)[ok]
     out = {"success": bool(res.success), "t_ref_c": float(t_ref_c), "rms_decades": float(np.sqrt(np.mean(resid ** 2))),
-           "n": int(ok.sum()), "aic": float(res.aic), "message": str(res.message)}
+           "n": int(ok.sum()), "aic": information_criteria(res.chisqr, res.ndata, res.nvarys)["aic"],
+           "message": str(res.message)}
     for name, p in res.params.items():
         if name == "t_ref_c":
             continue

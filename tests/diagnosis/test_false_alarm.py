@@ -5,7 +5,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tissuemech.diagnosis import stats as st
+from tissuemech import stats as st
 from tissuemech.diagnosis.catalogue import DiagnosisContext, raw_phase_inertia
 from tissuemech.diagnosis.inertia import detect_inertial_ringing, hold_rise_sds
 

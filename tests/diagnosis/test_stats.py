@@ -6,7 +6,7 @@ import pandas as pd
 import pytest
 from scipy import stats as sps
 
-from tissuemech.diagnosis import stats as st
+from tissuemech import stats as st
 
 ALPHA = st.ALPHA
 

@@ -12,6 +12,7 @@ from doubles import ProxyMooneyRivlin, ProxyNewton, ProxyPowerLaw, ProxyProny, P
 from tissuemech import fitting as F
 from tissuemech.canonical import make_run_dataset, read_netcdf
 from tissuemech.models import plate
+from tissuemech.stats import information_criteria
 
 RADIUS = 0.01
 RNG_SEED = 20241122
@@ -203,7 +204,7 @@ def test_joint_qlv_fit_on_csr_rates_and_relaxation_recovers_truth():
 
 
 def test_information_criteria_closed_form_and_aicc_prefers_true_order():
-    ic = F.information_criteria(chisqr=50.0, n=100, k=3)
+    ic = information_criteria(chisqr=50.0, n=100, k=3)  # the package's one AIC/AICc/BIC, used by fit
     base = 100 * np.log(0.5)
     assert ic["aic"] == pytest.approx(base + 6)
     assert ic["aicc"] == pytest.approx(base + 6 + 24 / 96)
@@ -281,8 +282,9 @@ def test_fit_netcdf_and_csv_row(tmp_path):
     assert ds["correlation"].shape == (2, 2) and abs(ds["correlation"].values[0, 1]) <= 1
     assert json.loads(ds.attrs["flags"]) == res.flags
     assert ds["weighted_residual"].size == res.n
-    row = F.fits_csv_row(res, dataset="demo")
+    row = F.fits_csv_row(ds, dataset="demo", file=str(path))  # the fits.csv row of the record read back
     frame = pd.DataFrame([row])
+    assert row["model"] == "reduced_polynomial2" and row["success"] is res.success
     for col in ("aicc", "bic", "n_eff", "param_C10", "se_C20", "strain_max", "target", "flags"):
         assert col in frame
     assert not list(tmp_path.glob("fits/.*tmp"))  # atomic write leaves no temporary

@@ -8,6 +8,7 @@ from doubles import ProxyReducedPolynomial
 
 from tissuemech import fitting as F
 from tissuemech import ranking as R
+from tissuemech.canonical import read_netcdf
 from tissuemech.models.qlv import LinearElasticShear, QLVModel, qlv_params
 from tissuemech.models.registry import get_model
 
@@ -62,6 +63,8 @@ def test_rate_dependent_small_strain_selects_qlv_by_cv_and_rule():
     assert "rate/time-dependent (csr_rates)" in rec["statement"]
     assert set(cv["design"]) == {"leave_one_condition_out"} and (cv["status"] == "ok").all()
     assert np.isclose(table["akaike_weight"].sum(), 1.0)
+    # the one recommendation column: exactly one row, the recommended model
+    assert table.loc[table["recommended"], "model"].tolist() == ["qlv_linear_prony4"]
 
 
 def test_rate_independent_large_strain_selects_hyperelastic():
@@ -141,6 +144,54 @@ def test_rule_choice_stands_when_the_top_model_is_not_decisively_better():
     assert rec["recommended"] == "beyond" and "The data say otherwise" in rec["statement"]
 
 
+def test_a_fit_at_a_bound_or_without_covariance_is_never_recommended():
+    """The ranking may put a flagged fit first; the recommendation passes over it and says why, and names none
+    when no fit qualifies."""
+    table = pd.DataFrame({"model": ["qlv_a", "qlv_b", "qlv_c"], "family": ["qlv"] * 3, "aicc": [1.0, 5.0, 9.0],
+                          "cv_nrmse": [0.05, 0.06, 0.07], "strain_max": [0.5] * 3, "rank_criterion": ["cv_nrmse"] * 3,
+                          "converged": [True] * 3, "at_bound": ["G0", "", ""], "has_covariance": [True, False, True],
+                          "recommendable": [False, False, True]})
+    qlv = get_model("qlv_linear_prony4")
+    curves = csr_curves(qlv, qlv_params(qlv, {"G0": 200.0}, G_PRONY), gmax=0.5, seed=5)
+    rec = R.recommend(table, curves)
+    assert rec["recommended"] == "qlv_c"
+    assert "qlv_a (G0 at a bound)" in rec["statement"] and "qlv_b (no covariance)" in rec["statement"]
+    table["recommendable"] = False
+    rec = R.recommend(table, curves)
+    assert rec["recommended"] is None and "No model is recommended" in rec["statement"]
+
+
+def test_at_bound_parameters_and_covariance_from_flags():
+    flags = ["at_bound: G0 at its upper bound 1e+06", "at_bound: beta_2 at its lower bound 0",
+             "at_bound: beta_3 at its upper bound 1000", "correlated: a~b (rho=+0.990)"]
+    assert F.at_bound_parameters(flags) == ["G0", "beta_3"]  # an absent Prony mode (beta_i = 0) is no collapse
+    assert F.has_covariance([], {"a": 1.0, "b": np.nan}, ["a", "b"])
+    assert not F.has_covariance([], {"a": np.nan}, ["a"])
+    assert not F.has_covariance(["no_covariance: the Jacobian is singular"], {"a": 1.0}, ["a"])
+
+
+def test_select_cards_takes_the_recommended_card_of_each_scope(tmp_path):
+    from tissuemech import stages
+
+    for scope, model, law in (("constant_shear_rate", "neo_hookean", "neo_hookean"),
+                              ("constant_shear_rate", "ogden1", "ogden1"),
+                              ("stress_relaxation", "maxwell", "maxwell"),
+                              ("viscoelastic_joint", "qlv_rp3_prony4", "reduced_polynomial3")):
+        (tmp_path / "cards" / scope).mkdir(parents=True, exist_ok=True)
+        (tmp_path / "cards" / scope / f"{model}.json").write_text(f'{{"model": "{model}", "elastic_law": "{law}"}}')
+    ranking = tmp_path / "ranking.csv"
+    # ogden1 ranks first in its scope but the ranking recommends neo_hookean; no FEM law for maxwell
+    pd.DataFrame({"scope": ["constant_shear_rate", "constant_shear_rate", "stress_relaxation", "viscoelastic_joint",
+                            "creep_recovery"],
+                  "model": ["ogden1", "neo_hookean", "maxwell", "qlv_rp3_prony4", None],
+                  "rank": [1, 2, 1, 1, np.nan], "recommended": [False, True, True, True, False]}).to_csv(ranking)
+    chosen = stages.select_cards(ranking, tmp_path / "cards")
+    assert [(p.parent.name, p.stem) for p in chosen] == [("viscoelastic_joint", "qlv_rp3_prony4"),
+                                                         ("constant_shear_rate", "neo_hookean")]
+    assert R.recommended_models(ranking) == {"constant_shear_rate": "neo_hookean", "stress_relaxation": "maxwell",
+                                             "viscoelastic_joint": "qlv_rp3_prony4"}
+
+
 def test_time_dependence_from_relaxation_and_sweep():
     t = np.geomspace(0.1, 100, 30)
     relax = F.Curve(test="stress_relaxation", condition="s", response="shear_history", inputs={"time": t, "shear_strain": 0.01 + 0 * t},
@@ -153,47 +204,58 @@ def test_time_dependence_from_relaxation_and_sweep():
     assert R.time_dependence([fs])["rate_dependent"] is False
 
 
-def test_run_fit_stage_writes_fits_ranking_cards(tmp_path):
-    qlv = get_model("qlv_linear_prony4")
-    truth = qlv_params(qlv, {"G0": 200.0}, G_PRONY)
-    curves = csr_curves(qlv, truth, gmax=0.05, seed=6)
-    scopes = (R.Scope("csr", ("constant_shear_rate",), models=("qlv_linear_prony4",), target="none"),
-              R.Scope("flow", ("flow_curve",), ("viscous",)))  # no data: skipped
-    summary = R.run_fit_stage(curves, tmp_path, dataset="demo", scopes=scopes)
-    assert summary["scopes"] == ["csr"] and summary["n_fits"] == 1
-    fits = pd.read_csv(tmp_path / "fits.csv")
-    assert list(fits["model"]) == ["qlv_linear_prony4"] and (fits["dataset"] == "demo").all()
-    ranking = pd.read_csv(tmp_path / "ranking.csv")
-    assert list(ranking["rank"]) == [1] and ranking["recommendation"].notna().all()
-    assert (tmp_path / "fits" / "csr" / "qlv_linear_prony4.nc").exists()
-    assert (tmp_path / "cards" / "csr" / "qlv_linear_prony4.inp").exists()
-    assert (tmp_path / "ranking_csr.png").exists() and (tmp_path / "recommendations.json").exists()
-    assert len(pd.read_csv(tmp_path / "cv.csv")) == len(RATES)
-    with pytest.raises(KeyError, match="unknown model 'no_such_model'"):  # a config typo is an error
-        R.run_fit_stage(curves, tmp_path / "x", scopes=(R.Scope("csr", ("constant_shear_rate",), models=("no_such_model",)),))
-
-
-def test_run_fit_stage_files_reads_averages_and_geometry(tmp_path):
-    from tissuemech.canonical import make_run_dataset, write_netcdf
+def _write_csr_averages(folder, rates, truth, model):
+    """Canonical CSR runs (2 samples per rate, 12.5 mm plate, apparent rim stress of the model) and their
+    ``averages.nc``, as the workflow's average rule writes it."""
+    from tissuemech.canonical import make_run_dataset
     from tissuemech.curves import average_runs, write_averages
     from tissuemech.models import plate
 
-    qlv = get_model("qlv_linear_prony4")
-    truth = qlv_params(qlv, {"G0": 200.0}, G_PRONY)
     runs = []
-    for i, rate in enumerate((0.01, 0.1)):
+    for i, rate in enumerate(rates):
         for s in range(2):
             t = np.linspace(0, 0.05 / rate, 31)
-            y = plate.forward_plate(qlv, truth, t, rate * t, 0.0125) * (1 + 0.002 * s)
-            ds = make_run_dataset({"time": t[1:], "shear_strain": rate * t[1:], "shear_stress": y[1:]},
-                                  {"test": "constant_shear_rate", "shear_rate_1_per_s": rate, "radius_m": 0.0125,
-                                   "gap_m": 0.003, "specimen": "b1", "sample": f"s{s}", "run": f"r{i}{s}"})
-            write_netcdf(ds, tmp_path / "runs" / f"r{i}{s}.nc")
-            runs.append(ds)
-    write_averages(average_runs(runs), tmp_path / "averages.nc")
-    summary = R.run_fit_stage_files(tmp_path / "averages.nc", tmp_path / "out", runs_dir=tmp_path / "runs",
-                                    dataset="demo", scopes=(R.Scope("csr", ("constant_shear_rate",),
-                                                                    models=("qlv_linear_prony4",)),))
-    assert summary["scopes"] == ["csr"]
-    fits = pd.read_csv(tmp_path / "out" / "fits.csv")
+            y = plate.forward_plate(model, truth, t, rate * t, 0.0125) * (1 + 0.002 * s)
+            runs.append(make_run_dataset({"time": t[1:], "shear_strain": rate * t[1:], "shear_stress": y[1:]},
+                                         {"test": "constant_shear_rate", "shear_rate_1_per_s": rate,
+                                          "radius_m": 0.0125, "gap_m": 0.003, "specimen": "b1", "sample": f"s{s}",
+                                          "run": f"r{i}{s}"}))
+    write_averages(average_runs(runs), folder / "averages.nc")
+    return folder / "averages.nc"
+
+
+def test_fit_stage_writes_fits_ranking_cards(tmp_path):
+    """The workflow's fit stage (``stages``: scopes from the config, ``run_fit_scope`` per scope,
+    ``collect_scopes``) on averaged CSR runs: fit records, cards, ranking with its recommendation, CV records,
+    the one ``fits.csv`` schema; plate geometry from the averages; the generating parameter is recovered."""
+    from tissuemech import stages
+
+    qlv = get_model("qlv_linear_prony4")
+    truth = qlv_params(qlv, {"G0": 200.0}, G_PRONY)
+    averages = _write_csr_averages(tmp_path, RATES, truth, qlv)
+    config = {"models": {"constant_shear_rate": ["qlv_linear_prony4"], "flow_curve": ["newton"]}}
+    scopes = stages.dataset_scopes(["constant_shear_rate"], config)
+    assert list(scopes) == ["constant_shear_rate"]  # flow curves: no data, no scope
+    with pytest.raises(KeyError, match="no_such_model"):  # a config typo is an error
+        stages.dataset_scopes(["constant_shear_rate"], {"models": {"constant_shear_rate": ["no_such_model"]}})
+    curves = stages.scope_curves(read_netcdf(averages), ["constant_shear_rate"])
+    assert {c.radius_m for c in curves} == {0.0125} and {c.gap_m for c in curves} == {0.003}
+
+    scope = "constant_shear_rate"
+    fits_dir, cards_dir = tmp_path / "fits" / scope, tmp_path / "cards" / scope
+    table = stages.run_fit_scope(averages, scope, scopes[scope], target="apparent_stress", seed=0, multistart=1,
+                                 fits_dir=fits_dir, cards_dir=cards_dir, ranking_path=tmp_path / "ranking" / f"{scope}.csv",
+                                 dataset="demo")
+    assert list(table["rank"]) == [1] and table["recommendation"].notna().all() and table["recommended"].all()
+    assert (fits_dir / "qlv_linear_prony4.nc").exists() and (cards_dir / "qlv_linear_prony4.inp").exists()
+    assert (tmp_path / "ranking" / f"{scope}.recommendation.json").exists()
+    assert len(pd.read_csv(tmp_path / "ranking" / f"{scope}.cv.csv")) == len(RATES)
+
+    stages.collect_scopes([tmp_path / "ranking" / f"{scope}.csv"], [fits_dir], "demo", tmp_path / "ranking.csv",
+                          tmp_path / "fits.csv", tmp_path / "ranking.png")
+    fits = pd.read_csv(tmp_path / "fits.csv")
+    assert list(fits["model"]) == ["qlv_linear_prony4"] and (fits["dataset"] == "demo").all()
     assert fits.loc[0, "target"] == "apparent_stress" and fits.loc[0, "param_G0"] == pytest.approx(200.0, rel=0.02)
+    assert list(pd.read_csv(tmp_path / "ranking.csv")["rank"]) == [1]
+    assert R.recommended_models(tmp_path / "ranking.csv") == {scope: "qlv_linear_prony4"}
+    assert (tmp_path / "ranking.png").exists()

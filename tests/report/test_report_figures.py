@@ -135,9 +135,11 @@ def test_card_table_ranks_and_counts_prony_terms(tmp_path):
             "initial_shear_modulus": mu, "bulk_modulus": 50 * mu, "prony": {"g": g, "tau": [1.0] * len(g)},
             "fit_quality": {"nrmse": 0.01 if model == "prony2" else 0.05, "flags": ["x"] if model == "sls1" else []}}))
     ranking = tmp_path / "ranking.csv"
-    pd.DataFrame({"scope": ["stress_relaxation"] * 2, "model": ["prony2", "sls1"], "rank": [1, 2]}).to_csv(ranking)
+    pd.DataFrame({"scope": ["stress_relaxation"] * 2, "model": ["prony2", "sls1"], "rank": [1, 2],
+                  "recommended": [False, True]}).to_csv(ranking)
     table = card_table(tmp_path / "cards", ranking)
     assert table["model"].tolist() == ["prony2", "sls1"]
+    assert table["recommended"].tolist() == [False, True]  # the ranking's column, not the rank order
     assert table["prony_terms"].tolist() == [2, 1]
     assert table["n_flags"].tolist() == [0, 1]
     assert table.loc[0, "elastic_parameters"] == "mu=1000"

@@ -1,4 +1,4 @@
-"""Snakemake adapter: best card of the first indentation dataset -> flat punches (8, 15 mm) into the MNI brain."""
+"""Snakemake adapter: recommended card (ranking.csv) of the first indentation dataset -> flat punches (8, 15 mm) into the MNI brain."""
 import time
 from pathlib import Path
 
@@ -12,7 +12,7 @@ from tissuemech.pipeline import job_log
 from tissuemech.stages import _card_for_fem, select_cards
 
 with job_log(snakemake.log[0]) as log:
-    card_path = Path(select_cards(snakemake.input.ranking, snakemake.params.cards_root, per_scope=1)[0])
+    card_path = Path(select_cards(snakemake.input.ranking, snakemake.params.cards_root)[0])
     mesh = read_mesh(snakemake.input.brain_mesh)[0]
     Path(snakemake.output.vtu).mkdir(parents=True, exist_ok=True)
     cases, depth, force, attrs = [], [], [], {}

@@ -1,4 +1,4 @@
-"""Snakemake adapter: best cards -> TLED torsion of the rheometer sample vs measured torque."""
+"""Snakemake adapter: recommended cards (ranking.csv) -> TLED torsion of the rheometer sample vs measured torque."""
 from tissuemech.pipeline import job_log
 from tissuemech.stages import run_fem_torsion, select_cards
 

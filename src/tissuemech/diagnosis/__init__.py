@@ -1,7 +1,7 @@
 """Diagnosis: what a fitted model gets wrong, the named cause, the fix and its held-out gain.
 
-Modules: :mod:`.evidence` (residual tables, cross-test consistency), :mod:`.stats` (residual-structure
-statistics, Holm), :mod:`.catalogue` (named causes, detectors, fixes), :mod:`.temperature` (temperature dependence, TTS fix),
+Modules: :mod:`.evidence` (residual tables, cross-test consistency), the statistics (cluster regression,
+Holm) are in :mod:`tissuemech.stats`, below; :mod:`.catalogue` (named causes, detectors, fixes), :mod:`.temperature` (temperature dependence, TTS fix),
 :mod:`.inertia` (inertia-dominated oscillation points), :mod:`.causes` (registry of every named cause),
 :mod:`.generic` (unnamed structure, confounded covariates),
 :mod:`.baseline` (fitted models on runs, extension fits), :mod:`.homogeneous` (simple shear + uniaxial

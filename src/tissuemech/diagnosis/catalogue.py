@@ -51,7 +51,7 @@ import statsmodels.api as sm
 import xarray as xr
 from scipy.optimize import least_squares
 
-from . import stats as st
+from .. import stats as st
 from ..tts import run_temperature_c
 from .evidence import (booij_thoone, condition_label, estimate_noise, fit_prony_relaxation, log_spaced_taus,
                        noise_sd, nominal_strain, prony_complex_modulus, run_id)
@@ -285,7 +285,7 @@ FIXED_EFFECT_SETS = (("sample", "condition"), ("sample", "test"), ("sample",), (
 def level_regression(levels: pd.DataFrame, y: str, columns: Sequence[str], require_condition: bool = False,
                      sets: Sequence[tuple[str, ...]] | None = None):
     """Curve-level OLS ``y ~ columns + fixed effects`` (first usable set of :data:`FIXED_EFFECT_SETS`),
-    standard errors clustered by sample (t with G - 1 df, :func:`tissuemech.diagnosis.stats.cluster_regression`). Returns the result (with
+    standard errors clustered by sample (t with G - 1 df, :func:`tissuemech.stats.cluster_regression`). Returns the result (with
     ``fixed_effects`` set) or None when no set leaves the columns estimable.
 
     ``require_condition``: only sets with condition fixed effects are tried when the condition varies
@@ -809,7 +809,7 @@ def specimen_levels(levels: pd.DataFrame) -> pd.Series:
 def detect_outlier_specimen(ctx: DiagnosisContext) -> dict:
     """Most extreme specimen level (curve scales with condition effects removed, :func:`specimen_levels`):
     externally studentised deletion residual against the other specimens, t_{n-2}, Bonferroni over the n
-    specimens (:func:`tissuemech.diagnosis.stats.deletion_outlier_test`); valid from 3 specimens."""
+    specimens (:func:`tissuemech.stats.deletion_outlier_test`); valid from 3 specimens."""
     eff = "outlier_specimen"
     levels = curve_levels(ctx.table)
     n_spec = levels["specimen"].nunique()

@@ -37,7 +37,7 @@ import pandas as pd
 import statsmodels.api as sm
 
 from ..tts import run_temperature_c
-from . import stats as st
+from .. import stats as st
 from .catalogue import SPECTRUM_SHAPE_DEGREE, between_sample_test, level_regression
 from .evidence import run_id
 

@@ -53,7 +53,7 @@ import xarray as xr
 from .. import fitting as F
 from ..models.hyperelastic import stability_flags
 from ..models.registry import get_model
-from . import stats as st
+from .. import stats as st
 from .catalogue import CATALOGUE_IDS, fix_record, untested_finding
 
 ASYMMETRY_ID = "tension_compression_asymmetry"

@@ -53,7 +53,7 @@ from scipy import stats as sps
 from scipy.optimize import minimize
 
 from ..io.quality import RAW_PHASE_LIMIT_RAD
-from . import stats as st
+from .. import stats as st
 from .catalogue import DiagnosisContext, fix_record, make_finding, untested_finding
 from .evidence import robust_noise_sd, run_id
 

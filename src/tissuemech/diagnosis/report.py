@@ -5,7 +5,7 @@ Entry points
 :func:`diagnose` ``(runs, table, model, fit_info) -> dict``
     runs every catalogue detector (:mod:`.catalogue`) and every generic structure test (:mod:`.generic`)
     on the residual table of the baseline model, controls the family-wise false-alarm rate at
-    :data:`tissuemech.diagnosis.stats.ALPHA` (0.01) across *all* of them (alpha/2 to the catalogue and
+    :data:`tissuemech.stats.ALPHA` (0.01) across *all* of them (alpha/2 to the catalogue and
     alpha/2 to the generic scan, Holm within each; ``p_holm`` is reported on the alpha scale), and names a cause
     by :data:`DECISION_RULE`: significant after Holm, practically relevant, and its fix scored on held-out data
     beats the noise-calibrated margin of :func:`fix_margin`. Significant, relevant causes without a scored fix
@@ -64,7 +64,7 @@ from statsmodels.tools.sm_exceptions import MissingDataError
 
 from ..canonical import read_netcdf, write_netcdf, write_text
 from ..models.registry import available_models, get_model
-from . import stats as st
+from .. import stats as st
 from .baseline import (baseline_adequacy, extension_gain, fit_runs, predict_runs, ranked_candidates,
                        read_fit_record, resolved_window_s, spectrum_model, window_taus)
 from .catalogue import DiagnosisContext, curve_levels, explains

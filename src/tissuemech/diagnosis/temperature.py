@@ -40,7 +40,7 @@ import pandas as pd
 import xarray as xr
 
 from .. import tts
-from . import stats as st
+from .. import stats as st
 from .catalogue import (DiagnosisContext, between_sample_test, curve_levels, make_finding, fix_record,
                         level_regression, untested_finding)
 from .evidence import run_id

@@ -1,4 +1,11 @@
-"""Residual-structure statistics used to name what a fitted model gets wrong (``science.md`` section 4).
+"""Generic statistics, below fitting and diagnosis (this module imports nothing of the package).
+
+* information criteria of a least-squares fit -- :func:`information_criteria` (AIC, AICc, BIC), the package's
+  one AICc (:func:`aicc` is its AICc); effective sample size of autocorrelated residuals
+  (:func:`effective_sample_size`, ``science.md`` section 4.2);
+* residual-structure tests used to name what a fitted model gets wrong (``science.md`` section 4): runs test,
+  Durbin-Watson, cluster-robust regression and coefficient tests, nested F-test, likelihood ratio, Holm and
+  Bonferroni, outlier tests, a random-intercept model.
 
 Thin, pure wrappers around statsmodels/scipy that return plain dicts (JSON-ready floats) so the catalogue
 and the generic detector share one vocabulary: ``statistic``, ``p_value``, ``log10_p`` (kept separately
@@ -10,6 +17,7 @@ of the measurement; all tests are two-sided unless stated.
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -20,7 +28,8 @@ from statsmodels.sandbox.stats.runs import runstest_1samp
 from statsmodels.stats.multitest import multipletests
 from statsmodels.stats.stattools import durbin_watson as _durbin_watson
 
-#: family-wise false-alarm level of the diagnosis (Holm across every test run on one dataset)
+#: family-wise false-alarm level of the diagnosis (Holm across every test run on one dataset); the default of
+#: :func:`holm`
 ALPHA = 0.01
 
 
@@ -164,10 +173,24 @@ def gaussian_loglik(rss: float, n: float) -> float:
     return float(-0.5 * n * (np.log(2.0 * np.pi * rss / n) + 1.0))
 
 
+def information_criteria(chisqr: float, n: float, k: int) -> dict[str, float]:
+    """AIC, AICc and BIC of a (weighted) least-squares fit (Burnham & Anderson; ``science.md`` §4.2).
+
+    AIC = n ln(chi2/n) + 2k; AICc = AIC + 2k(k+1)/(n-k-1) (infinite when n <= k+1); BIC = n ln(chi2/n) + k ln n.
+    ``chisqr`` may be a weighted chi-square or a residual sum of squares; ``n`` may be an effective sample size.
+    A zero chi-square is taken as the smallest positive float (finite criteria).
+    """
+    chisqr = max(float(chisqr), np.finfo(float).tiny)
+    base = n * math.log(chisqr / n)
+    aic = base + 2.0 * k
+    corrected = aic + (2.0 * k * (k + 1) / (n - k - 1) if n - k - 1 > 0 else np.inf)
+    bic = base + k * math.log(n)
+    return {"aic": float(aic), "aicc": float(corrected), "bic": float(bic)}
+
+
 def aicc(rss: float, n: float, k: int) -> float:
-    """AICc = n ln(RSS/n) + 2k + 2k(k+1)/(n-k-1) (Burnham & Anderson; RSS may be a weighted chi2)."""
-    aic = n * np.log(rss / n) + 2.0 * k
-    return float(aic + (2.0 * k * (k + 1) / (n - k - 1) if n - k - 1 > 0 else np.inf))
+    """AICc of :func:`information_criteria` (RSS may be a weighted chi2)."""
+    return information_criteria(rss, n, k)["aicc"]
 
 
 # ------------------------------------------------------------------------------------------------
