@@ -137,3 +137,19 @@ def test_a_model_without_residuals_is_inadequate_and_the_diagnosis_still_returns
     res = report.diagnose([], empty, "qlv_none", {}, noise={"blocks": {}}, adequacy=[a])
     assert [f["effect"] for f in res["findings"] if f["detected"]] == ["baseline_inadequate"]
     assert res["baseline"]["adequate"] is False and res["unexplained"] == []
+
+
+def test_the_recommended_qlv_model_is_the_first_candidate():
+    """ranking.csv's 'recommended' column (the choice cards and FEM use) orders the QLV family; a recommended
+    model outside the QLV family is named in the source but the separable reference still comes first."""
+    recs = [_record("qlv_linear_prony4", aicc=1.0), _record("qlv_rp3_prony4", aicc=5.0),
+            _record("pr_rp3_prony4", family="pipkin_rogers", aicc=-50.0)]
+    ranking = pd.DataFrame({"scope": ["csr"] * 3, "model": ["pr_rp3_prony4", "qlv_rp3_prony4", "qlv_linear_prony4"],
+                            "rank": [1, 2, 3], "recommended": [False, False, True]})
+    order, source = ranked_candidates(recs, ranking)
+    assert [r["model_key"] for r in order] == ["qlv_linear_prony4", "qlv_rp3_prony4", "pr_rp3_prony4"]
+    assert "recommended model qlv_linear_prony4 first" in source
+    ranking["recommended"] = [True, False, False]
+    order, source = ranked_candidates(recs, ranking)
+    assert [r["model_key"] for r in order] == ["qlv_rp3_prony4", "qlv_linear_prony4", "pr_rp3_prony4"]
+    assert "pr_rp3_prony4 is not QLV-family" in source

@@ -131,10 +131,13 @@ def ranked_candidates(records: Sequence[Mapping], ranking: pd.DataFrame | None) 
     """Fit records in baseline-preference order and the source of that order.
 
     The diagnosis explains departures from a separable (QLV-family) reference, so QLV-family records come
-    first; within each group the order is the dataset's ranking (``ranking.csv`` rows of the records'
-    scope, column ``rank``), which chooses the instantaneous law. Without a usable ranking the order is AICc.
+    first. Within each group the model the ranking stage recommends for the records' scope (``ranking.csv``
+    column ``recommended``, the one choice cards and FEM use too) comes first, then the dataset's ranking
+    (column ``rank``), which chooses the instantaneous law. Without a usable ranking the order is AICc.
+    When the recommended model is not QLV-family, the source says that the QLV-first rule overrode it.
     """
     order: dict[str, float] = {}
+    recommended: set[str] = set()
     source = "aicc (no ranking.csv rows for these fits)"
     if ranking is not None and not ranking.empty and {"model", "rank"} <= set(ranking.columns):
         scopes = {str(r.get("scope", "")) for r in records}
@@ -144,11 +147,21 @@ def ranked_candidates(records: Sequence[Mapping], ranking: pd.DataFrame | None) 
         if not rows.empty:
             order = {str(m): float(k) for m, k in zip(rows["model"], rows["rank"])}
             source = "ranking.csv (rank within scope " + ", ".join(sorted(scopes)) + ")"
+            if "recommended" in rows:
+                recommended = set(rows.loc[rows["recommended"].astype(str).str.lower() == "true", "model"].astype(str))
+                families = {str(r["model_key"]): r.get("family") for r in records}
+                if recommended:
+                    rec = ", ".join(sorted(recommended))
+                    qlv = all(families.get(m) == "qlv" for m in recommended)
+                    source += (f"; recommended model {rec} first" if qlv else
+                               f"; recommended model {rec} is not QLV-family: the separable reference comes first")
+                else:
+                    source += "; no model recommended for this scope"
 
     def key(r):
         aicc = r.get("aicc", np.nan)
-        return (r.get("family") != "qlv", order.get(str(r["model_key"]), np.inf),
-                aicc if np.isfinite(aicc) else np.inf)
+        return (r.get("family") != "qlv", str(r["model_key"]) not in recommended,
+                order.get(str(r["model_key"]), np.inf), aicc if np.isfinite(aicc) else np.inf)
     return sorted(records, key=key), source
 
 
