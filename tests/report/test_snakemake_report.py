@@ -22,7 +22,9 @@ import pytest
 import yaml
 from PIL import Image
 
-pytestmark = pytest.mark.slow
+# one worker runs the module-scoped workflow (small_run) for every test of this module: without a group,
+# --dist loadgroup spreads the tests over both workers and each ran the workflow and the report once
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("snakemake_report")]
 
 DATASET = "agar_3pct_thesis"
 TARGETS = [f"results/{DATASET}/lve.csv", f"results/{DATASET}/figures/fits/flow_curve"]
