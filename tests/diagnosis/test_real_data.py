@@ -24,6 +24,10 @@ from tissuemech.diagnosis.report import diagnose_runs
 from tissuemech.io.dispatch import read_export
 from tissuemech.io.ingest import ingest_dataset
 
+# the module-scoped datasets (lims, fungi, cnf) are ingested and diagnosed once, on one worker: without a
+# group, --dist loadgroup sent the two tests of a fixture to different workers and both built it
+pytestmark = pytest.mark.xdist_group("real_data")
+
 
 def _lab_dataset(root: Path, name: str, rows: list[dict], source: Path, material: str) -> list:
     """Write samples.csv + dataset.yaml (source_dir = the real folder), ingest, return the canonical runs."""

@@ -39,6 +39,8 @@ TARGETS = [
     f"results/{DATASET}/lve.csv",
     *(f"results/{DATASET}/ranking/{scope}.csv" for scope in FIT_MODELS),
 ]
+#: workflow/scripts of the rules that produce TARGETS (ingest, average, lve, fit_scope)
+JOB_SCRIPTS = {"ingest.py", "average.py", "lve.py", "fit_scope.py"}
 RUN_TIMEOUT_S = 540
 #: ClusterName written by start_local_slurm.sh
 LOCAL_CLUSTER = "tissuemech-ci"
@@ -115,6 +117,13 @@ def _small_workflow(folder: Path) -> Path:
     shutil.copy2(ROOT / "Snakefile", folder / "Snakefile")
     for part in ("workflow", "config", "src"):
         shutil.copytree(ROOT / part, folder / part, ignore=ignore)
+    # only the scripts of the rules this run executes: every Snakemake start (the submitting one and two per SLURM
+    # job) hashes the package sources each present rule script reaches (common.smk script_hash, ~1-2 s per
+    # script on a shared 2-core machine); an absent script hashes as "script-absent" (a partial copy of the
+    # workflow that never runs that rule). The rules, the DAG and the jobs run are the same.
+    for script in (folder / "workflow" / "scripts").glob("*.py"):
+        if script.name not in JOB_SCRIPTS:
+            script.unlink()
     raw = folder / "raw" / DATASET
     raw.mkdir(parents=True)
     sheet = pd.read_csv(SOURCE_DATASET / "samples.csv", dtype=str, keep_default_na=False)
