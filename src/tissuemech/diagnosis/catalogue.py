@@ -986,15 +986,25 @@ def detect_instrument_inertia(ctx: DiagnosisContext) -> dict:
 SPECTRUM_SHAPE_DEGREE = 3
 
 
-def _relative_shape_columns(frame: pd.DataFrame, degree: int = SPECTRUM_SHAPE_DEGREE) -> dict[str, np.ndarray]:
-    """predicted x P_k(z), k = 1..degree, with z the log angular frequency scaled to [-1, 1] over the frame:
-    a relative misfit shape along log omega shared by every sweep (degree at most distinct omegas - 2)."""
-    logw = 0.5 * np.log(frame["frequency_sq"].to_numpy(float))
-    degree = int(min(degree, np.unique(logw).size - 2))
-    z = 2.0 * (logw - logw.min()) / max(logw.max() - logw.min(), 1e-12) - 1.0
-    basis = np.polynomial.legendre.legvander(z, degree)[:, 1:]
+def spectrum_shape_basis(frequency_sq) -> np.ndarray:
+    """Legendre polynomials P_1..P_d of log omega scaled to [-1, 1] over the given points (rows; 0 where omega^2
+    is not finite and positive), d = min(:data:`SPECTRUM_SHAPE_DEGREE`, distinct omegas - 2): the basis of a
+    misfit shape of the relaxation spectrum along a frequency sweep. Shape (n, d); d may be 0."""
+    w2 = np.asarray(frequency_sq, float)
+    ok = np.isfinite(w2) & (w2 > 0)
+    logw = np.where(ok, 0.5 * np.log(np.where(ok, w2, 1.0)), np.nan)
+    degree = int(max(0, min(SPECTRUM_SHAPE_DEGREE, np.unique(logw[ok]).size - 2)))
+    lo, hi = (np.min(logw[ok]), np.max(logw[ok])) if ok.any() else (0.0, 1.0)
+    z = np.where(ok, 2.0 * (logw - lo) / max(hi - lo, 1e-12) - 1.0, 0.0)
+    return np.polynomial.legendre.legvander(z, degree)[:, 1:]
+
+
+def _relative_shape_columns(frame: pd.DataFrame) -> dict[str, np.ndarray]:
+    """predicted x P_k(log omega) (:func:`spectrum_shape_basis`): a relative misfit shape along log omega shared
+    by every sweep."""
+    basis = spectrum_shape_basis(frame["frequency_sq"])
     pred = frame["predicted"].to_numpy(float)
-    return {f"shape_P{k + 1}": pred * basis[:, k] for k in range(degree)}
+    return {f"shape_P{k + 1}": pred * basis[:, k] for k in range(basis.shape[1])}
 
 
 def raw_phase_inertia(table: pd.DataFrame, frame: pd.DataFrame) -> dict:

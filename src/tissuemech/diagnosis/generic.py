@@ -38,7 +38,7 @@ import statsmodels.api as sm
 
 from ..tts import run_temperature_c
 from .. import stats as st
-from .catalogue import SPECTRUM_SHAPE_DEGREE, between_sample_test, level_regression
+from .catalogue import between_sample_test, level_regression, spectrum_shape_basis
 from .evidence import run_id
 
 #: smallest structured misfit (log-residual change over the covariate range) worth reporting
@@ -132,23 +132,22 @@ SPECTRUM_COORDINATE = {"frequency_sweep": "frequency_sq"}
 def shared_shape(block: pd.DataFrame, coordinate: str) -> tuple[np.ndarray, dict] | None:
     """The misfit shape shared by every curve of a block along its spectrum coordinate, and a summary.
 
-    Fits the per-curve demeaned log-residual with a Legendre polynomial (degree <= :data:`SPECTRUM_SHAPE_DEGREE`,
-    at most the number of distinct coordinate values minus 2) in the log of the coordinate, common to all
+    Fits the per-curve demeaned log-residual with Legendre polynomials in log omega, common to all
+    (:func:`tissuemech.diagnosis.catalogue.spectrum_shape_basis`: degree <= 3, at most the number of distinct
+    coordinate values minus 2),
     curves, with curve-clustered covariance. Returns ``(shape, summary)``: ``shape`` (per row, log units,
     mean zero per curve) and ``summary`` with ``range_log`` (max - min of the shape over the block),
     ``degree``, ``n_curves``, ``wald_p`` (joint test of the shape coefficients, NaN when not computable); None
     when the block cannot carry a shape (fewer than :data:`MIN_CURVES` curves or 4 coordinate values).
     """
-    x = np.log(block[coordinate].to_numpy(float))
+    w2 = block[coordinate].to_numpy(float)
     y = block["log_ratio"].to_numpy(float)
-    ok = np.isfinite(x) & np.isfinite(y)
-    if block.loc[ok, "curve"].nunique() < MIN_CURVES or np.unique(x[ok]).size < 4:
+    ok = np.isfinite(w2) & (w2 > 0) & np.isfinite(y)
+    if block.loc[ok, "curve"].nunique() < MIN_CURVES or np.unique(w2[ok]).size < 4:
         return None
-    degree = int(min(SPECTRUM_SHAPE_DEGREE, np.unique(x[ok]).size - 2))
     codes = pd.factorize(block["curve"])[0]
-    lo, hi = np.nanmin(x[ok]), np.nanmax(x[ok])
-    z = np.where(ok, 2.0 * (x - lo) / (hi - lo) - 1.0, 0.0)
-    basis = np.polynomial.legendre.legvander(z, degree)[:, 1:]
+    basis = spectrum_shape_basis(np.where(ok, w2, np.nan))
+    degree = basis.shape[1]
     basis_d = np.column_stack([_demean(np.where(ok, b, 0.0), codes) for b in basis.T])
     yd = _demean(np.where(ok, y, 0.0), codes)
     names = [f"P{k}" for k in range(1, degree + 1)]
