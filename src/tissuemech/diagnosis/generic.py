@@ -132,10 +132,9 @@ SPECTRUM_COORDINATE = {"frequency_sweep": "frequency_sq"}
 def shared_shape(block: pd.DataFrame, coordinate: str) -> tuple[np.ndarray, dict] | None:
     """The misfit shape shared by every curve of a block along its spectrum coordinate, and a summary.
 
-    Fits the per-curve demeaned log-residual with Legendre polynomials in log omega, common to all
+    Fits the per-curve demeaned log-residual with Legendre polynomials in log omega common to all curves
     (:func:`tissuemech.diagnosis.catalogue.spectrum_shape_basis`: degree <= 3, at most the number of distinct
-    coordinate values minus 2),
-    curves, with curve-clustered covariance. Returns ``(shape, summary)``: ``shape`` (per row, log units,
+    coordinate values minus 2), with curve-clustered covariance. Returns ``(shape, summary)``: ``shape`` (per row, log units,
     mean zero per curve) and ``summary`` with ``range_log`` (max - min of the shape over the block),
     ``degree``, ``n_curves``, ``wald_p`` (joint test of the shape coefficients, NaN when not computable); None
     when the block cannot carry a shape (fewer than :data:`MIN_CURVES` curves or 4 coordinate values).
