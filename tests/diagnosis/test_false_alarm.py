@@ -88,3 +88,20 @@ def test_a_ringing_stress_rises_again_during_the_hold():
     assert n == 89 and rise > 20          # 0.3 x level ring against 0.2 % noise
     f = detect_inertial_ringing(DiagnosisContext(runs=[], table=table))
     assert f["practical"] and f["hold_rise_share"] == 1.0
+
+
+def test_raw_phase_with_reported_moduli_gives_the_calibrated_inertia():
+    """science.md 2.5: the raw torque carries the whole inertia I; the reported G' is corrected with I_cal only,
+    G'_rep = G' - (I - I_cal) w^2/b. With the reported moduli the raw phase gives I_cal, not I, so it cannot
+    bound an under-correction dI = I - I_cal (here dI = 1.5 I_cal, which the old bound |dI| <= I_raw refused)."""
+    i_total, i_cal = 5e-6, 2e-6
+    b_inv = 2.0 * 2e-3 / (np.pi * 0.0125 ** 4)
+    w = np.geomspace(1.0, 400.0, 14)
+    g1, g2 = 500.0 * (w / w[0]) ** 0.1, 80.0 * (w / w[0]) ** 0.2
+    raw = np.angle((g1 - i_total * w ** 2 * b_inv) + 1j * g2)
+    reported = g1 - (i_total - i_cal) * w ** 2 * b_inv
+    frame = pd.DataFrame({"curve": "fs1", "frequency_sq": w ** 2, "observed": reported, "x_inertia": w ** 2 * b_inv,
+                          "channel_raw_phase": raw})
+    table = pd.DataFrame({"curve": "fs1", "test": "frequency_sweep", "quantity": "loss_modulus",
+                          "frequency_sq": w ** 2, "observed": g2})
+    assert raw_phase_inertia(table, frame)["i_raw_kg_m2"] == pytest.approx(i_cal, rel=1e-6)
