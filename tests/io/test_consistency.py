@@ -82,3 +82,18 @@ def test_fuzz_oracle_tells_a_deleted_row_from_lost_points(tmp_path):
                                original)[0] == "file_shorter"
     assert fuzz._judge_missing("truncate", 0, [(0, 1, 3, True)], len(original), original)[0] == (
         "lost" if len(original) > 1 else "file_shorter")
+
+
+def test_a_trios_step_sheet_emptied_by_byte_damage_is_an_error(tmp_path):
+    """Five bytes of the real TRIOS workbook's BIFF record overwritten (what fuzz seed 7 found): xlrd then reads
+    the 'Frequency sweep - 2' sheet as empty, which used to be skipped like Excel's empty 'Sheet1'."""
+    real = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "real" / "trios" / "hr20_fungi_frequency_sweep.xls"
+    if not real.is_file():
+        pytest.skip("../shared/data/real not present")
+    data = bytearray(real.read_bytes())
+    assert bytes(data[27256:27261]) == b"\x0f\x00\x08\x02\x10"          # the file this offset was found in
+    data[27256:27261] = b"A>\\\x9a\xb9"
+    (tmp_path / "damaged.xls").write_bytes(bytes(data))
+    assert len(read_export(real)) == 2                                  # the undamaged file: both step sheets
+    with pytest.raises(IngestError, match="step sheet 'Frequency sweep - 2' has 0 row"):
+        read_export(tmp_path / "damaged.xls")
