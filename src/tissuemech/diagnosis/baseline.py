@@ -92,10 +92,8 @@ def baseline_adequacy(record: Mapping, table: pd.DataFrame) -> dict:
     :data:`GROSS_MISFIT_FACTOR`.
     """
     flags = [str(f) for f in record.get("flags", [])]
-    # a non-negative relaxation weight at zero is the NNLS answer "this mode is not needed", not a collapse
-    at_bound = sorted({m.group(1) for f in flags for m in [re.match(r"at_bound: (\S+) at its (\w+) bound (\S+)", f)]
-                       if m and not (re.fullmatch(r"beta_\d+", m.group(1)) and m.group(2) == "lower"
-                                     and float(m.group(3)) == 0.0)})
+    # the ranking's rule (a Prony weight at its lower bound 0 is an absent mode, not a collapse)
+    at_bound = fitting.at_bound_parameters(flags)
     varying = list(record.get("varying", []))
     se = record.get("stderr", {})
     no_cov = bool(varying) and bool(se) and not any(np.isfinite(se.get(n, np.nan)) for n in varying)
