@@ -65,8 +65,10 @@ from statsmodels.tools.sm_exceptions import MissingDataError
 from ..canonical import read_netcdf, write_netcdf, write_text
 from ..models.registry import available_models, get_model
 from .. import stats as st
-from .baseline import (baseline_adequacy, extension_gain, fit_runs, predict_runs, ranked_candidates,
-                       read_fit_record, resolved_window_s, spectrum_model, window_taus)
+from .baseline import (baseline_adequacy, extension_gain, fit_runs, level_normalised, predict_runs,
+                       ranked_candidates,
+                       nnls_relaxation_times, read_fit_record, resolved_window_s, spectrum_model,
+                       window_taus)
 from .catalogue import DiagnosisContext, curve_levels, explains
 from .causes import CAUSE_IDS, DETECTORS
 from .evidence import estimate_noise, residual_table, residual_table_to_xarray
@@ -384,9 +386,10 @@ def _read_runs(runs_dir: str | Path) -> list[xr.Dataset]:
     return [r for r in runs if "test" in r.attrs]
 
 
-def _nonseparable_fix(runs, baseline_key: str, target: str) -> dict | None:
+def _nonseparable_fix(runs, baseline_key: str, target: str, taus_s: Sequence[float] | None = None) -> dict | None:
     """Pipkin-Rogers counterpart of a QLV baseline, scored leaving out the extreme CSR rates; both refitted in
-    every fold on a one-per-decade relaxation-time grid spanning the window the tests resolve."""
+    every fold on the baseline's relaxation times ``taus_s`` [s] (the runs-only path's NNLS times), or, when
+    None, on a one-per-decade grid spanning the window the tests resolve."""
     if not baseline_key.startswith("qlv_"):
         return None
     ext = "pr_" + baseline_key[len("qlv_"):]
@@ -402,7 +405,7 @@ def _nonseparable_fix(runs, baseline_key: str, target: str) -> dict | None:
              for rate in (rates[0], rates[-1])]
     # both models on the relaxation times these tests resolve (never the registry's fixed 0.1-100 s)
     window = resolved_window_s(use)
-    taus = window_taus(window)
+    taus = np.asarray(taus_s, float) if taus_s is not None and len(taus_s) else window_taus(window)
     fix = extension_gain(use, baseline_key, ext, target, folds, taus_s=taus if taus.size else None)
     fix["parameters"]["window_t_min_s"] = window["t_min_s"]
     fix["parameters"]["window_t_max_s"] = window["t_max_s"]
@@ -423,7 +426,7 @@ def with_model_fixes(result: dict, runs: Sequence[xr.Dataset], table: pd.DataFra
     nonsep = next((f for f in result["findings"] if f["effect"] == "nonseparable_relaxation"), None)
     if nonsep is None or not (nonsep["significant"] and nonsep["practical"]):
         return result
-    fix = _nonseparable_fix(runs, result["model"], fit_info.get("target", "apparent_stress"))
+    fix = _nonseparable_fix(runs, result["model"], fit_info.get("target", "apparent_stress"), fit_info.get("taus_s"))
     if fix is None:
         return result
     fit_info.setdefault("fixes", {})["nonseparable_relaxation"] = fix
@@ -446,7 +449,8 @@ def diagnose_runs(runs: Sequence[xr.Dataset], baseline: str | Sequence[str] = RU
 
     ``baseline``: a fixed-time QLV key, or a sequence of candidate keys (default
     :data:`RUNS_BASELINE_CANDIDATES`). Each is rebuilt on the relaxation times the runs resolve
-    (:func:`tissuemech.diagnosis.baseline.resolved_window_s`, one time per decade; never a fixed grid) and
+    (:func:`tissuemech.diagnosis.baseline.resolved_window_s`; the times NNLS selects on a dense grid over that
+    window, :func:`~tissuemech.diagnosis.baseline.nnls_relaxation_times`; never a fixed grid) and
     fitted jointly to the ``fitted_tests`` runs (``target``: plate target of :mod:`tissuemech.fitting`); the
     candidates are ranked by AICc of that fit (the runs-only counterpart of the pipeline's ranking: the
     instantaneous law comes from the data, so that a law the data do not follow is not reported as
@@ -460,17 +464,18 @@ def diagnose_runs(runs: Sequence[xr.Dataset], baseline: str | Sequence[str] = RU
     keys = [baseline] if isinstance(baseline, str) else list(baseline)
     noise = estimate_noise(runs)
     window = resolved_window_s(runs)
-    taus = window_taus(window)
     fitted = [r for r in runs if r.attrs.get("test") in fitted_tests]
     if not fitted:
         raise ValueError(f"no run of the fitted tests {list(fitted_tests)} to fit the baseline {baseline!r} to")
-    fits = {k: fit_runs(k, fitted, target, relaxation, n_points=n_points, taus_s=taus if taus.size else None)
-            for k in keys}
+    fits, spectra = {}, {}
+    for k in keys:
+        fits[k], spectra[k] = _fit_on_data_times(k, fitted, target, relaxation, window, n_points)
     aicc = {k: float(f.aicc) for k, f in fits.items()}
     order = sorted(keys, key=lambda k: (aicc[k] if np.isfinite(aicc[k]) else np.inf, keys.index(k)))
     adequacy = []
     for key in order:
-        fit = fits[key]
+        fit, spectrum = fits[key], spectra[key]
+        taus = spectrum["taus_s"]
         model = spectrum_model(key, taus)
         preds = predict_runs(model, fit.params, runs, target, relaxation)
         keep = [i for i, p in enumerate(preds) if p]
@@ -483,11 +488,44 @@ def diagnose_runs(runs: Sequence[xr.Dataset], baseline: str | Sequence[str] = RU
             break
     fit_info = {"target": target, "relaxation": relaxation, "fitted_tests": list(fitted_tests),
                 "correlations": {}, "taus_s": [float(t) for t in taus], "window": window, "fixes": {},
+                "relaxation_times": {"method": spectrum["method"], "grid_s": [float(t) for t in spectrum["grid_s"]],
+                                     "levels": spectrum["levels"],
+                                     "weights": [float(w) for w in spectrum["weights"]]},
                 "baseline_order": "aicc" if len(keys) > 1 else "requested", "baseline_aicc": aicc}
     result = diagnose(kept, table, key, fit_info, alpha=alpha, noise=noise, adequacy=adequacy)
     if extensions:
         result = with_model_fixes(result, kept, table, fit_info, alpha=alpha, noise=noise, adequacy=adequacy)
     return (result, table) if return_table else result
+
+
+def _fit_on_data_times(key: str, runs: Sequence[xr.Dataset], target: str, relaxation: str, window: dict,
+                       n_points: int):
+    """One candidate of the runs-only path on the relaxation times the data ask for.
+
+    NNLS on a dense grid over the window (:func:`~tissuemech.diagnosis.baseline.nnls_relaxation_times`, with
+    the linear law) gives first times and the level of every loaded piece; the candidate is fitted on those
+    times to the runs divided by their piece's level (the shape common to every piece; residuals are later
+    taken against the unscaled runs, so level differences between pieces stay in the evidence). A law that is
+    not linear in shear changes the elastic drive, so NNLS is repeated with the fitted law and the candidate
+    refitted when the times change. The window's one-per-decade grid is used only where NNLS selects
+    nothing. Returns ``(FitResult, spectrum dict with the times used as taus_s)``."""
+    spectrum = nnls_relaxation_times(runs, target, relaxation, window)
+    if not spectrum["taus_s"].size:
+        spectrum = {**spectrum, "taus_s": window_taus(window),
+                    "method": "one time per decade spanning the resolved window (NNLS selected none)"}
+    taus = spectrum["taus_s"]
+    fit = fit_runs(key, level_normalised(runs, spectrum["levels"]), target, relaxation, n_points=n_points,
+                   taus_s=taus if taus.size else None)
+    law = getattr(spectrum_model(key, taus), "instantaneous", None) if taus.size else None
+    # a one-parameter law is its modulus times a fixed shape, absorbed by the weights: nothing to repeat
+    if law is not None and len(law.param_names) > 1 and fit.success:
+        again = nnls_relaxation_times(runs, target, relaxation, window, model_key=key, law_params=fit.params)
+        if again["taus_s"].size and not np.array_equal(again["taus_s"], taus):
+            refit = fit_runs(key, level_normalised(runs, again["levels"]), target, relaxation, n_points=n_points,
+                             taus_s=again["taus_s"])
+            again["method"] += ", repeated with the fitted instantaneous law"
+            return refit, again
+    return fit, spectrum
 
 
 def _read_ranking(path: str | Path | None) -> pd.DataFrame | None:
