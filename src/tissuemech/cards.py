@@ -70,10 +70,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .canonical import write_text
+from .canonical import to_jsonable, write_text
 from .cards_febio import (FEBIO_SOURCE_COMMIT, febio_card_material, febio_document, febio_material_element,
                           febio_simple_shear_stress)
-from .fitting import FitResult, _jsonable
+from .fitting import FitResult
 from .models.base import ConstitutiveModel
 
 #: default Poisson ratio of nearly incompressible soft tissue
@@ -480,7 +480,7 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float 
 def card_json(card: Mapping) -> str:
     """Canonical JSON text of a card (sorted keys, runtime objects dropped)."""
     clean = {k: v for k, v in card.items() if not k.startswith("_")}
-    return json.dumps(_jsonable(clean), indent=2, sort_keys=True, allow_nan=True)
+    return json.dumps(to_jsonable(clean, nonfinite_as_null=False), indent=2, sort_keys=True, allow_nan=True)
 
 
 # ------------------------------------------------------------------------------------------------

@@ -180,7 +180,7 @@ def collect_scopes(ranking_paths: Sequence, fits_dirs: Sequence, dataset: str, r
     if not ranking.empty:
         ranking["recommended"] = R.recommended_mask(ranking)
     write_text(ranking.to_csv(index=False), ranking_out)
-    rows = [F.fits_csv_row(read_netcdf(path), dataset, file=str(path))
+    rows = [F.fits_csv_row(F.FitRecord.from_netcdf(path), dataset, file=str(path))
             for folder in fits_dirs for path in sorted(Path(folder).glob("*.nc"))]
     write_text(pd.DataFrame(rows).to_csv(index=False), fits_out)
     if figure_out is not None and not ranking.empty and "model" in ranking:
