@@ -5,7 +5,7 @@ Card shape (JSON, SI units)::
     {"model": key, "family": ..., "parameters": {...}, "units": {...}, "standard_errors": {...},
      "elastic_law": law key, "elastic_parameters": {...}, "initial_shear_modulus": Pa,
      "prony": {"g": [...], "tau": [...], "g_inf": ..., "normalisation": ..., "source": ...} | null,
-     "poisson_ratio": 0.49, "bulk_modulus": Pa, "validity": {...}, "provenance": {...},
+     "poisson_ratio": nu, "bulk_modulus": Pa, "validity": {...}, "provenance": {...},
      "fit_quality": {...}, "abaqus_form": ..., "febio_form": type | null, "febio_parameters": {...} | null,
      "febio_reason": str | null, "valid_range": {...}, "uncertainty": {...}, "notes": [...]}
 
@@ -56,8 +56,8 @@ Valid range and uncertainty (every card): ``valid_range`` = the fitted data sele
 time and angular-frequency spans (``None`` and listed in ``not_given`` when the data carry none), its tests and
 conditions; ``uncertainty`` = lmfit standard errors, relative standard errors, parameters without a finite
 standard error, and the initial shear modulus's standard error (delta method). The Poisson ratio (hence ``k``)
-is the configuration's ``fem.poisson_ratio`` passed in by ``fit_scope``; ``DEFAULT_POISSON`` only serves direct
-calls.
+is the configuration's ``fem.poisson_ratio``, a required argument of :func:`make_card` (passed in by
+``stages.run_fit_scope``); ``k`` = ``models.base.bulk_modulus(G0, nu)``.
 """
 from __future__ import annotations
 
@@ -74,10 +74,8 @@ from .canonical import to_jsonable, write_text
 from .cards_febio import (FEBIO_SOURCE_COMMIT, febio_card_material, febio_document, febio_material_element,
                           febio_simple_shear_stress)
 from .fitting import FitResult
-from .models.base import ConstitutiveModel
+from .models.base import ConstitutiveModel, bulk_modulus, initial_shear_modulus
 
-#: default Poisson ratio of nearly incompressible soft tissue
-DEFAULT_POISSON = 0.49
 #: Abaqus Arruda-Boyce series coefficients
 ARRUDA_BOYCE_C = (0.5, 1.0 / 20.0, 11.0 / 1050.0, 19.0 / 7000.0, 519.0 / 673750.0)
 #: number of points of a MARLOW uniaxial table
@@ -95,12 +93,6 @@ def _law_and_params(model: ConstitutiveModel, p: Mapping[str, float]) -> tuple[C
     if model.family == "qlv" and inst is not None:
         return inst, {k: float(p[k]) for k in inst.param_names}
     return None, {}
-
-
-def initial_shear_modulus(law: ConstitutiveModel, p: Mapping[str, float], step: float = 1e-6) -> float:
-    """d sigma / d gamma at gamma = 0 of an elastic shear law (central difference), Pa."""
-    s = np.asarray(law.elastic_shear_stress(p, np.array([-step, step])), float)
-    return float((s[1] - s[0]) / (2 * step))
 
 
 def prony_from_step_response(model: ConstitutiveModel, p: Mapping[str, float], taus: np.ndarray,
@@ -338,9 +330,10 @@ def parameter_uncertainty(result: FitResult, law: ConstitutiveModel | None = Non
     return out
 
 
-def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float = DEFAULT_POISSON,
+def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float,
               dataset: str = "", fit_file: str = "", strain_margin: float = 1.2) -> dict:
-    """Canonical card of a fitted model (see the module docstring for the shape and conventions)."""
+    """Canonical card of a fitted model (see the module docstring for the shape and conventions); ``poisson_ratio``
+    is the configuration's ``fem.poisson_ratio`` (no default)."""
     p = result.params
     notes: list[str] = []
     card = {"model": result.model_key, "family": result.family, "parameters": dict(p), "units": dict(result.units),
@@ -418,8 +411,7 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float 
         notes.append("linear elastic shear law written as neo-Hookean (mu = G0; identical in simple shear)")
     card["initial_shear_modulus"] = mu0
     card["poisson_ratio"] = float(poisson_ratio)
-    card["bulk_modulus"] = (2.0 * mu0 * (1 + poisson_ratio) / (3.0 * (1 - 2 * poisson_ratio))
-                            if np.isfinite(mu0) else float("nan"))
+    card["bulk_modulus"] = bulk_modulus(mu0, poisson_ratio) if np.isfinite(mu0) else float("nan")
     card["validity"] = {**result.ranges, "plate_target": result.target,
                         "marlow_strain_max": strain_max * strain_margin}
     if singular_origin:
@@ -637,4 +629,4 @@ def write_card_files(card: Mapping, folder, stem: str | None = None) -> dict[str
 __all__ = ["make_card", "card_json", "abaqus_block", "parse_abaqus_block", "abaqus_simple_shear_stress",
            "abaqus_hyperelastic_form", "marlow_uniaxial_table", "febio_block", "febio_file_text",
            "febio_simple_shear_stress", "valid_range", "parameter_uncertainty",
-           "prony_from_step_response", "prony_from_complex_modulus", "initial_shear_modulus", "write_card_files", "DEFAULT_POISSON"]
+           "prony_from_step_response", "prony_from_complex_modulus", "write_card_files"]

@@ -106,7 +106,7 @@ def scope_folds(scope: str, curves: Sequence[F.Curve]) -> list[R.Fold]:
 
 
 def run_fit_scope(averages_path, scope: str, spec: Mapping, target: str, seed: int, multistart: int,
-                  fits_dir, cards_dir, ranking_path, dataset: str = "", poisson_ratio: float = 0.49) -> pd.DataFrame:
+                  fits_dir, cards_dir, ranking_path, poisson_ratio: float, dataset: str = "") -> pd.DataFrame:
     """Fit, cross-validate and rank every candidate of one scope; write fits, cards and the ranking table.
 
     Parameters
