@@ -69,12 +69,14 @@ from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
+from scipy.optimize import nnls
 
 from .canonical import to_jsonable, write_text
 from .cards_febio import (FEBIO_SOURCE_COMMIT, febio_card_material, febio_document, febio_material_element,
                           febio_simple_shear_stress)
 from .fitting import FitResult
 from .models.base import ConstitutiveModel, bulk_modulus, initial_shear_modulus
+from .spectra import prony_nnls_weights, prony_oscillation_basis, prony_relaxation_basis
 
 #: Abaqus Arruda-Boyce series coefficients
 ARRUDA_BOYCE_C = (0.5, 1.0 / 20.0, 11.0 / 1050.0, 19.0 / 7000.0, 519.0 / 673750.0)
@@ -103,16 +105,14 @@ def prony_from_step_response(model: ConstitutiveModel, p: Mapping[str, float], t
     with G_inf + sum G_i exp(-t/tau_i), G_i >= 0. Exact for generalized-Maxwell models on their own taus; an
     approximation for fractional models (``fit_rel_error`` reports the relative RMS misfit).
     """
-    from scipy.optimize import nnls
-
     t = np.r_[0.0, np.geomspace(t_min_s, t_max_s, 200)]
     stress = np.asarray(model.shear_stress_history(p, t, np.full(t.size, strain)), float)
     g_t = stress[1:] / strain
     tt = t[1:]
-    A = np.column_stack([np.ones_like(tt), np.exp(-tt[:, None] / taus[None, :])])
     w = 1.0 / np.maximum(np.abs(g_t), 1e-12 * np.max(np.abs(g_t)))  # relative misfit
-    coef, _ = nnls(A * w[:, None], g_t * w)
-    fitted = A @ coef
+    g_e, g_i, _ = prony_nnls_weights(tt, g_t, taus, row_weights=w)
+    coef = np.r_[g_e, g_i]
+    fitted = prony_relaxation_basis(tt, taus) @ coef
     g0 = float(coef.sum())
     return {"g_inf": float(coef[0] / g0), "g": (coef[1:] / g0).tolist(), "tau": np.asarray(taus, float).tolist(),
             "G0": g0, "fit_rel_error": float(np.sqrt(np.mean(((fitted - g_t) / g_t) ** 2)))}
@@ -122,13 +122,9 @@ def prony_from_complex_modulus(model: ConstitutiveModel, p: Mapping[str, float],
                                omega_min: float, omega_max: float) -> dict:
     """Prony series of a linear viscoelastic model by NNLS on its G'(omega), G''(omega) (relative misfit) over
     ``[omega_min, omega_max]`` rad/s -- for models that define only the oscillatory response."""
-    from scipy.optimize import nnls
-
     w = np.geomspace(omega_min, omega_max, 120)
     gs = np.asarray(model.complex_modulus(p, w))
-    x = w[:, None] * np.asarray(taus, float)[None, :]
-    re = np.column_stack([np.ones_like(w), x ** 2 / (1 + x ** 2)])
-    im = np.column_stack([np.zeros_like(w), x / (1 + x ** 2)])
+    re, im = prony_oscillation_basis(w, taus)
     A = np.vstack([re / np.abs(gs.real)[:, None], im / np.abs(gs.imag)[:, None]])
     b = np.r_[np.ones(w.size), np.ones(w.size)]
     coef, _ = nnls(A, b)

@@ -59,7 +59,7 @@ from scipy.optimize import nnls
 from .canonical import to_jsonable
 from .models.base import ConstitutiveModel, ParamSpec
 from .records import FitRecord
-from .spectra import log_spaced_taus  # the one implementation; re-exported (fitting.__all__)
+from .spectra import log_spaced_taus, prony_oscillation_basis  # log_spaced_taus re-exported (fitting.__all__)
 from .stats import effective_sample_size, information_criteria
 
 PLATE_TARGETS: tuple[str, ...] = ("thesis", "apparent_stress", "corrected_stress", "torque", "none")
@@ -1055,10 +1055,7 @@ def prony_nnls(curves: Sequence[Curve], taus: np.ndarray, elastic: Callable[[np.
         elif c.response == "oscillation":
             if elastic is not None:
                 continue  # oscillation is linear: only informs the linear-moduli variant
-            w = c.obs_inputs("angular_frequency")
-            x = w[:, None] * taus[None, :]
-            re = np.column_stack([np.ones_like(w), x ** 2 / (1 + x ** 2)])
-            im = np.column_stack([np.zeros_like(w), x / (1 + x ** 2)])
+            re, im = prony_oscillation_basis(c.obs_inputs("angular_frequency"), taus)
             for part, name in ((re, "storage_modulus"), (im, "loss_modulus")):
                 y = np.asarray(c.observed[name], float)
                 sig = noise.sigma(name, y, c.sd.get(name))
