@@ -326,6 +326,24 @@ def test_fit_record_round_trips_through_netcdf(tmp_path):
     assert F.fits_csv_row(back, "demo", "f") == F.fits_csv_row(read_netcdf(path), "demo", "f")
 
 
+def test_fit_record_reads_an_older_record_with_defaults(tmp_path):
+    """A record without ``stderr``/``varying``/``relaxation``/``success`` (older files) reads with the stated
+    defaults: every parameter varying, NaN standard errors, relaxation "measured", converged; the model key
+    falls back to the file name."""
+    ds = xr.Dataset({"value": ("param", [40.0, 100.0]),
+                     "correlation": (("param", "param_b"), [[1.0, -0.9], [-0.9, 1.0]])},
+                    coords={"param": ["C10", "C20"], "param_b": ["C10", "C20"]},
+                    attrs={"target": "none", "aicc": -3.5, "flags": "[]",
+                           "selection": json.dumps([{"test": "simple_shear"}])})
+    path = tmp_path / "reduced_polynomial2.nc"
+    ds.to_netcdf(path, engine="h5netcdf")
+    rec = FitRecord.from_netcdf(path)
+    assert rec.model_key == "reduced_polynomial2" and rec.relaxation == "measured" and rec.converged
+    assert rec.params == {"C10": 40.0, "C20": 100.0} and rec.varying == ["C10", "C20"]
+    assert all(np.isnan(v) for v in rec.stderr.values()) and rec.aicc == -3.5 and rec.n == 0
+    assert rec.correlations == {"C10|C20": -0.9} and rec.tests == ["simple_shear"]
+
+
 def test_prony_start_for_qlv_is_close_to_truth():
     from tissuemech.models.qlv import qlv_params
     from tissuemech.models.registry import get_model
