@@ -63,11 +63,11 @@ def synthetic_averages(path: Path, radius_m: float, seed: int = 0, samples: int 
 
 
 def _fit_scope(args):
-    averages, scope, spec, fit_config, out = args
+    averages, scope, spec, fit_config, poisson_ratio, out = args
     stages.run_fit_scope(averages, scope, spec, target=fit_config["plate_target"], seed=fit_config["seed"],
                          multistart=fit_config["multistart"], fits_dir=out / "fits" / scope,
                          cards_dir=out / "cards" / scope, ranking_path=out / "ranking" / f"{scope}.csv",
-                         dataset="benchmark")
+                         poisson_ratio=poisson_ratio, dataset="benchmark")
     return scope
 
 
@@ -79,7 +79,8 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2, help="processes for the scopes (Snakemake jobs)")
     args = ap.parse_args()
 
-    fit_config = yaml.safe_load(CONFIG.read_text())["fit"]
+    config = yaml.safe_load(CONFIG.read_text())
+    fit_config, poisson_ratio = config["fit"], config["fem"]["poisson_ratio"]
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp)
         if args.averages.exists():
@@ -106,7 +107,7 @@ def main() -> None:
               f"{res.n_starts} starts): {dt:.2f} s; flags: {res.flags or 'none'}")
 
         scopes = stages.dataset_scopes(tests, fit_config)
-        jobs = [(averages, name, spec, fit_config, out) for name, spec in scopes.items()]
+        jobs = [(averages, name, spec, fit_config, poisson_ratio, out) for name, spec in scopes.items()]
         t0 = time.perf_counter()
         if args.workers > 1:  # Snakemake runs the scopes as parallel jobs; a process pool stands in for it
             with ProcessPoolExecutor(max_workers=args.workers) as pool:

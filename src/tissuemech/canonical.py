@@ -10,7 +10,10 @@ labels onto it, the synthetic rheometer writes it, models and fits read it.
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
+import json
+import math
 import os
 import tempfile
 from collections.abc import Mapping
@@ -150,6 +153,43 @@ def write_text(text: str, path: str | os.PathLike) -> Path:
         with open(tmp, "w", encoding="utf-8") as fh:
             fh.write(text)
     return atomic_write(path, _w)
+
+
+def to_jsonable(obj, *, nonfinite_as_null: bool = True):
+    """A JSON-safe copy of ``obj`` (the one JSON sanitiser of the package).
+
+    Mappings become dicts with string keys; lists, tuples and numpy arrays become lists; numpy scalars become
+    Python ``bool``/``int``/``float``; dataclass instances become dicts of their fields; ``Path`` and any other
+    object become their ``str``. Non-finite floats (NaN, +-inf) become ``None`` (JSON ``null``) by default;
+    with ``nonfinite_as_null=False`` they stay floats, for files written with ``allow_nan`` (material cards,
+    fit-record attributes) or as YAML (``.nan``).
+    """
+    def conv(o):
+        if isinstance(o, Mapping):
+            return {str(k): conv(v) for k, v in o.items()}
+        if isinstance(o, (list, tuple)):
+            return [conv(v) for v in o]
+        if isinstance(o, np.ndarray):
+            return [conv(v) for v in o.tolist()]
+        if isinstance(o, (bool, np.bool_)):
+            return bool(o)
+        if isinstance(o, (int, np.integer)):
+            return int(o)
+        if isinstance(o, (float, np.floating)):
+            return float(o) if (math.isfinite(float(o)) or not nonfinite_as_null) else None
+        if o is None or isinstance(o, str):
+            return o
+        if dataclasses.is_dataclass(o) and not isinstance(o, type):
+            return conv({f.name: getattr(o, f.name) for f in dataclasses.fields(o)})
+        return str(o)
+    return conv(obj)
+
+
+def write_json(obj, path: str | os.PathLike, *, indent: int | None = 2, sort_keys: bool = False,
+               nonfinite_as_null: bool = True, newline: bool = True) -> Path:
+    """Atomically write ``obj`` as JSON through :func:`to_jsonable` (``newline``: end the file with one)."""
+    text = json.dumps(to_jsonable(obj, nonfinite_as_null=nonfinite_as_null), indent=indent, sort_keys=sort_keys)
+    return write_text(text + ("\n" if newline else ""), path)
 
 
 def read_netcdf(path: str | os.PathLike) -> xr.Dataset:

@@ -5,7 +5,7 @@ Card shape (JSON, SI units)::
     {"model": key, "family": ..., "parameters": {...}, "units": {...}, "standard_errors": {...},
      "elastic_law": law key, "elastic_parameters": {...}, "initial_shear_modulus": Pa,
      "prony": {"g": [...], "tau": [...], "g_inf": ..., "normalisation": ..., "source": ...} | null,
-     "poisson_ratio": 0.49, "bulk_modulus": Pa, "validity": {...}, "provenance": {...},
+     "poisson_ratio": nu, "bulk_modulus": Pa, "validity": {...}, "provenance": {...},
      "fit_quality": {...}, "abaqus_form": ..., "febio_form": type | null, "febio_parameters": {...} | null,
      "febio_reason": str | null, "valid_range": {...}, "uncertainty": {...}, "notes": [...]}
 
@@ -56,8 +56,8 @@ Valid range and uncertainty (every card): ``valid_range`` = the fitted data sele
 time and angular-frequency spans (``None`` and listed in ``not_given`` when the data carry none), its tests and
 conditions; ``uncertainty`` = lmfit standard errors, relative standard errors, parameters without a finite
 standard error, and the initial shear modulus's standard error (delta method). The Poisson ratio (hence ``k``)
-is the configuration's ``fem.poisson_ratio`` passed in by ``fit_scope``; ``DEFAULT_POISSON`` only serves direct
-calls.
+is the configuration's ``fem.poisson_ratio``, a required argument of :func:`make_card` (passed in by
+``stages.run_fit_scope``); ``k`` = ``models.base.bulk_modulus(G0, nu)``.
 """
 from __future__ import annotations
 
@@ -69,15 +69,15 @@ from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
+from scipy.optimize import nnls
 
-from .canonical import write_text
+from .canonical import to_jsonable, write_text
 from .cards_febio import (FEBIO_SOURCE_COMMIT, febio_card_material, febio_document, febio_material_element,
                           febio_simple_shear_stress)
-from .fitting import FitResult, _jsonable
-from .models.base import ConstitutiveModel
+from .fitting import FitResult
+from .models.base import ConstitutiveModel, bulk_modulus, initial_shear_modulus
+from .spectra import prony_nnls_weights, prony_oscillation_basis, prony_relaxation_basis
 
-#: default Poisson ratio of nearly incompressible soft tissue
-DEFAULT_POISSON = 0.49
 #: Abaqus Arruda-Boyce series coefficients
 ARRUDA_BOYCE_C = (0.5, 1.0 / 20.0, 11.0 / 1050.0, 19.0 / 7000.0, 519.0 / 673750.0)
 #: number of points of a MARLOW uniaxial table
@@ -97,12 +97,6 @@ def _law_and_params(model: ConstitutiveModel, p: Mapping[str, float]) -> tuple[C
     return None, {}
 
 
-def initial_shear_modulus(law: ConstitutiveModel, p: Mapping[str, float], step: float = 1e-6) -> float:
-    """d sigma / d gamma at gamma = 0 of an elastic shear law (central difference), Pa."""
-    s = np.asarray(law.elastic_shear_stress(p, np.array([-step, step])), float)
-    return float((s[1] - s[0]) / (2 * step))
-
-
 def prony_from_step_response(model: ConstitutiveModel, p: Mapping[str, float], taus: np.ndarray,
                              t_min_s: float, t_max_s: float, strain: float = 1e-3) -> dict:
     """Prony series of a linear(ised) viscoelastic model by NNLS on its step relaxation modulus.
@@ -111,16 +105,14 @@ def prony_from_step_response(model: ConstitutiveModel, p: Mapping[str, float], t
     with G_inf + sum G_i exp(-t/tau_i), G_i >= 0. Exact for generalized-Maxwell models on their own taus; an
     approximation for fractional models (``fit_rel_error`` reports the relative RMS misfit).
     """
-    from scipy.optimize import nnls
-
     t = np.r_[0.0, np.geomspace(t_min_s, t_max_s, 200)]
     stress = np.asarray(model.shear_stress_history(p, t, np.full(t.size, strain)), float)
     g_t = stress[1:] / strain
     tt = t[1:]
-    A = np.column_stack([np.ones_like(tt), np.exp(-tt[:, None] / taus[None, :])])
     w = 1.0 / np.maximum(np.abs(g_t), 1e-12 * np.max(np.abs(g_t)))  # relative misfit
-    coef, _ = nnls(A * w[:, None], g_t * w)
-    fitted = A @ coef
+    g_e, g_i, _ = prony_nnls_weights(tt, g_t, taus, row_weights=w)
+    coef = np.r_[g_e, g_i]
+    fitted = prony_relaxation_basis(tt, taus) @ coef
     g0 = float(coef.sum())
     return {"g_inf": float(coef[0] / g0), "g": (coef[1:] / g0).tolist(), "tau": np.asarray(taus, float).tolist(),
             "G0": g0, "fit_rel_error": float(np.sqrt(np.mean(((fitted - g_t) / g_t) ** 2)))}
@@ -130,13 +122,9 @@ def prony_from_complex_modulus(model: ConstitutiveModel, p: Mapping[str, float],
                                omega_min: float, omega_max: float) -> dict:
     """Prony series of a linear viscoelastic model by NNLS on its G'(omega), G''(omega) (relative misfit) over
     ``[omega_min, omega_max]`` rad/s -- for models that define only the oscillatory response."""
-    from scipy.optimize import nnls
-
     w = np.geomspace(omega_min, omega_max, 120)
     gs = np.asarray(model.complex_modulus(p, w))
-    x = w[:, None] * np.asarray(taus, float)[None, :]
-    re = np.column_stack([np.ones_like(w), x ** 2 / (1 + x ** 2)])
-    im = np.column_stack([np.zeros_like(w), x / (1 + x ** 2)])
+    re, im = prony_oscillation_basis(w, taus)
     A = np.vstack([re / np.abs(gs.real)[:, None], im / np.abs(gs.imag)[:, None]])
     b = np.r_[np.ones(w.size), np.ones(w.size)]
     coef, _ = nnls(A, b)
@@ -338,9 +326,10 @@ def parameter_uncertainty(result: FitResult, law: ConstitutiveModel | None = Non
     return out
 
 
-def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float = DEFAULT_POISSON,
+def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float,
               dataset: str = "", fit_file: str = "", strain_margin: float = 1.2) -> dict:
-    """Canonical card of a fitted model (see the module docstring for the shape and conventions)."""
+    """Canonical card of a fitted model (see the module docstring for the shape and conventions); ``poisson_ratio``
+    is the configuration's ``fem.poisson_ratio`` (no default)."""
     p = result.params
     notes: list[str] = []
     card = {"model": result.model_key, "family": result.family, "parameters": dict(p), "units": dict(result.units),
@@ -418,8 +407,7 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float 
         notes.append("linear elastic shear law written as neo-Hookean (mu = G0; identical in simple shear)")
     card["initial_shear_modulus"] = mu0
     card["poisson_ratio"] = float(poisson_ratio)
-    card["bulk_modulus"] = (2.0 * mu0 * (1 + poisson_ratio) / (3.0 * (1 - 2 * poisson_ratio))
-                            if np.isfinite(mu0) else float("nan"))
+    card["bulk_modulus"] = bulk_modulus(mu0, poisson_ratio) if np.isfinite(mu0) else float("nan")
     card["validity"] = {**result.ranges, "plate_target": result.target,
                         "marlow_strain_max": strain_max * strain_margin}
     if singular_origin:
@@ -480,7 +468,7 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float 
 def card_json(card: Mapping) -> str:
     """Canonical JSON text of a card (sorted keys, runtime objects dropped)."""
     clean = {k: v for k, v in card.items() if not k.startswith("_")}
-    return json.dumps(_jsonable(clean), indent=2, sort_keys=True, allow_nan=True)
+    return json.dumps(to_jsonable(clean, nonfinite_as_null=False), indent=2, sort_keys=True, allow_nan=True)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -637,4 +625,4 @@ def write_card_files(card: Mapping, folder, stem: str | None = None) -> dict[str
 __all__ = ["make_card", "card_json", "abaqus_block", "parse_abaqus_block", "abaqus_simple_shear_stress",
            "abaqus_hyperelastic_form", "marlow_uniaxial_table", "febio_block", "febio_file_text",
            "febio_simple_shear_stress", "valid_range", "parameter_uncertainty",
-           "prony_from_step_response", "prony_from_complex_modulus", "initial_shear_modulus", "write_card_files", "DEFAULT_POISSON"]
+           "prony_from_step_response", "prony_from_complex_modulus", "write_card_files"]

@@ -45,7 +45,6 @@ target.
 """
 from __future__ import annotations
 
-import json
 import math
 import re
 import warnings
@@ -57,9 +56,10 @@ import numpy as np
 import xarray as xr
 from scipy.optimize import nnls
 
-from .canonical import write_netcdf
+from .canonical import to_jsonable
 from .models.base import ConstitutiveModel, ParamSpec
-from .spectra import log_spaced_taus  # the one implementation; re-exported (fitting.__all__)
+from .records import FitRecord
+from .spectra import log_spaced_taus, prony_oscillation_basis  # log_spaced_taus re-exported (fitting.__all__)
 from .stats import effective_sample_size, information_criteria
 
 PLATE_TARGETS: tuple[str, ...] = ("thesis", "apparent_stress", "corrected_stress", "torque", "none")
@@ -987,20 +987,8 @@ def _record(problem: FitProblem, best, nfev: int, chis: list[float]) -> FitResul
         n=n, n_eff=n_eff, k=k, aic=ic["aic"], aicc=ic["aicc"], bic=ic["bic"], aicc_eff=ic_eff["aicc"],
         bic_eff=ic_eff["bic"], nfev=nfev, n_starts=len(chis), curve_labels=[c.label for c in problem.curves],
         curve_rmse=curve_rmse, curve_nrmse=curve_nrmse, residuals=terms, ranges=curve_ranges(problem.curves),
-        selection=selection, structure=_jsonable(model.structure), start_chisqr=chis, condition_number=cond,
-        sloppy_direction=sloppy, relaxation=problem.relaxation)
-
-
-def _jsonable(obj):
-    if isinstance(obj, Mapping):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple, np.ndarray)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, (np.floating, np.integer)):
-        return obj.item()
-    if isinstance(obj, (str, int, float, bool)) or obj is None:
-        return obj
-    return str(obj)
+        selection=selection, structure=to_jsonable(model.structure, nonfinite_as_null=False), start_chisqr=chis,
+        condition_number=cond, sloppy_direction=sloppy, relaxation=problem.relaxation)
 
 
 def evaluate(model: ConstitutiveModel, params: Mapping[str, float], curves: Sequence[Curve], target: str,
@@ -1067,10 +1055,7 @@ def prony_nnls(curves: Sequence[Curve], taus: np.ndarray, elastic: Callable[[np.
         elif c.response == "oscillation":
             if elastic is not None:
                 continue  # oscillation is linear: only informs the linear-moduli variant
-            w = c.obs_inputs("angular_frequency")
-            x = w[:, None] * taus[None, :]
-            re = np.column_stack([np.ones_like(w), x ** 2 / (1 + x ** 2)])
-            im = np.column_stack([np.zeros_like(w), x / (1 + x ** 2)])
+            re, im = prony_oscillation_basis(c.obs_inputs("angular_frequency"), taus)
             for part, name in ((re, "storage_modulus"), (im, "loss_modulus")):
                 y = np.asarray(c.observed[name], float)
                 sig = noise.sigma(name, y, c.sd.get(name))
@@ -1121,55 +1106,15 @@ def prony_start(model: ConstitutiveModel, curves: Sequence[Curve], noise: NoiseM
 # outputs
 # ------------------------------------------------------------------------------------------------
 def fit_to_dataset(result: FitResult) -> xr.Dataset:
-    """The fit record as an xarray Dataset (dims ``param``, ``param_b``, ``point``, ``curve``)."""
-    names = list(result.params)
-    k = len(result.varying)
-    corr = np.full((len(names), len(names)), np.nan)
-    pos = {n: names.index(n) for n in result.varying}
-    for i, a in enumerate(result.varying):
-        for j, b in enumerate(result.varying):
-            corr[pos[a], pos[b]] = result.correlation[i, j] if result.correlation.shape == (k, k) else np.nan
-    obs, pred, wres, cidx, oname = [], [], [], [], []
-    for ci, terms in enumerate(result.residuals):
-        for name, (y, f, w) in terms.items():
-            obs.append(y)
-            pred.append(f)
-            wres.append(w)
-            cidx.append(np.full(y.size, ci))
-            oname.extend([name] * y.size)
-    cat = (lambda xs: np.concatenate(xs) if xs else np.array([]))
-    ds = xr.Dataset(
-        {"value": ("param", [result.params[n] for n in names], {"long_name": "fitted value (natural units)"}),
-         "stderr": ("param", [result.stderr[n] for n in names], {"long_name": "standard error (delta method)"}),
-         "varying": ("param", [int(n in result.varying) for n in names]),
-         "unit": ("param", [result.units[n] for n in names]),
-         "correlation": (("param", "param_b"), corr, {"long_name": "correlation of the fitted (internal) parameters"}),
-         "observed": ("point", cat(obs)), "predicted": ("point", cat(pred)),
-         "weighted_residual": ("point", cat(wres), {"long_name": "(prediction - observation) / sigma (log for G*, flow)"}),
-         "curve_index": ("point", cat(cidx).astype(int)), "observable": ("point", np.array(oname, dtype=str)),
-         "curve_label": ("curve", np.array(result.curve_labels, dtype=str)),
-         "curve_rmse": ("curve", [result.curve_rmse[c] for c in result.curve_labels]),
-         "curve_nrmse": ("curve", [result.curve_nrmse[c] for c in result.curve_labels])},
-        coords={"param": names, "param_b": names})
-    scalars = {k2: getattr(result, k2) for k2 in ("model_key", "family", "scope", "target", "relaxation", "message",
-                                                  "chisqr", "redchi",
-                                                  "rmse", "nrmse", "n", "n_eff", "k", "aic", "aicc", "bic", "aicc_eff",
-                                                  "bic_eff", "nfev", "n_starts")}
-    scalars["success"] = int(result.success)
-    ds.attrs.update({k2: (float(v) if isinstance(v, (float, np.floating)) else v) for k2, v in scalars.items()})
-    ds.attrs["flags"] = json.dumps(result.flags)
-    ds.attrs["selection"] = json.dumps(_jsonable(result.selection))
-    ds.attrs["ranges"] = json.dumps(_jsonable(result.ranges))
-    ds.attrs["structure"] = json.dumps(result.structure)
-    ds.attrs["condition_number"] = float(result.condition_number)
-    ds.attrs["sloppy_direction"] = json.dumps(result.sloppy_direction)
-    ds.attrs["start_chisqr"] = json.dumps([c if np.isfinite(c) else None for c in result.start_chisqr])
-    return ds
+    """The fit record as an xarray Dataset (dims ``param``, ``param_b``, ``point``, ``curve``), written by
+    :meth:`tissuemech.records.FitRecord.to_dataset` (the one layout; read back with ``FitRecord.from_dataset``)."""
+    return FitRecord.from_result(result).to_dataset()
 
 
 def write_fit_netcdf(result: FitResult, path) -> None:
-    """Atomically write the fit record (``results/<dataset>/fits/<model>.nc``)."""
-    write_netcdf(fit_to_dataset(result), path)
+    """Atomically write the fit record (``results/<dataset>/fits/<scope>/<model>.nc``); read it back with
+    :meth:`tissuemech.records.FitRecord.from_netcdf`."""
+    FitRecord.from_result(result).to_netcdf(path)
 
 
 #: scalar attributes of a fit record copied to ``fits.csv`` (in this order, after ``dataset``/``file``/``model``)
@@ -1178,24 +1123,23 @@ FITS_CSV_ATTRS = ("family", "scope", "target", "relaxation", "success", "n", "n_
                   "message")
 
 
-def fits_csv_row(record: xr.Dataset, dataset: str = "", file: str = "") -> dict:
-    """One tidy ``fits.csv`` row of a fit record (:func:`fit_to_dataset`, or a ``fits/<scope>/<model>.nc`` read
-    back): criteria, flags, ranges and ``param_<name>``/``se_<name>`` columns. The one ``fits.csv`` schema:
+def fits_csv_row(record: FitRecord | xr.Dataset, dataset: str = "", file: str = "") -> dict:
+    """One tidy ``fits.csv`` row of a fit record (a :class:`~tissuemech.records.FitRecord`, or its Dataset
+    :func:`fit_to_dataset` / a ``fits/<scope>/<model>.nc`` read back): criteria, flags, ranges and
+    ``param_<name>``/``se_<name>`` columns. The one ``fits.csv`` schema:
     ``dataset, file, model, <FITS_CSV_ATTRS>, n_flags, flags ("; "), curves ("; "), <ranges>, param_*, se_*``.
     """
-    attrs = record.attrs
-    flags = json.loads(attrs.get("flags", "[]"))
-    row = {"dataset": dataset, "file": str(file), "model": str(attrs.get("model_key", ""))}
+    rec = record if isinstance(record, FitRecord) else FitRecord.from_dataset(record)
+    row = {"dataset": dataset, "file": str(file), "model": rec.model_key}
     for name in FITS_CSV_ATTRS:
-        v = attrs.get(name, np.nan)
-        row[name] = bool(int(v)) if name == "success" else v
-    row["n_flags"] = len(flags)
-    row["flags"] = "; ".join(flags)
-    row["curves"] = "; ".join(str(c) for c in record["curve_label"].values) if "curve_label" in record else ""
-    row.update(json.loads(attrs.get("ranges", "{}")))
-    for name, value, se in zip(record["param"].values, record["value"].values, record["stderr"].values):
+        row[name] = bool(rec.success) if name == "success" else getattr(rec, name)
+    row["n_flags"] = len(rec.flags)
+    row["flags"] = "; ".join(rec.flags)
+    row["curves"] = "; ".join(rec.curve_labels)
+    row.update(rec.ranges)
+    for name, value in rec.params.items():
         row[f"param_{name}"] = float(value)
-        row[f"se_{name}"] = float(se)
+        row[f"se_{name}"] = float(rec.stderr[name])
     return row
 
 
@@ -1203,6 +1147,6 @@ __all__ = [
     "PLATE_TARGETS", "TEST_RESPONSE", "Curve", "amplitude_sweep_lve_curve", "curve_from_run", "curves_from_averages", "geometry_from_runs", "relaxation_history",
     "thin", "select_strain", "with_relaxation_history", "curve_ranges", "plate_factor", "target_observations", "predict",
     "NoiseModel", "FitProblem", "FitResult", "fit", "evaluate", "log_spaced_taus",
-    "prony_nnls", "prony_start", "fit_to_dataset", "write_fit_netcdf", "fits_csv_row", "FITS_CSV_ATTRS",
+    "prony_nnls", "prony_start", "FitRecord", "fit_to_dataset", "write_fit_netcdf", "fits_csv_row", "FITS_CSV_ATTRS",
     "at_bound_parameters", "has_covariance",
 ]

@@ -131,6 +131,47 @@ def prony_complex_modulus(g_e_pa: float, g_pa: np.ndarray, tau_s: np.ndarray, om
     return g_e_pa + np.sum(np.asarray(g_pa, float) * (1j * x) / (1.0 + 1j * x), axis=-1)
 
 
+def prony_relaxation_basis(time_s: np.ndarray, tau_s: np.ndarray, equilibrium: bool = True) -> np.ndarray:
+    """Design matrix of ``G(t)`` of a Prony series: columns ``[1,] exp(-t/tau_i)`` (``(n_t, [1 +] n_tau)``).
+
+    The weights it multiplies are ``[G_e,] g_i`` (Pa); ``equilibrium=False`` drops the constant column (a liquid).
+    """
+    t = np.asarray(time_s, float)
+    basis = np.exp(-t[:, None] / np.asarray(tau_s, float)[None, :])
+    return np.hstack([np.ones((t.size, 1)), basis]) if equilibrium else basis
+
+
+def prony_oscillation_basis(omega_rad_s: np.ndarray, tau_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Design matrices of ``G'(w)`` and ``G''(w)`` of a Prony series, with the equilibrium column first:
+    ``[1, x_i^2/(1 + x_i^2)]`` and ``[0, x_i/(1 + x_i^2)]``, ``x_i = w tau_i`` (each ``(n_w, 1 + n_tau)``)."""
+    w = np.asarray(omega_rad_s, float)
+    x = w[:, None] * np.asarray(tau_s, float)[None, :]
+    storage = np.column_stack([np.ones_like(w), x ** 2 / (1 + x ** 2)])
+    loss = np.column_stack([np.zeros_like(w), x / (1 + x ** 2)])
+    return storage, loss
+
+
+def prony_nnls_weights(time_s: np.ndarray, modulus_pa: np.ndarray, tau_s: np.ndarray, equilibrium: bool = True,
+                       row_weights: np.ndarray | None = None) -> tuple[float, np.ndarray, float]:
+    """Non-negative Prony weights on fixed relaxation times from a relaxation modulus ``G(t)``.
+
+    Solves ``min || w (G_e + sum_i g_i exp(-t/tau_i) - G(t)) ||`` with ``G_e, g_i >= 0`` (scipy ``nnls``; the
+    design matrix is :func:`prony_relaxation_basis`), ``w`` the ``row_weights`` (none: 1, e.g.
+    ``1/|G(t)|`` for a relative misfit). Without ``equilibrium`` ``G_e`` is 0 (a liquid).
+
+    Returns ``(G_e [Pa], g_i [Pa], residual norm of the weighted rows)``.
+    """
+    basis = prony_relaxation_basis(time_s, tau_s, equilibrium)
+    y = np.asarray(modulus_pa, float)
+    if row_weights is not None:
+        w = np.asarray(row_weights, float)
+        basis, y = basis * w[:, None], y * w
+    weights, resid = nnls(basis, y)
+    if equilibrium:
+        return float(weights[0]), weights[1:], float(resid)
+    return 0.0, weights, float(resid)
+
+
 def kv_creep_compliance(j_g_per_pa: float, j_per_pa: np.ndarray, tau_s: np.ndarray, time_s: np.ndarray,
                         fluidity_per_pa_s: float = 0.0) -> np.ndarray:
     """``J(t) = J_g + sum j_i (1 - exp(-t/tau_i)) + t/eta_0`` (``fluidity = 1/eta_0``), 1/Pa."""
@@ -690,7 +731,8 @@ def sweep_predicts_relaxation(omega_rad_s: np.ndarray, storage_pa: np.ndarray, l
 
 __all__ = [
     "PER_DECADE", "EXTEND_DECADES", "LAMBDA_GRID", "log_spaced_taus", "tau_window_from_frequency",
-    "tau_window_from_time", "prony_relaxation_modulus", "prony_complex_modulus", "kv_creep_compliance",
+    "tau_window_from_time", "prony_relaxation_modulus", "prony_complex_modulus", "prony_relaxation_basis",
+    "prony_oscillation_basis", "prony_nnls_weights", "kv_creep_compliance",
     "kv_complex_compliance", "prony_to_kelvin_voigt", "kelvin_voigt_to_prony", "second_difference",
     "regularised_nnls", "Spectrum", "relaxation_spectrum_from_modulus", "relaxation_spectrum_from_relaxation",
     "retardation_spectrum_from_creep", "retardation_spectrum_from_compliance", "kramers_kronig_check",

@@ -32,7 +32,7 @@ from . import cards as cards_mod
 from . import fitting as F
 from . import ranking as R
 from . import spectra as S
-from .canonical import read_netcdf, write_netcdf, write_text
+from .canonical import read_netcdf, write_json, write_netcdf, write_text
 from .curves import as_str, select_average
 from .models.registry import available_models, get_model
 
@@ -105,22 +105,8 @@ def scope_folds(scope: str, curves: Sequence[F.Curve]) -> list[R.Fold]:
     return folds
 
 
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, (np.floating, float)):
-        return None if not math.isfinite(float(obj)) else float(obj)
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    return obj
-
-
 def run_fit_scope(averages_path, scope: str, spec: Mapping, target: str, seed: int, multistart: int,
-                  fits_dir, cards_dir, ranking_path, dataset: str = "", poisson_ratio: float = 0.49) -> pd.DataFrame:
+                  fits_dir, cards_dir, ranking_path, poisson_ratio: float, dataset: str = "") -> pd.DataFrame:
     """Fit, cross-validate and rank every candidate of one scope; write fits, cards and the ranking table.
 
     Parameters
@@ -167,7 +153,7 @@ def run_fit_scope(averages_path, scope: str, spec: Mapping, target: str, seed: i
     write_text(table.to_csv(index=False), ranking_path)
     write_text(cv.to_csv(index=False) if not cv.empty else "fold,design,model,status\n",
                Path(ranking_path).with_suffix(".cv.csv"))
-    write_text(json.dumps(_jsonable(rec), indent=2, default=str), Path(ranking_path).with_suffix(".recommendation.json"))
+    write_json(rec, Path(ranking_path).with_suffix(".recommendation.json"), newline=False)
     return table
 
 
@@ -180,7 +166,7 @@ def collect_scopes(ranking_paths: Sequence, fits_dirs: Sequence, dataset: str, r
     if not ranking.empty:
         ranking["recommended"] = R.recommended_mask(ranking)
     write_text(ranking.to_csv(index=False), ranking_out)
-    rows = [F.fits_csv_row(read_netcdf(path), dataset, file=str(path))
+    rows = [F.fits_csv_row(F.FitRecord.from_netcdf(path), dataset, file=str(path))
             for folder in fits_dirs for path in sorted(Path(folder).glob("*.nc"))]
     write_text(pd.DataFrame(rows).to_csv(index=False), fits_out)
     if figure_out is not None and not ranking.empty and "model" in ranking:

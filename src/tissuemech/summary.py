@@ -32,6 +32,7 @@ from matplotlib.ticker import MaxNLocator, NullFormatter
 from .canonical import read_netcdf, write_text
 from .pipeline import progress
 from .ranking import recommended_models
+from .records import FitRecord
 from .plots import _new_figure, _positive, axis_label, figure_curves, figure_table, safe_name, save_figure
 
 # ------------------------------------------------------------------------------------------------------
@@ -64,12 +65,12 @@ def _match_in_order(values: np.ndarray, reference: np.ndarray) -> np.ndarray | N
     return np.asarray(out, int)
 
 
-def fit_panels(fit: xr.Dataset, curves: Sequence) -> dict[tuple[str, str], list[dict]]:
+def fit_panels(fit: FitRecord | xr.Dataset, curves: Sequence) -> dict[tuple[str, str], list[dict]]:
     """Group the points of a fit record by (test, observable), with their abscissa recovered from the curves.
 
     Parameters
     ----------
-    fit : a fit record (:func:`tissuemech.fitting.fit_to_dataset`): ``observed``, ``predicted``,
+    fit : a fit record (:class:`tissuemech.records.FitRecord`, or its Dataset): ``observed``, ``predicted``,
         ``curve_index``, ``observable`` per point and ``curve_label`` per curve.
     curves : the curves the fit was made on (:func:`tissuemech.stages.scope_curves`), matched by label.
 
@@ -82,12 +83,11 @@ def fit_panels(fit: xr.Dataset, curves: Sequence) -> dict[tuple[str, str], list[
     from .fitting import target_observations
 
     by_label = {c.label: c for c in curves}
-    observed = np.asarray(fit["observed"].values, float)
-    predicted = np.asarray(fit["predicted"].values, float)
-    curve_index = np.asarray(fit["curve_index"].values, int)
-    observable = np.asarray(fit["observable"].values).astype(str)
-    labels = [str(v) for v in fit["curve_label"].values]
-    target = str(fit.attrs.get("target", "apparent_stress"))
+    rec = fit if isinstance(fit, FitRecord) else FitRecord.from_dataset(fit)
+    observed, predicted = rec.observed, rec.predicted
+    curve_index, observable = rec.curve_index, rec.observable.astype(str)
+    labels = rec.curve_labels
+    target = rec.target or "apparent_stress"
     panels: dict[tuple[str, str], list[dict]] = {}
     for ci, label in enumerate(labels):
         test = label.split("|", 1)[0]
@@ -122,13 +122,14 @@ def _quiet_minor_labels(axis, values: np.ndarray) -> None:
         axis.set_minor_formatter(NullFormatter())
 
 
-def figure_scope_fit(fit: xr.Dataset, curves: Sequence, title: str | None = None) -> Figure:
+def figure_scope_fit(fit: FitRecord | xr.Dataset, curves: Sequence, title: str | None = None) -> Figure:
     """A fitted model over its data: one row per (test, observable), linear axes left, log axes right.
 
     Data are markers (± SD bars of the sample average where known), the model a line of the same colour per
     curve. A log axis is used only where every value along it is positive (signed stress stays linear).
     """
-    panels = fit_panels(fit, curves)
+    rec = fit if isinstance(fit, FitRecord) else FitRecord.from_dataset(fit)
+    panels = fit_panels(rec, curves)
     fig, axes = _new_figure(ncols=2, nrows=max(len(panels), 1), width=4.6, height=3.4)
     axes = axes.reshape(-1, 2)
     for row, ((test, name), series) in enumerate(panels.items()):
@@ -162,10 +163,9 @@ def figure_scope_fit(fit: xr.Dataset, curves: Sequence, title: str | None = None
         for ax in axes.ravel():
             ax.axis("off")
         axes[0][0].text(0.5, 0.5, "no fitted points", ha="center", va="center")
-    model = fit.attrs.get("model_key", "")
-    quality = f"NRMSE = {float(fit.attrs.get('nrmse', np.nan)):.3g}, AICc = {float(fit.attrs.get('aicc', np.nan)):.4g}"
-    flags = json.loads(fit.attrs.get("flags", "[]") or "[]")
-    fig.suptitle((title or f"{model} ({fit.attrs.get('scope', '')}, target {fit.attrs.get('target', '')})")
+    quality = f"NRMSE = {rec.nrmse:.3g}, AICc = {rec.aicc:.4g}"
+    flags = rec.flags
+    fig.suptitle((title or f"{rec.model_key} ({rec.scope}, target {rec.target})")
                  + f"\n{quality}" + (f", {len(flags)} flag(s)" if flags else ""), fontsize=10)
     return fig
 
@@ -184,8 +184,8 @@ def plot_scope_fits(averages_path, fits_dir, tests: Sequence[str], out_dir) -> l
     curves_by_relaxation: dict[str, list] = {}
     written: list[Path] = []
     for path in progress(sorted(Path(fits_dir).glob("*.nc")), f"fit figures {Path(fits_dir).name}"):
-        fit = read_netcdf(path)
-        relaxation = str(fit.attrs.get("relaxation", "measured"))
+        fit = FitRecord.from_netcdf(path)
+        relaxation = fit.relaxation
         if relaxation not in curves_by_relaxation:
             curves_by_relaxation[relaxation] = scope_curves(averages, list(tests), relaxation=relaxation)
         fig = figure_scope_fit(fit, curves_by_relaxation[relaxation])

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from tissuemech.fem.experiments import (constant_shear_rate_history, flat_punch_indentation, relaxation_history,
-                                        rheometer_torsion)
+from tissuemech.fem.experiments import (card_material, constant_shear_rate_history, flat_punch_indentation,
+                                        relaxation_history, rheometer_torsion)
 from tissuemech.fem.mesh import read_mesh
 
 CARD = {"model": "neo_hookean", "parameters": {"mu": 1000.0}, "prony": {"g": [0.4, 0.2], "tau": [0.5, 5.0]},
@@ -48,3 +48,13 @@ def test_flat_punch_force_depth_is_near_sneddon_at_small_depth():
     ratio = ds.force.values / sneddon
     assert np.all((ratio > 1.0) & (ratio < 1.35))  # coarse linear tets over-predict (see test_tled)
     assert ds.force.attrs["units"] == "N"
+
+
+def test_a_card_without_compressibility_is_refused():
+    """No code default of Poisson's ratio: a card states bulk_modulus or poisson_ratio (config fem.poisson_ratio)."""
+    bare = {k: v for k, v in CARD.items() if k != "poisson_ratio"}
+    with pytest.raises(ValueError, match="neither bulk_modulus nor poisson_ratio"):
+        card_material(bare)
+    assert card_material({**bare, "bulk_modulus": 5e4}).bulk_modulus_pa == 5e4
+    # K = 2 mu (1 + nu) / (3 (1 - 2 nu)) with mu = 1000 Pa, nu = 0.3: 2600 / 1.2 Pa
+    assert card_material({**bare, "poisson_ratio": 0.3}).bulk_modulus_pa == pytest.approx(2600.0 / 1.2, rel=1e-6)

@@ -9,6 +9,7 @@ import pytest
 
 from tissuemech import fitting as F
 from tissuemech.io.ingest import ingest_dataset
+from tissuemech.models.base import initial_shear_modulus
 from tissuemech.models.registry import get_model
 from tissuemech.pipeline import load_runs
 
@@ -35,7 +36,7 @@ def _initial_moduli(law, tmp_path):
         result = F.fit(F.FitProblem(model=model, curves=[curve], target="none", model_key=law, scope="simple_shear"),
                        n_random=2, seed=11)
         assert result.success
-        mu[region] = model.initial_shear_modulus(result.params)
+        mu[region] = initial_shear_modulus(model, result.params)
     return mu
 
 

@@ -55,7 +55,7 @@ def test_qlv_card_shape_prony_normalisation_and_abaqus_syntax():
     qlv = get_model("qlv_linear_prony4")
     truth = qlv_params(qlv, {"G0": 200.0}, G_PRONY)
     res = fitted_qlv(qlv, truth, "qlv_linear_prony4")
-    card = C.make_card(res, qlv, dataset="demo")
+    card = C.make_card(res, qlv, dataset="demo", poisson_ratio=0.49)
     data = json.loads(C.card_json(card))
     for key in ("model", "family", "parameters", "units", "prony", "poisson_ratio", "validity", "provenance",
                 "fit_quality", "elastic_law", "bulk_modulus"):
@@ -102,7 +102,7 @@ def test_qlv_card_shape_prony_normalisation_and_abaqus_syntax():
 def test_round_trip_card_law_matches_fitted_curve(make, truth, form):
     model = make()
     res = fitted(model, truth, model.name)
-    card = C.make_card(res, model)
+    card = C.make_card(res, model, poisson_ratio=0.49)
     assert card["abaqus_form"] == form
     fitted_curve = model.elastic_shear_stress(res.params, GAMMA)
     block = C.abaqus_block(card)
@@ -119,7 +119,7 @@ def test_round_trip_card_law_matches_fitted_curve(make, truth, form):
 def test_ogden_conventions_in_abaqus_and_febio():
     model = ProxyOgden()
     truth = {"mu1": 600.0, "alpha1": -12.0}
-    card = C.make_card(fitted(model, truth, "ogden1"), model)
+    card = C.make_card(fitted(model, truth, "ogden1"), model, poisson_ratio=0.49)
     parsed = C.parse_abaqus_block(C.abaqus_block(card))
     mu, alpha, d1 = parsed["*HYPERELASTIC, OGDEN, N=1"][0]
     assert mu == pytest.approx(600.0, rel=1e-4) and alpha == pytest.approx(-12.0, rel=1e-4)
@@ -131,7 +131,7 @@ def test_ogden_conventions_in_abaqus_and_febio():
 
 def test_marlow_table_is_uniaxial_and_covers_the_validity_range():
     model = ProxyLopezPamies()
-    card = C.make_card(fitted(model, {"mu1": 500.0, "alpha1": 3.0}, "lopez_pamies1"), model)
+    card = C.make_card(fitted(model, {"mu1": 500.0, "alpha1": 3.0}, "lopez_pamies1"), model, poisson_ratio=0.49)
     parsed = C.parse_abaqus_block(C.abaqus_block(card))
     assert "*HYPERELASTIC, MARLOW, POISSON=0.49" in parsed and parsed["*HYPERELASTIC, MARLOW, POISSON=0.49"] == []
     stress, strain = np.array(parsed["*UNIAXIAL TEST DATA"]).T
@@ -150,7 +150,7 @@ def test_linear_viscoelastic_card_prony_from_step_response():
                     inputs={"time": t, "shear_strain": g}, observed={"shear_stress": model.shear_stress_history(truth, t, g)[1:]},
                     obs_index=np.arange(1, t.size))
     res = F.fit(F.FitProblem(model, [curve], target="none", model_key="prony4"), starts=[truth], n_random=0)
-    card = C.make_card(res, model)
+    card = C.make_card(res, model, poisson_ratio=0.49)
     g0 = sum(truth.values())
     assert card["initial_shear_modulus"] == pytest.approx(g0, rel=1e-3)
     np.testing.assert_allclose(card["prony"]["g"], np.array(list(truth.values())[1:]) / g0, atol=1e-3)
@@ -162,7 +162,7 @@ def test_linear_viscoelastic_card_prony_from_step_response():
 def test_write_card_files(tmp_path):
     qlv = get_model("qlv_linear_prony4")
     truth = qlv_params(qlv, {"G0": 200.0}, G_PRONY)
-    card = C.make_card(fitted_qlv(qlv, truth, "qlv_linear_prony4"), qlv)
+    card = C.make_card(fitted_qlv(qlv, truth, "qlv_linear_prony4"), qlv, poisson_ratio=0.49)
     paths = C.write_card_files(card, tmp_path / "cards")
     assert set(paths) == {"json", "abaqus", "febio"}
     assert json.loads(paths["json"].read_text())["model"] == "qlv_linear_prony4"
@@ -174,7 +174,7 @@ def test_beyond_qlv_card_has_no_fe_block_and_says_why():
     model = get_model(key)
     p = model.default_params()
     res = fitted_qlv(model, p, key)
-    card = C.make_card(res, model)
+    card = C.make_card(res, model, poisson_ratio=0.49)
     assert C.abaqus_block(card) is None and C.febio_block(card) is None
     assert any("user material" in n for n in card["notes"])
 
@@ -182,7 +182,7 @@ def test_beyond_qlv_card_has_no_fe_block_and_says_why():
 def test_qlv_with_nonlinear_law_round_trip():
     model = QLVModel(ProxyReducedPolynomial(order=3), 4, name="qlv_rp3_prony4")
     truth = qlv_params(model, {"C10": 40.0, "C20": 100.0, "C30": 400.0}, G_PRONY)
-    card = C.make_card(fitted_qlv(model, truth, "qlv_rp3_prony4"), model)
+    card = C.make_card(fitted_qlv(model, truth, "qlv_rp3_prony4"), model, poisson_ratio=0.49)
     block = C.abaqus_block(card)
     assert "*HYPERELASTIC, REDUCED POLYNOMIAL, N=3, MODULI=INSTANTANEOUS" in block
     np.testing.assert_allclose(C.abaqus_simple_shear_stress(block, GAMMA), model.elastic_shear_stress(truth, GAMMA),
@@ -210,7 +210,7 @@ def test_classical_ogden_convention_is_converted_and_checked():
 
     model = ClassicalOgden()
     truth = {"mu1": 100.0, "alpha1": -12.0}
-    card = C.make_card(fitted(model, truth, "ogden1"), model)
+    card = C.make_card(fitted(model, truth, "ogden1"), model, poisson_ratio=0.49)
     mu, alpha = card["abaqus_constants"]
     assert card["abaqus_form"] == "OGDEN, N=1" and mu == pytest.approx(100.0 * -12.0 / 2, rel=1e-4)
     assert any("do not reproduce" in n for n in card["notes"])
@@ -239,7 +239,7 @@ def _poly6_truth():
 def test_round_trip_cards_of_the_new_hyperelastic_laws(key, truth, form):
     model = get_model(key)
     res = fitted(model, truth, key)
-    card = C.make_card(res, model)
+    card = C.make_card(res, model, poisson_ratio=0.49)
     assert card["abaqus_form"] == form and card["elastic_law"] == key
     fitted_curve = model.elastic_shear_stress(res.params, GAMMA)
     block = C.abaqus_block(card)
@@ -251,7 +251,7 @@ def test_round_trip_cards_of_the_new_hyperelastic_laws(key, truth, form):
 
 def test_polynomial_card_writes_the_constants_in_abaqus_order():
     model = get_model("polynomial3")
-    card = C.make_card(fitted(model, POLY3, "polynomial3"), model)
+    card = C.make_card(fitted(model, POLY3, "polynomial3"), model, poisson_ratio=0.49)
     parsed = C.parse_abaqus_block(C.abaqus_block(card))
     values = [v for row in parsed["*HYPERELASTIC, POLYNOMIAL, N=3"] for v in row]
     # Abaqus data lines: C10, C01, C20, C11, C02, C30, C21, C12 / C03, D1, D2, D3
@@ -263,7 +263,7 @@ def test_polynomial_card_writes_the_constants_in_abaqus_order():
 
 def test_nunes_card_has_no_finite_initial_modulus_and_a_log_spaced_marlow_table():
     model = get_model("nunes")
-    card = C.make_card(fitted(model, {"C1": 60.0, "C2": 15.0}, "nunes"), model)
+    card = C.make_card(fitted(model, {"C1": 60.0, "C2": 15.0}, "nunes"), model, poisson_ratio=0.49)
     gamma_ref = 0.5 / 20
     assert card["initial_shear_modulus"] == pytest.approx(2 * 60.0 + 2 * 15.0 / np.sqrt(gamma_ref), rel=1e-9)
     assert any("unbounded initial tangent modulus" in n for n in card["notes"])
@@ -274,7 +274,8 @@ def test_nunes_card_has_no_finite_initial_modulus_and_a_log_spaced_marlow_table(
     assert strain[1] == pytest.approx(1e-3 * strain[-1], rel=1e-9)
     # an ordinary law keeps its secant-free initial modulus and the linear table
     rp = get_model("reduced_polynomial3")
-    rp_card = C.make_card(fitted(rp, {"C10": 40.0, "C20": 100.0, "C30": 400.0}, "reduced_polynomial3"), rp)
+    rp_card = C.make_card(fitted(rp, {"C10": 40.0, "C20": 100.0, "C30": 400.0}, "reduced_polynomial3"), rp,
+                          poisson_ratio=0.49)
     assert rp_card["initial_shear_modulus"] == pytest.approx(80.0, rel=1e-6)
     assert "marlow_spacing" not in rp_card["validity"]
 
@@ -288,7 +289,7 @@ def test_gkv_card_prony_series_is_the_exact_relaxation_spectrum():
     curve = F.Curve(test="creep_recovery", condition="5 Pa", response="creep", inputs={"time": t, "shear_stress": stress},
                     observed={"shear_strain": model.creep_strain(truth, t, stress)})
     res = F.fit(F.FitProblem(model, [curve], target="none", model_key="gkv3"), starts=[truth], n_random=0)
-    card = C.make_card(res, model)
+    card = C.make_card(res, model, poisson_ratio=0.49)
     assert card["initial_shear_modulus"] == pytest.approx(800.0, rel=1e-6)
     assert card["prony"]["fit_rel_error"] == 0.0 and "Kelvin-Voigt" in card["prony"]["source"]
     parsed = C.parse_abaqus_block(C.abaqus_block(card))

@@ -210,7 +210,7 @@ def test_gent_card_is_febio_gent_with_the_same_constants():
 def test_polynomial2_card_uses_febio_d1_convention():
     model = get_model("polynomial2")
     truth = {"C10": 40.0, "C01": 15.0, "C20": 60.0, "C11": -10.0, "C02": 20.0}
-    card = C.make_card(_fitted(model, truth), model)
+    card = C.make_card(_fitted(model, truth), model, poisson_ratio=0.49)
     text = C.febio_file_text(card)
     assert check_febio_structure(text) == []
     mat = ET.fromstring(text).find("Material/material")
@@ -227,7 +227,7 @@ def test_polynomial2_card_uses_febio_d1_convention():
 def test_ogden2_and_mooney_rivlin_conventions():
     model = get_model("ogden2")
     truth = {"mu1": 300.0, "alpha1": 4.0, "mu2": 200.0, "alpha2": -6.0}
-    card = C.make_card(_fitted(model, truth), model)
+    card = C.make_card(_fitted(model, truth), model, poisson_ratio=0.49)
     mat = ET.fromstring(C.febio_file_text(card)).find("Material/material")
     c = {t: float(mat.findtext(t)) for t in ("c1", "m1", "c2", "m2")}
     # FEOgdenMaterial::DevStress: principal stress sum c/m (lambda^m - 1) -> sigma12 = sum c/m (l^m - l^-m)/(l + 1/l)
@@ -235,7 +235,7 @@ def test_ogden2_and_mooney_rivlin_conventions():
     s = sum(c[f"c{i}"] / c[f"m{i}"] * (lam ** c[f"m{i}"] - lam ** -c[f"m{i}"]) / (lam + 1 / lam) for i in (1, 2))
     np.testing.assert_allclose(s, model.elastic_shear_stress(truth, GAMMA), rtol=1e-3)
     mr = get_model("mooney_rivlin")
-    mr_card = C.make_card(_fitted(mr, {"C10": 60.0, "C01": 20.0}), mr)
+    mr_card = C.make_card(_fitted(mr, {"C10": 60.0, "C01": 20.0}), mr, poisson_ratio=0.49)
     mat = ET.fromstring(C.febio_file_text(mr_card)).find("Material/material")
     assert (float(mat.findtext("c1")), float(mat.findtext("c2"))) == pytest.approx((60.0, 20.0), rel=1e-4)
 
@@ -247,7 +247,7 @@ def test_ogden2_and_mooney_rivlin_conventions():
 ])
 def test_laws_without_a_faithful_febio_form_get_a_reason(key, truth, reason, tmp_path):
     model = get_model(key)
-    card = C.make_card(_result(model, truth), model)
+    card = C.make_card(_result(model, truth), model, poisson_ratio=0.49)
     assert card["febio_form"] is None and C.febio_block(card) is None and reason in card["febio_reason"]
     assert "febio" not in C.write_card_files(card, tmp_path)
 
@@ -264,7 +264,7 @@ def test_more_than_six_prony_terms_are_refused():
 def test_card_lists_the_fitted_strain_range_and_says_what_the_data_did_not_give():
     model = get_model("mooney_rivlin")
     res = _fitted(model, {"C10": 60.0, "C01": 20.0}, gmax=0.3)
-    card = C.make_card(res, model)
+    card = C.make_card(res, model, poisson_ratio=0.49)
     vr = card["valid_range"]
     assert vr["shear_strain"] == pytest.approx([0.01, 0.3])  # the fitted curve: gamma = 0.3/30 .. 0.3
     # an elastic simple-shear curve carries no rate, time or frequency: reported missing, not invented
@@ -278,11 +278,11 @@ def test_uncertainty_propagates_the_covariance_to_the_initial_modulus():
     model = get_model("mooney_rivlin")
     res = _result(model, {"C10": 60.0, "C01": 20.0}, {"C10": 3.0, "C01": 4.0})
     res = dataclasses.replace(res, correlation=np.array([[1.0, -0.5], [-0.5, 1.0]]))
-    unc = C.make_card(res, model)["uncertainty"]
+    unc = C.make_card(res, model, poisson_ratio=0.49)["uncertainty"]
     assert unc["standard_errors"] == {"C10": 3.0, "C01": 4.0}
     assert unc["relative_standard_errors"]["C01"] == pytest.approx(0.2)
     # mu0 = 2 (C10 + C01): var = 4 (s1^2 + s2^2 + 2 rho s1 s2)
     assert unc["initial_shear_modulus_stderr"] == pytest.approx(2 * math.sqrt(9 + 16 - 2 * 0.5 * 12), rel=1e-4)
     nan_res = dataclasses.replace(res, stderr={"C10": float("nan"), "C01": 4.0})
-    nan_unc = C.make_card(nan_res, model)["uncertainty"]
+    nan_unc = C.make_card(nan_res, model, poisson_ratio=0.49)["uncertainty"]
     assert nan_unc["not_determined"] == ["C10"] and nan_unc["initial_shear_modulus_stderr"] is None

@@ -2,16 +2,19 @@
 seeded noise; the fit must return the truth within stated tolerances, and its flags must fire when they should."""
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
 import pandas as pd
 import pytest
+import xarray as xr
 from doubles import ProxyMooneyRivlin, ProxyNewton, ProxyPowerLaw, ProxyProny, ProxyReducedPolynomial
 
 from tissuemech import fitting as F
 from tissuemech.canonical import make_run_dataset, read_netcdf
 from tissuemech.models import plate
+from tissuemech.records import FitRecord
 from tissuemech.stats import information_criteria
 
 RADIUS = 0.01
@@ -288,6 +291,57 @@ def test_fit_netcdf_and_csv_row(tmp_path):
     for col in ("aicc", "bic", "n_eff", "param_C10", "se_C20", "strain_max", "target", "flags"):
         assert col in frame
     assert not list(tmp_path.glob("fits/.*tmp"))  # atomic write leaves no temporary
+
+
+def _assert_records_equal(a: FitRecord, b: FitRecord):
+    """Every field of two fit records equal (NaN equal to NaN; arrays element by element)."""
+    for f in dataclasses.fields(FitRecord):
+        np.testing.assert_equal(getattr(a, f.name), getattr(b, f.name), err_msg=f.name)
+
+
+def test_fit_record_round_trips_through_netcdf(tmp_path):
+    """A real joint fit (two relaxation curves, one parameter held fixed) written and read back with the one
+    reader: every field of the record equal, and the record read back writes the same Dataset again."""
+    model = ProxyProny()
+    curves = [relaxation_curve(model, PRONY_TRUTH, s, seed=i) for i, s in enumerate((0.01, 0.1))]
+    res = F.fit(F.FitProblem(model, curves, target="none", model_key="proxy_prony", scope="stress_relaxation",
+                             fixed={"G_4": 28.9}, relaxation="ramp"), n_random=1)
+    path = tmp_path / "fits" / "stress_relaxation" / "proxy_prony.nc"
+    F.write_fit_netcdf(res, path)
+    written = FitRecord.from_result(res)
+    back = FitRecord.from_netcdf(path)
+    _assert_records_equal(back, written)
+    # the fields shared with the fit result itself
+    for name in ("model_key", "family", "scope", "target", "relaxation", "params", "stderr", "units", "varying",
+                 "flags", "success", "message", "aicc", "n", "k", "curve_labels", "selection", "ranges",
+                 "structure", "start_chisqr", "sloppy_direction"):
+        np.testing.assert_equal(getattr(back, name), getattr(res, name), err_msg=name)
+    assert back.varying == ["G_inf", "G_1", "G_2", "G_3"] and back.converged is True
+    assert back.tests == ["stress_relaxation"] and back.observed.size == res.n
+    names = list(back.params)
+    assert np.isnan(back.correlation[names.index("G_4")]).all()  # a fixed parameter has no correlation
+    assert set(back.correlations) == {f"{a}|{b}" for i, a in enumerate(back.varying) for b in back.varying[i + 1:]}
+    xr.testing.assert_identical(back.to_dataset(), read_netcdf(path))
+    # the fits.csv row is the same from the record and from its Dataset
+    assert F.fits_csv_row(back, "demo", "f") == F.fits_csv_row(read_netcdf(path), "demo", "f")
+
+
+def test_fit_record_reads_an_older_record_with_defaults(tmp_path):
+    """A record without ``stderr``/``varying``/``relaxation``/``success`` (older files) reads with the stated
+    defaults: every parameter varying, NaN standard errors, relaxation "measured", converged; the model key
+    falls back to the file name."""
+    ds = xr.Dataset({"value": ("param", [40.0, 100.0]),
+                     "correlation": (("param", "param_b"), [[1.0, -0.9], [-0.9, 1.0]])},
+                    coords={"param": ["C10", "C20"], "param_b": ["C10", "C20"]},
+                    attrs={"target": "none", "aicc": -3.5, "flags": "[]",
+                           "selection": json.dumps([{"test": "simple_shear"}])})
+    path = tmp_path / "reduced_polynomial2.nc"
+    ds.to_netcdf(path, engine="h5netcdf")
+    rec = FitRecord.from_netcdf(path)
+    assert rec.model_key == "reduced_polynomial2" and rec.relaxation == "measured" and rec.converged
+    assert rec.params == {"C10": 40.0, "C20": 100.0} and rec.varying == ["C10", "C20"]
+    assert all(np.isnan(v) for v in rec.stderr.values()) and rec.aicc == -3.5 and rec.n == 0
+    assert rec.correlations == {"C10|C20": -0.9} and rec.tests == ["simple_shear"]
 
 
 def test_prony_start_for_qlv_is_close_to_truth():

@@ -245,7 +245,7 @@ def test_fit_stage_writes_fits_ranking_cards(tmp_path):
     fits_dir, cards_dir = tmp_path / "fits" / scope, tmp_path / "cards" / scope
     table = stages.run_fit_scope(averages, scope, scopes[scope], target="apparent_stress", seed=0, multistart=1,
                                  fits_dir=fits_dir, cards_dir=cards_dir, ranking_path=tmp_path / "ranking" / f"{scope}.csv",
-                                 dataset="demo")
+                                 dataset="demo", poisson_ratio=0.49)
     assert list(table["rank"]) == [1] and table["recommendation"].notna().all() and table["recommended"].all()
     assert (fits_dir / "qlv_linear_prony4.nc").exists() and (cards_dir / "qlv_linear_prony4.inp").exists()
     assert (tmp_path / "ranking" / f"{scope}.recommendation.json").exists()

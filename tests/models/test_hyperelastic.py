@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 
+from tissuemech.models.base import bulk_modulus, initial_shear_modulus
 from tissuemech.models.hyperelastic import HYPERELASTIC_LAWS, stability_flags
 from tissuemech.models.registry import get_model
 
@@ -59,7 +60,7 @@ def test_uniaxial_neo_hookean_and_lopez_pamies_reduction():
 def test_initial_modulus_and_stability_flags():
     og = get_model("ogden2")
     p = {"mu1": 100.0, "alpha1": 2.0, "mu2": 50.0, "alpha2": -4.0}
-    assert og.initial_shear_modulus(p) == pytest.approx(150.0, rel=1e-5)
+    assert initial_shear_modulus(og, p) == pytest.approx(150.0, rel=1e-9)
     assert stability_flags(og, p) == []
     unstable = {"mu1": 100.0, "alpha1": 2.0, "mu2": -300.0, "alpha2": 8.0}
     assert "negative_initial_modulus" in stability_flags(og, unstable)
@@ -220,3 +221,14 @@ def test_nunes_fit_from_default_start_recovers_noisy_truth():
                     observed={"shear_stress": observed})
     res = F.fit(F.FitProblem(m, [curve], target="none", model_key="nunes"), n_random=0)
     assert res.params["C1"] == pytest.approx(120.0, rel=0.05) and res.params["C2"] == pytest.approx(35.0, rel=0.05)
+
+
+def test_bulk_modulus_from_shear_modulus_and_poisson_ratio():
+    """K = 2 mu (1 + nu) / (3 (1 - 2 nu)): nu = 0 gives 2 mu / 3, nu = 0.25 gives 5 mu / 3 (= lambda + 2 mu / 3 with
+    lambda = mu); nu outside (-1, 0.5) is refused."""
+    assert bulk_modulus(300.0, 0.0) == pytest.approx(200.0, rel=1e-15)
+    assert bulk_modulus(300.0, 0.25) == pytest.approx(500.0, rel=1e-15)
+    assert bulk_modulus(1000.0, 0.49) == pytest.approx(1000.0 * 2 * 1.49 / (3 * 0.02), rel=1e-12)
+    for nu in (0.5, 0.6, -1.0):
+        with pytest.raises(ValueError, match="poisson_ratio"):
+            bulk_modulus(300.0, nu)

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from tissuemech.models.fractional import mittag_leffler_neg
-from tissuemech.models.linear import nnls_prony_weights
+from tissuemech.spectra import prony_nnls_weights
 from tissuemech.models.registry import get_model
 
 AGAR_SLS2 = {"G1": 650.0, "G2": 2753.0, "eta1": 7.4e4}
@@ -54,7 +54,7 @@ def test_nnls_recovers_prony_weights():
     taus = np.array([0.1, 1.0, 10.0, 100.0])
     true = np.array([30.0, 0.0, 50.0, 20.0])
     g = 80.0 + (true[:, None] * np.exp(-t[None, :] / taus[:, None])).sum(0)
-    g_inf, weights, resid = nnls_prony_weights(t, g, taus)
+    g_inf, weights, resid = prony_nnls_weights(t, g, taus)
     assert g_inf == pytest.approx(80.0, abs=1e-8)
     np.testing.assert_allclose(weights, true, atol=1e-8)
 

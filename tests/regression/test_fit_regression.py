@@ -154,8 +154,8 @@ def test_committed_table_is_well_formed(path):
 @pytest.mark.filterwarnings("ignore:All-NaN axis encountered:RuntimeWarning")  # ranking of strain-free flow curves
 def test_the_regression_refits_what_the_pipeline_writes(repo_root, tmp_path, fresh):
     """``stages.run_fit_scope`` (the Snakemake fit rule) gives the same values as the regression's refit."""
-    from tissuemech.canonical import read_netcdf
     from tissuemech.curves import write_averages
+    from tissuemech.records import FitRecord
     from tissuemech.stages import run_fit_scope
 
     settings = REG.fit_settings(repo_root / "config" / "config.yaml")
@@ -165,12 +165,12 @@ def test_the_regression_refits_what_the_pipeline_writes(repo_root, tmp_path, fre
     run_fit_scope(tmp_path / "averages.nc", "flow_curve", {"tests": ["flow_curve"], "models": models},
                   target=settings["plate_target"], seed=settings["seed"], multistart=settings["multistart"],
                   fits_dir=tmp_path / "fits", cards_dir=tmp_path / "cards", ranking_path=tmp_path / "ranking.csv",
-                  dataset="agar_3pct_thesis")
+                  dataset="agar_3pct_thesis", poisson_ratio=0.49)
     for model in models:
-        fit = read_netcdf(tmp_path / "fits" / f"{model}.nc")
+        fit = FitRecord.from_netcdf(tmp_path / "fits" / f"{model}.nc")
         mine = fresh[(fresh["dataset"] == "agar_3pct_thesis") & (fresh["model"] == model)].set_index("parameter")
-        for name, value in zip(fit["param"].values, fit["value"].values):
-            assert float(value) == pytest.approx(mine.loc[str(name), "value"], rel=1e-12)
+        for name, value in fit.params.items():
+            assert value == pytest.approx(mine.loc[name, "value"], rel=1e-12)
 
 
 def test_malformed_tables_are_rejected_with_line_and_column(reference_copy):

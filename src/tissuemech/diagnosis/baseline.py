@@ -46,27 +46,13 @@ def read_fit_record(path: str | Path) -> dict:
     "relaxation", "stderr", "varying", "flags", "converged"}``;
     ``correlations`` maps ``"a|b"`` to the fitted correlation of every varying pair.
     """
-    ds = read_netcdf(path)
-    names = [str(n) for n in ds["param"].values]
-    params = {n: float(v) for n, v in zip(names, ds["value"].values)}
-    corr = {}
-    c = ds["correlation"].values
-    for i, a in enumerate(names):
-        for j, b in enumerate(names):
-            if j > i and np.isfinite(c[i, j]):
-                corr[f"{a}|{b}"] = float(c[i, j])
-    selection = json.loads(ds.attrs.get("selection", "[]"))
-    return {"model_key": str(ds.attrs.get("model_key", Path(path).stem)), "target": str(ds.attrs.get("target", "")),
-            "family": str(ds.attrs.get("family", "")), "scope": str(ds.attrs.get("scope", "")),
-            "aicc": float(ds.attrs.get("aicc", np.nan)), "params": params, "correlations": corr,
-            # relaxation strain-history treatment of the fit (fitting.relaxation_history); "measured" when
-            # the record does not say
-            "relaxation": str(ds.attrs.get("relaxation", "measured")),
-            "tests": sorted({s.get("test", "") for s in selection}),
-            "stderr": ({n: float(v) for n, v in zip(names, ds["stderr"].values)} if "stderr" in ds else {}),
-            "varying": ([n for n, v in zip(names, ds["varying"].values) if int(v)] if "varying" in ds else names),
-            "flags": list(json.loads(ds.attrs.get("flags", "[]"))),
-            "converged": bool(int(ds.attrs.get("success", 1)))}
+    rec = fitting.FitRecord.from_netcdf(path)  # the one fit-record reader
+    # relaxation: the strain-history treatment of the fit (fitting.relaxation_history), "measured" when the
+    # record does not say
+    return {"model_key": rec.model_key, "target": rec.target, "family": rec.family, "scope": rec.scope,
+            "aicc": rec.aicc, "params": rec.params, "correlations": rec.correlations, "relaxation": rec.relaxation,
+            "tests": rec.tests, "stderr": rec.stderr, "varying": rec.varying, "flags": rec.flags,
+            "converged": rec.converged}
 
 
 #: a baseline whose typical point (median over rows) is off by more than this factor misfits grossly: the

@@ -62,7 +62,7 @@ import xarray as xr
 from scipy import stats as sps
 from statsmodels.tools.sm_exceptions import MissingDataError
 
-from ..canonical import read_netcdf, write_netcdf, write_text
+from ..canonical import read_netcdf, to_jsonable, write_netcdf, write_text
 from ..models.registry import available_models, get_model
 from .. import stats as st
 from .baseline import (baseline_adequacy, extension_gain, fit_runs, level_normalised, predict_runs,
@@ -93,20 +93,8 @@ DECISION_RULE = (
 
 
 def _clean(obj):
-    """JSON-safe copy: NaN/inf -> None, numpy scalars -> Python."""
-    if isinstance(obj, dict):
-        return {str(k): _clean(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
-    if isinstance(obj, (np.floating, float)):
-        return float(obj) if math.isfinite(float(obj)) else None
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    if isinstance(obj, np.ndarray):
-        return _clean(obj.tolist())
-    return obj
+    """JSON-safe copy: NaN/inf -> None, numpy scalars -> Python (:func:`tissuemech.canonical.to_jsonable`)."""
+    return to_jsonable(obj)
 
 
 def run_detectors(ctx: DiagnosisContext) -> list[dict]:

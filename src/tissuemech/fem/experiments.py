@@ -30,10 +30,12 @@ RHEOMETER_RADIUS_M = 12.5e-3
 RHEOMETER_GAP_M = 2.0e-3
 
 
-def card_material(card: Mapping, default_poisson_ratio: float = 0.49) -> Material:
-    """Material of a card; cards without ``bulk_modulus``/``poisson_ratio`` get ``default_poisson_ratio``."""
+def card_material(card: Mapping) -> Material:
+    """Material of a card. The card states its compressibility, ``bulk_modulus`` or ``poisson_ratio`` (the cards of
+    ``tissuemech.cards`` carry the configuration's ``fem.poisson_ratio``); there is no default Poisson ratio."""
     if "bulk_modulus" not in card and "poisson_ratio" not in card:
-        card = {**card, "poisson_ratio": default_poisson_ratio}
+        raise ValueError("the card states neither bulk_modulus nor poisson_ratio (the configuration's "
+                         "fem.poisson_ratio belongs in the card)")
     return material_from_card(card)
 
 
@@ -63,7 +65,7 @@ def rheometer_sample_mesh(radius_m: float = RHEOMETER_RADIUS_M, gap_m: float = R
 
 def rheometer_torsion(card: Mapping, time_s, rim_strain, *, radius_m: float = RHEOMETER_RADIUS_M,
                       gap_m: float = RHEOMETER_GAP_M, element_size_m: float = 1.5e-3,
-                      default_poisson_ratio: float = 0.49, test: str = "torsion", anp: bool = True,
+                      test: str = "torsion", anp: bool = True,
                       vtu_path: str | Path | None = None, n_threads: int | None = None) -> xr.Dataset:
     """Torsion of the bonded cylindrical sample between parallel plates, driven by a rim-strain history.
 
@@ -90,7 +92,7 @@ def rheometer_torsion(card: Mapping, time_s, rim_strain, *, radius_m: float = RH
     gamma = np.asarray(rim_strain, float)
     if t.shape != gamma.shape or t.ndim != 1 or np.any(np.diff(t) <= 0) or t[0] <= 0:
         raise ValueError("time_s must be increasing, positive and of the same length as rim_strain")
-    material = card_material(card, default_poisson_ratio)
+    material = card_material(card)
     mesh = rheometer_sample_mesh(radius_m, gap_m, element_size_m)
     z = mesh.nodes[:, 2]
     angle = gamma * gap_m / radius_m
@@ -112,7 +114,7 @@ def rheometer_torsion(card: Mapping, time_s, rim_strain, *, radius_m: float = RH
 def flat_punch_indentation(card: Mapping, punch_diameter_m: float = 8e-3, max_depth_m: float = 2e-3,
                            speed_m_s: float = 1e-4, *, sample_radius_m: float = 20e-3, sample_height_m: float = 10e-3,
                            element_size_m: float | None = None, growth: float = 1.3, bonded_punch: bool = False,
-                           n_increments: int = 20, default_poisson_ratio: float = 0.49, anp: bool = True,
+                           n_increments: int = 20, anp: bool = True,
                            vtu_path: str | Path | None = None, n_threads: int | None = None) -> xr.Dataset:
     """Rigid flat cylindrical punch pressed at constant speed into a sample bonded to a rigid base.
 
@@ -139,7 +141,7 @@ def flat_punch_indentation(card: Mapping, punch_diameter_m: float = 8e-3, max_de
     n_inner = max(2, int(np.ceil(a / h)))
     mesh = cylinder_mesh(sample_radius_m, sample_height_m, ring_radii_m=graded_ring_radii(sample_radius_m, a, n_inner, growth),
                          z_m=graded_layers(sample_height_m, a / n_inner, growth))
-    material = card_material(card, default_poisson_ratio)
+    material = card_material(card)
     x = mesh.nodes
     punch = np.flatnonzero(np.isclose(x[:, 2], sample_height_m) & (np.hypot(x[:, 0], x[:, 1]) <= a * (1 + 1e-9)))
     t_end = max_depth_m / speed_m_s
@@ -159,7 +161,7 @@ def flat_punch_indentation(card: Mapping, punch_diameter_m: float = 8e-3, max_de
 
 def brain_indentation(card: Mapping, punch_diameter_m: float = 8e-3, max_depth_m: float = 2e-3,
                       speed_m_s: float = 1e-4, *, mesh: TetMesh | None = None, cache_dir: str | Path | None = None,
-                      support_height_m: float = 25e-3, n_increments: int = 10, default_poisson_ratio: float = 0.49,
+                      support_height_m: float = 25e-3, n_increments: int = 10,
                       anp: bool = True, vtu_path: str | Path | None = None,
                       n_threads: int | None = None) -> xr.Dataset:
     """Rigid flat cylindrical punch pressed vertically into the top of the MNI brain geometry.
@@ -192,7 +194,7 @@ def brain_indentation(card: Mapping, punch_diameter_m: float = 8e-3, max_depth_m
     t = np.linspace(0.0, t_end, n_increments + 1)[1:]
     punch = RigidContact("flat_punch", tuple(x[top]), a, (0.0, 0.0, -1.0), np.array([0.0, t_end]),
                          np.array([0.0, max_depth_m]), nodes=surface[under])
-    material = card_material(card, default_poisson_ratio)
+    material = card_material(card)
     model = build_model(mesh, material, [fixed_group("support", base)], punch, anp=anp)
     res = solve_quasistatic(model, t, n_threads=n_threads)
     u = np.asarray(res.displacement_m, float)

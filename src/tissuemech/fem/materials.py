@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import cfunc, njit, types
 
+from ..models.base import bulk_modulus
 from ..models.hyperelastic import (lopez_pamies_dw_di1, mooney_rivlin_dw_di1, mooney_rivlin_dw_di2,
                                   neo_hookean_dw_di1, ogden_dw_dlambda, reduced_polynomial_dw_di1)
 from .kinematics import FASTMATH, left_cauchy_green, symmetric_eigen3, symmetric_square
@@ -258,7 +259,8 @@ def make_material(law_key: str, parameters: Mapping[str, float] | np.ndarray, *,
                   branch_parameters=None) -> Material:
     """Build a :class:`Material`; give either ``bulk_modulus_pa`` or ``poisson_ratio``.
 
-    ``kappa = 2 mu (1 + nu) / (3 (1 - 2 nu))`` with ``mu`` the instantaneous small-strain shear modulus.
+    ``kappa = models.base.bulk_modulus(mu, nu)`` = 2 mu (1 + nu) / (3 (1 - 2 nu)) with ``mu`` the instantaneous
+    small-strain shear modulus (:func:`small_strain_shear_modulus`).
 
     Beyond QLV (science.md 1.1 "3D/TLED", Holzapfel/Simo overstress with branch energies): give
     ``branch_law`` (an invariant law whose ``dW/dI1`` is used, e.g. ``"reduced_polynomial2"`` for the
@@ -309,9 +311,7 @@ def make_material(law_key: str, parameters: Mapping[str, float] | np.ndarray, *,
     if (bulk_modulus_pa is None) == (poisson_ratio is None):
         raise ValueError("give exactly one of bulk_modulus_pa and poisson_ratio")
     if bulk_modulus_pa is None:
-        if not -1.0 < poisson_ratio < 0.5:
-            raise ValueError("poisson_ratio must lie in (-1, 0.5)")
-        bulk_modulus_pa = 2.0 * mu * (1.0 + poisson_ratio) / (3.0 * (1.0 - 2.0 * poisson_ratio))
+        bulk_modulus_pa = bulk_modulus(mu, poisson_ratio)
     return Material(law_key, kind, params, float(bulk_modulus_pa), density_kg_m3, g, tau, float(mu), branch_law,
                     branch_params)
 
@@ -349,7 +349,9 @@ def material_from_card(card: Mapping) -> Material:
 
 
 def small_strain_shear_modulus(material: Material) -> float:
-    """Initial shear modulus (Pa): the simple-shear Cauchy stress at gamma = 1e-6 divided by gamma."""
+    """Initial shear modulus (Pa) of a FEM :class:`Material`: the simple-shear Cauchy stress at gamma = 1e-6 divided
+    by gamma. The FEM's own stress routine on its compiled law vector, not ``models.base.initial_shear_modulus`` (which
+    differentiates a fitted model's ``elastic_shear_stress``): a material has no model object."""
     gamma = 1e-6
     F = np.eye(3)
     F[0, 1] = gamma

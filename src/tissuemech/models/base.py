@@ -137,3 +137,52 @@ class InstantaneousLawModel(ConstitutiveModel):
         if not self.supports("normal_stress"):
             self._unsupported("normal_stress")
         return self.instantaneous.normal_stress_differences(self.instantaneous_params(p), np.asarray(strain, float))
+
+
+# ----------------------------------------------------------------------------------------------------------
+# small-strain elastic constants (the one definition of each; cards, QLV/beyond-QLV models, synth and FEM use them)
+# ----------------------------------------------------------------------------------------------------------
+#: shear-strain step of the numerical initial slope (:func:`initial_shear_modulus`)
+SLOPE_STEP = 1e-6
+
+
+def initial_shear_modulus(model: ConstitutiveModel, p: Params, step: float = SLOPE_STEP) -> float:
+    r"""Initial (small-strain) shear modulus of an elastic shear law, Pa.
+
+    .. math:: \mu_0 = \left.\frac{d\sigma_e}{d\gamma}\right|_{\gamma=0}
+              \approx \frac{\sigma_e(h) - \sigma_e(-h)}{2h}
+
+    a central difference of :meth:`ConstitutiveModel.elastic_shear_stress` with step :math:`h` (``step``);
+    for an isotropic law :math:`\sigma_e` is odd in :math:`\gamma`, so the error is :math:`O(h^2)`. A law whose
+    tangent grows without bound as :math:`\gamma \to 0` gives a step-dependent value (``cards.make_card``
+    detects that by comparing two steps).
+
+    Parameters
+    ----------
+    model : an elastic shear law (``elastic_shear`` response)
+    p : its parameters
+    step : the shear-strain step :math:`h`
+    """
+    strain = np.array([-step, step])
+    s = np.asarray(model.elastic_shear_stress(p, strain), float).reshape(strain.shape)
+    return float((s[1] - s[0]) / (2.0 * step))
+
+
+def bulk_modulus(mu: float, nu: float) -> float:
+    r"""Bulk modulus of an isotropic material from its shear modulus and Poisson's ratio, Pa.
+
+    .. math:: K = \frac{2\mu(1+\nu)}{3(1-2\nu)}
+
+    Parameters
+    ----------
+    mu : shear modulus :math:`\mu` (Pa); for a hyperelastic law its initial shear modulus
+    nu : Poisson's ratio :math:`\nu` in (-1, 0.5); the pipeline's value is the configuration's
+        ``fem.poisson_ratio`` (there is no default)
+
+    Raises
+    ------
+    ValueError : ``nu`` outside (-1, 0.5)
+    """
+    if not -1.0 < nu < 0.5:
+        raise ValueError("poisson_ratio must lie in (-1, 0.5)")
+    return 2.0 * mu * (1.0 + nu) / (3.0 * (1.0 - 2.0 * nu))

@@ -25,9 +25,9 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from numba import njit
 
-from .base import ConstitutiveModel, InstantaneousLawModel, ParamSpec, Params
+from .base import ConstitutiveModel, InstantaneousLawModel, ParamSpec, Params, initial_shear_modulus
 from .qlv import (available_instantaneous_tags, check_param_names, default_taus,
-                  elastic_stress_nd, initial_shear_modulus, instantaneous_law, prony_ratio_specs,
+                  elastic_stress_nd, instantaneous_law, prony_ratio_specs,
                   stress_controlled_strain, stress_controlled_strain_by_history, sub_params, tau_specs)
 from .recursion import prony_branch_sum_batch
 

@@ -52,9 +52,9 @@ import numpy as np
 from pymittagleffler import mittag_leffler as garrappa_mittag_leffler
 from scipy.special import gamma as gamma_fn
 
-from .base import ConstitutiveModel, InstantaneousLawModel, ParamSpec, Params
-from .qlv import (available_instantaneous_tags, check_param_names, elastic_stress_nd, initial_shear_modulus,
-                  instantaneous_law, invert_monotone, sub_params)
+from .base import ConstitutiveModel, InstantaneousLawModel, ParamSpec, Params, initial_shear_modulus
+from .qlv import (available_instantaneous_tags, check_param_names, elastic_stress_nd, instantaneous_law,
+                  invert_monotone, sub_params)
 
 Kernel = Callable[[np.ndarray], np.ndarray]
 

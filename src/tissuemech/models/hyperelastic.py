@@ -324,10 +324,6 @@ class HyperelasticModel(ConstitutiveModel):
             out = _stretch_uniaxial(self.dw_dlambda, self._vector(p), flat)
         return out.reshape(lam.shape)
 
-    def initial_shear_modulus(self, p: Params) -> float:
-        """Small-strain shear modulus ``mu0 = 2 (W1 + W2)`` at the reference state (Pa)."""
-        return float(self.elastic_shear_stress(p, np.array([1e-7]))[0] / 1e-7)
-
 
 @dataclass
 class LinearElasticShear(ConstitutiveModel):
@@ -353,9 +349,6 @@ class LinearElasticShear(ConstitutiveModel):
 
     def uniaxial_nominal_stress(self, p: Params, stretch: np.ndarray) -> np.ndarray:
         return 3.0 * float(p["G"]) * (np.asarray(stretch, float) - 1.0)
-
-    def initial_shear_modulus(self, p: Params) -> float:
-        return float(p["G"])
 
 
 def neo_hookean() -> HyperelasticModel:

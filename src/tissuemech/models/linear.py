@@ -39,7 +39,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
-from scipy.optimize import nnls
 
 from .base import ConstitutiveModel, ParamSpec, Params
 from .recursion import prony_branch_histories, relaxation_factors
@@ -214,24 +213,6 @@ def prony(n_terms: int, liquid: bool = False) -> SpectrumModel:
     name = f"prony{n_terms}" + ("_liquid" if liquid else "")
     return SpectrumModel(name=name, param_specs=tuple(specs), spectrum_fn=spectrum,
                          structure={"terms": n_terms, "equilibrium_spring": not liquid})
-
-
-def nnls_prony_weights(time_s: np.ndarray, modulus_pa: np.ndarray, taus: np.ndarray,
-                       equilibrium: bool = True) -> tuple[float, np.ndarray, float]:
-    """Non-negative Prony weights on fixed relaxation times (the robust, convex start of a Prony fit).
-
-    Solves ``min || G_inf + sum_i G_i exp(-t/tau_i) - G(t) ||`` with ``G_inf, G_i >= 0`` (scipy ``nnls``).
-
-    Returns ``(G_inf [Pa], G_i [Pa], residual norm [Pa])``.
-    """
-    t = np.asarray(time_s, float)
-    basis = np.exp(-t[:, None] / np.asarray(taus, float)[None, :])
-    if equilibrium:
-        basis = np.hstack([np.ones((t.size, 1)), basis])
-    weights, resid = nnls(basis, np.asarray(modulus_pa, float))
-    if equilibrium:
-        return float(weights[0]), weights[1:], float(resid)
-    return 0.0, weights, float(resid)
 
 
 # ------------------------------------------------------------------------------------------------------

@@ -29,14 +29,11 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 from numba import njit
 
-from .base import ConstitutiveModel, InstantaneousLawModel, ParamSpec, Params
+from .base import ConstitutiveModel, InstantaneousLawModel, ParamSpec, Params, initial_shear_modulus
 from .recursion import qlv_stress_batch, relaxation_factors
 
 #: thesis relaxation times (log-spaced decades) used as the default fixed Prony times, s
 THESIS_TAUS_S = (0.1, 1.0, 10.0, 100.0)
-
-#: small-strain step for the numerical initial slope of an instantaneous law
-_SLOPE_STEP = 1e-6
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -51,12 +48,6 @@ def elastic_stress_nd(model: ConstitutiveModel, p: Params, strain: np.ndarray) -
     """Evaluate ``model.elastic_shear_stress`` on an array of any shape (laws may expect 1-D input)."""
     strain = np.asarray(strain, float)
     return np.asarray(model.elastic_shear_stress(p, strain.ravel()), float).reshape(strain.shape)
-
-
-def initial_shear_modulus(model: ConstitutiveModel, p: Params) -> float:
-    """Small-strain shear modulus ``d sigma_e / d gamma`` at 0 (Pa), by a central difference."""
-    s = elastic_stress_nd(model, p, np.array([-_SLOPE_STEP, _SLOPE_STEP]))
-    return float((s[1] - s[0]) / (2.0 * _SLOPE_STEP))
 
 
 def check_param_names(*groups: Sequence[ParamSpec]) -> tuple[ParamSpec, ...]:

@@ -36,8 +36,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..models.base import ConstitutiveModel, Params
-from ..models.qlv import QLVModel, initial_shear_modulus, sub_params
+from ..models.base import ConstitutiveModel, Params, initial_shear_modulus
+from ..models.qlv import QLVModel, sub_params
 from .instrument import Artefacts
 
 EFFECT_IDS: tuple[str, ...] = (

@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from ..canonical import atomic_write
+from ..canonical import atomic_write, to_jsonable
 
 #: canonical variable -> (RheoCompass English column label, unit label, factor from SI to that unit)
 RHEOCOMPASS_COLUMNS: dict[str, tuple[str, str, float]] = {
@@ -127,25 +127,14 @@ def write_samples_csv(path: str | Path, rows: Sequence[Mapping[str, object]]) ->
     return atomic_write(path, _w)
 
 
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return [_jsonable(v) for v in obj.tolist()]
-    if isinstance(obj, (np.floating, np.integer)):
-        return obj.item()
-    return obj
-
-
 def write_json(path: str | Path, obj) -> Path:
-    text = json.dumps(_jsonable(obj), indent=1, sort_keys=False)
+    """``truth.json``: NaN stays NaN (:func:`tissuemech.canonical.to_jsonable` with ``nonfinite_as_null=False``)."""
+    text = json.dumps(to_jsonable(obj, nonfinite_as_null=False), indent=1, sort_keys=False)
     return _write_text(path, text + "\n")
 
 
 def write_yaml(path: str | Path, obj) -> Path:
-    text = yaml.safe_dump(_jsonable(obj), sort_keys=False, allow_unicode=True, width=110)
+    text = yaml.safe_dump(to_jsonable(obj, nonfinite_as_null=False), sort_keys=False, allow_unicode=True, width=110)
     return _write_text(path, text)
 
 

@@ -1,0 +1,244 @@
+"""Typed records at stage boundaries (issue 14): what one stage writes and the next reads.
+
+:class:`FitRecord` is the fit record ``results/<dataset>/fits/<scope>/<model>.nc``: everything the fit stage
+keeps about one fit, with the one writer (:meth:`FitRecord.to_dataset` / :meth:`FitRecord.to_netcdf`) and the
+one reader (:meth:`FitRecord.from_dataset` / :meth:`FitRecord.from_netcdf`). ``fitting.fit_to_dataset`` and
+``fitting.write_fit_netcdf`` write through it, and every reader of a fit record (``fitting.fits_csv_row``,
+``summary`` fit figures, ``diagnosis.baseline.read_fit_record``) reads through it.
+
+On disk (the layout every existing record has): dims ``param``/``param_b`` (variables ``value``, ``stderr``,
+``varying``, ``unit``, ``correlation``), ``point`` (``observed``, ``predicted``, ``weighted_residual``,
+``curve_index``, ``observable``) and ``curve`` (``curve_label``, ``curve_rmse``, ``curve_nrmse``); scalar
+attributes (:data:`SCALAR_ATTRS`, ``success`` as 0/1, ``condition_number``) and JSON attributes (``flags``,
+``selection``, ``ranges``, ``structure``, ``sloppy_direction``, ``start_chisqr`` with failed starts as null).
+
+This module sits just above ``canonical`` (it imports nothing else of the package), so every layer may use it.
+"""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from .canonical import read_netcdf, to_jsonable, write_netcdf
+
+#: scalar attributes of a fit record, in the order they are written (``success`` and ``condition_number`` follow)
+SCALAR_ATTRS = ("model_key", "family", "scope", "target", "relaxation", "message", "chisqr", "redchi", "rmse",
+                "nrmse", "n", "n_eff", "k", "aic", "aicc", "bic", "aicc_eff", "bic_eff", "nfev", "n_starts")
+_INT_ATTRS = ("n", "k", "nfev", "n_starts")
+_STR_ATTRS = ("model_key", "family", "scope", "target", "relaxation", "message")
+
+
+def _json_attr(ds: xr.Dataset, name: str, default):
+    text = ds.attrs.get(name, "")
+    return json.loads(text) if text else default
+
+
+@dataclass(eq=False)
+class FitRecord:
+    """One fit record: parameters, uncertainties, flags, criteria, residuals and the data selection.
+
+    ``params``/``stderr``/``units`` are ordered by the model's parameters; ``correlation`` is the
+    ``len(params)`` square matrix of the fitted (internal) parameters, NaN in rows/columns of fixed ones. The
+    per-point arrays (``observed``, ``predicted``, ``weighted_residual``, ``curve_index``, ``observable``) are
+    the residual terms of every curve concatenated (curve by curve, observable by observable).
+    ``start_chisqr`` is inf for a start that failed. Compare records field by field (``eq=False``: arrays).
+    """
+
+    model_key: str
+    family: str = ""
+    scope: str = ""
+    target: str = ""
+    #: strain-history treatment of relaxation curves (``fitting.relaxation_history``)
+    relaxation: str = "measured"
+    params: dict[str, float] = field(default_factory=dict)
+    stderr: dict[str, float] = field(default_factory=dict)
+    units: dict[str, str] = field(default_factory=dict)
+    varying: list[str] = field(default_factory=list)
+    correlation: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    flags: list[str] = field(default_factory=list)
+    success: bool = True
+    message: str = ""
+    chisqr: float = float("nan")
+    redchi: float = float("nan")
+    rmse: float = float("nan")
+    nrmse: float = float("nan")
+    n: int = 0
+    n_eff: float = float("nan")
+    k: int = 0
+    aic: float = float("nan")
+    aicc: float = float("nan")
+    bic: float = float("nan")
+    aicc_eff: float = float("nan")
+    bic_eff: float = float("nan")
+    nfev: int = 0
+    n_starts: int = 0
+    condition_number: float = float("nan")
+    sloppy_direction: dict[str, float] = field(default_factory=dict)
+    start_chisqr: list[float] = field(default_factory=list)
+    curve_labels: list[str] = field(default_factory=list)
+    curve_rmse: dict[str, float] = field(default_factory=dict)
+    curve_nrmse: dict[str, float] = field(default_factory=dict)
+    observed: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    predicted: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    weighted_residual: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    curve_index: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    observable: np.ndarray = field(default_factory=lambda: np.zeros(0, str))
+    selection: list[dict] = field(default_factory=list)
+    ranges: dict[str, float] = field(default_factory=dict)
+    structure: dict = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ derived views
+    @property
+    def converged(self) -> bool:
+        """The optimiser reported success (``success``)."""
+        return bool(self.success)
+
+    @property
+    def correlations(self) -> dict[str, float]:
+        """``{"a|b": rho}`` for every pair a before b (parameter order) with a finite correlation."""
+        names = list(self.params)
+        c = np.asarray(self.correlation, float)
+        out = {}
+        if c.shape != (len(names), len(names)):
+            return out
+        for i, a in enumerate(names):
+            for j in range(i + 1, len(names)):
+                if np.isfinite(c[i, j]):
+                    out[f"{a}|{names[j]}"] = float(c[i, j])
+        return out
+
+    @property
+    def tests(self) -> list[str]:
+        """The test kinds of the curves the fit saw (from ``selection``), sorted."""
+        return sorted({str(s.get("test", "")) for s in self.selection})
+
+    # ------------------------------------------------------------------ from a fit
+    @classmethod
+    def from_result(cls, result: Any) -> FitRecord:
+        """The record of a ``fitting.FitResult`` (``residuals`` flattened to points, ``correlation`` widened
+        from the varying parameters to all parameters)."""
+        names = list(result.params)
+        kv = len(result.varying)
+        corr = np.full((len(names), len(names)), np.nan)
+        pos = {n: names.index(n) for n in result.varying}
+        full = np.shape(result.correlation) == (kv, kv)
+        for i, a in enumerate(result.varying):
+            for j, b in enumerate(result.varying):
+                corr[pos[a], pos[b]] = result.correlation[i, j] if full else np.nan
+        obs, pred, wres, cidx, oname = [], [], [], [], []
+        for ci, terms in enumerate(result.residuals):
+            for name, (y, f, w) in terms.items():
+                obs.append(np.asarray(y, float))
+                pred.append(np.asarray(f, float))
+                wres.append(np.asarray(w, float))
+                cidx.append(np.full(np.size(y), ci))
+                oname.extend([name] * np.size(y))
+        cat = (lambda xs: np.concatenate(xs) if xs else np.array([]))
+        return cls(
+            model_key=result.model_key, family=result.family, scope=result.scope, target=result.target,
+            relaxation=result.relaxation, params=dict(result.params), stderr={n: result.stderr[n] for n in names},
+            units={n: result.units[n] for n in names}, varying=list(result.varying), correlation=corr,
+            flags=list(result.flags), success=bool(result.success), message=str(result.message),
+            chisqr=result.chisqr, redchi=result.redchi, rmse=result.rmse, nrmse=result.nrmse, n=result.n,
+            n_eff=result.n_eff, k=result.k, aic=result.aic, aicc=result.aicc, bic=result.bic,
+            aicc_eff=result.aicc_eff, bic_eff=result.bic_eff, nfev=result.nfev, n_starts=result.n_starts,
+            condition_number=float(result.condition_number), sloppy_direction=dict(result.sloppy_direction),
+            start_chisqr=list(result.start_chisqr), curve_labels=list(result.curve_labels),
+            curve_rmse={c: result.curve_rmse[c] for c in result.curve_labels},
+            curve_nrmse={c: result.curve_nrmse[c] for c in result.curve_labels},
+            observed=cat(obs), predicted=cat(pred), weighted_residual=cat(wres), curve_index=cat(cidx).astype(int),
+            observable=np.array(oname, dtype=str), selection=result.selection, ranges=result.ranges,
+            structure=result.structure)
+
+    # ------------------------------------------------------------------ the one writer
+    def to_dataset(self) -> xr.Dataset:
+        """The record as an xarray Dataset (dims ``param``, ``param_b``, ``point``, ``curve``; module docstring)."""
+        names = list(self.params)
+        ds = xr.Dataset(
+            {"value": ("param", [self.params[n] for n in names], {"long_name": "fitted value (natural units)"}),
+             "stderr": ("param", [self.stderr[n] for n in names], {"long_name": "standard error (delta method)"}),
+             "varying": ("param", [int(n in self.varying) for n in names]),
+             "unit": ("param", [self.units[n] for n in names]),
+             "correlation": (("param", "param_b"), np.asarray(self.correlation, float),
+                             {"long_name": "correlation of the fitted (internal) parameters"}),
+             "observed": ("point", np.asarray(self.observed, float)),
+             "predicted": ("point", np.asarray(self.predicted, float)),
+             "weighted_residual": ("point", np.asarray(self.weighted_residual, float),
+                                   {"long_name": "(prediction - observation) / sigma (log for G*, flow)"}),
+             "curve_index": ("point", np.asarray(self.curve_index).astype(int)),
+             "observable": ("point", np.asarray(self.observable, dtype=str)),
+             "curve_label": ("curve", np.array(self.curve_labels, dtype=str)),
+             "curve_rmse": ("curve", [self.curve_rmse[c] for c in self.curve_labels]),
+             "curve_nrmse": ("curve", [self.curve_nrmse[c] for c in self.curve_labels])},
+            coords={"param": names, "param_b": names})
+        scalars = {name: getattr(self, name) for name in SCALAR_ATTRS}
+        scalars["success"] = int(self.success)
+        ds.attrs.update({k: (float(v) if isinstance(v, (float, np.floating)) else v) for k, v in scalars.items()})
+        ds.attrs["flags"] = json.dumps(list(self.flags))
+        ds.attrs["selection"] = json.dumps(to_jsonable(self.selection, nonfinite_as_null=False))
+        ds.attrs["ranges"] = json.dumps(to_jsonable(self.ranges, nonfinite_as_null=False))
+        ds.attrs["structure"] = json.dumps(self.structure)
+        ds.attrs["condition_number"] = float(self.condition_number)
+        ds.attrs["sloppy_direction"] = json.dumps(self.sloppy_direction)
+        ds.attrs["start_chisqr"] = json.dumps([c if np.isfinite(c) else None for c in self.start_chisqr])
+        return ds
+
+    def to_netcdf(self, path: str | os.PathLike) -> None:
+        """Atomically write the record (``results/<dataset>/fits/<scope>/<model>.nc``)."""
+        write_netcdf(self.to_dataset(), path)
+
+    # ------------------------------------------------------------------ the one reader
+    @classmethod
+    def from_dataset(cls, ds: xr.Dataset, default_key: str = "") -> FitRecord:
+        """A record from its Dataset (:meth:`to_dataset`, or a file read back). Variables or attributes an
+        older or partial record lacks take the field defaults (``varying``: every parameter; ``relaxation``:
+        ``"measured"``; ``success``: true)."""
+        a = ds.attrs
+        names = [str(n) for n in ds["param"].values] if "param" in ds.coords else []
+
+        def per_param(var, cast, default):
+            return {n: cast(v) for n, v in zip(names, ds[var].values)} if var in ds else dict.fromkeys(names, default)
+
+        def per_point(var, dtype):
+            return np.asarray(ds[var].values, dtype) if var in ds else np.zeros(0, dtype)
+
+        labels = [str(c) for c in ds["curve_label"].values] if "curve_label" in ds else []
+
+        def per_curve(var):
+            return ({c: float(v) for c, v in zip(labels, ds[var].values)} if var in ds
+                    else dict.fromkeys(labels, float("nan")))
+
+        kwargs: dict[str, Any] = {}
+        for name in SCALAR_ATTRS + ("condition_number",):
+            if name in a:
+                v = a[name]
+                kwargs[name] = str(v) if name in _STR_ATTRS else int(v) if name in _INT_ATTRS else float(v)
+        kwargs.setdefault("model_key", default_key)
+        return cls(
+            **kwargs, success=bool(int(a.get("success", 1))),
+            params=per_param("value", float, float("nan")), stderr=per_param("stderr", float, float("nan")),
+            units=per_param("unit", str, ""),
+            varying=[n for n, v in zip(names, ds["varying"].values) if int(v)] if "varying" in ds else names,
+            correlation=(np.asarray(ds["correlation"].values, float) if "correlation" in ds
+                         else np.full((len(names), len(names)), np.nan)),
+            flags=[str(f) for f in _json_attr(ds, "flags", [])],
+            sloppy_direction=_json_attr(ds, "sloppy_direction", {}),
+            start_chisqr=[float("inf") if c is None else float(c) for c in _json_attr(ds, "start_chisqr", [])],
+            curve_labels=labels, curve_rmse=per_curve("curve_rmse"), curve_nrmse=per_curve("curve_nrmse"),
+            observed=per_point("observed", float), predicted=per_point("predicted", float),
+            weighted_residual=per_point("weighted_residual", float), curve_index=per_point("curve_index", int),
+            observable=per_point("observable", str), selection=_json_attr(ds, "selection", []),
+            ranges=_json_attr(ds, "ranges", {}), structure=_json_attr(ds, "structure", {}))
+
+    @classmethod
+    def from_netcdf(cls, path: str | os.PathLike) -> FitRecord:
+        """Read a fit record file (the model key falls back to the file's stem)."""
+        return cls.from_dataset(read_netcdf(path), default_key=os.path.splitext(os.path.basename(path))[0])
+
+
+__all__ = ["FitRecord", "SCALAR_ATTRS"]
