@@ -95,6 +95,13 @@ def log_spaced_taus(t_min_s: float, t_max_s: float, per_decade: float = 1.0) -> 
     return np.geomspace(t_min_s, t_max_s, n)
 
 
+def decade_aligned_taus(t_min_s: float, t_max_s: float, per_decade: float = 1.0) -> np.ndarray:
+    """Times ``per_decade`` per decade from the decade at or below ``t_min_s`` to the one at or above
+    ``t_max_s`` (s): the grid 10^k, 10^(k + 1/per_decade), ... that does not move with the window's ends."""
+    lo, hi = math.floor(math.log10(t_min_s)), math.ceil(math.log10(t_max_s))
+    return 10.0 ** np.arange(lo, hi + 1e-9, 1.0 / per_decade)
+
+
 def tau_window_from_frequency(omega_rad_s: np.ndarray, extend_decades: float = EXTEND_DECADES) -> tuple[float, float]:
     """Span of identifiable times of a frequency window: ``(1/w_max, 1/w_min)`` widened by ``extend_decades``, s."""
     w = np.asarray(omega_rad_s, float)

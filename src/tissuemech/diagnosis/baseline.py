@@ -20,7 +20,6 @@
 """
 from __future__ import annotations
 
-import json
 import re
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -31,12 +30,12 @@ import xarray as xr
 from scipy.optimize import nnls
 
 from .. import fitting
-from ..canonical import read_netcdf
 from ..models.base import ConstitutiveModel, ResponseNotSupported
 from ..models.beyond_qlv import PipkinRogersModel
 from ..models.plate import oscillation_moduli
 from ..models.qlv import QLVModel, instantaneous_law
 from ..models.registry import get_model
+from ..spectra import decade_aligned_taus
 
 
 def read_fit_record(path: str | Path) -> dict:
@@ -258,8 +257,8 @@ def window_taus(window: Mapping, per_decade: float = 1.0) -> np.ndarray:
     t0, t1 = window.get("t_min_s", np.nan), window.get("t_max_s", np.nan)
     if not (np.isfinite(t0) and np.isfinite(t1) and 0 < t0 <= t1):
         return np.array([])
-    lo, hi = np.floor(np.log10(t0)), np.ceil(np.log10(t1))
-    return 10.0 ** np.arange(lo, max(hi, lo + 1.0) + 1e-9, 1.0 / per_decade)
+    # at least one decade: up to the decade above t_min's
+    return decade_aligned_taus(t0, max(t1, 10.0 ** (np.floor(np.log10(t0)) + 1.0)), per_decade)
 
 
 #: grid density of :func:`nnls_relaxation_times` (times per decade); dense enough that a mode lies within

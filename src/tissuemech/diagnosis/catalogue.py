@@ -52,9 +52,10 @@ import xarray as xr
 from scipy.optimize import least_squares
 
 from .. import stats as st
+from ..spectra import decade_aligned_taus, prony_complex_modulus
 from ..tts import run_temperature_c
-from .evidence import (booij_thoone, condition_label, estimate_noise, fit_prony_relaxation, log_spaced_taus,
-                       noise_sd, nominal_strain, prony_complex_modulus, run_id)
+from .evidence import (booij_thoone, condition_label, estimate_noise, fit_prony_relaxation, noise_sd,
+                       nominal_strain, run_id)
 
 CATALOGUE_IDS: tuple[str, ...] = (
     "nonseparable_relaxation", "rim_stress_nonlinearity", "wall_slip", "elapsed_time_drift",
@@ -1521,7 +1522,7 @@ def detect_finite_rise_time(ctx: DiagnosisContext) -> dict:
     parts, texts, fix = [], [], None
     sweep = _measured_sweep(ctx)
     tmax = max(float(r["time"].values.max()) for r in small)
-    taus = log_spaced_taus(t_r / 10.0, tmax)
+    taus = decade_aligned_taus(t_r / 10.0, tmax)
     # weights from the noise of these relaxations themselves (evidence.estimate_noise), not an instrument constant
     relax_noise = estimate_noise(small)
     fits = []

@@ -29,7 +29,7 @@ Cross-test consistency
 ----------------------
 :func:`fit_prony_relaxation` identifies a Prony spectrum (fixed log-spaced times, NNLS, ``science.md``
 4.1) from relaxation data, either treating the ramp as a step or through the actual strain history (the
-exact recursion of :mod:`tissuemech.models.recursion`); :func:`prony_complex_modulus` interconverts it to
+exact recursion of :mod:`tissuemech.models.recursion`); :func:`tissuemech.spectra.prony_complex_modulus` interconverts it to
 G', G''; :func:`booij_thoone` is the local Kramers-Kronig estimate G'' ~ (pi/2) dG'/dln(omega).
 """
 from __future__ import annotations
@@ -382,12 +382,6 @@ def residual_table_to_xarray(table: pd.DataFrame) -> xr.Dataset:
 # ------------------------------------------------------------------------------------------------
 # cross-test consistency (linear viscoelastic interconversion)
 # ------------------------------------------------------------------------------------------------
-def log_spaced_taus(t_min_s: float, t_max_s: float, per_decade: float = 1.0) -> np.ndarray:
-    """Relaxation times one (or ``per_decade``) per decade covering [t_min, t_max] (s)."""
-    lo, hi = np.floor(np.log10(t_min_s)), np.ceil(np.log10(t_max_s))
-    return 10.0 ** np.arange(lo, hi + 1e-9, 1.0 / per_decade)
-
-
 def fit_prony_relaxation(time_s: np.ndarray, stress_pa: np.ndarray, strain: np.ndarray, taus_s: np.ndarray,
                          ramp_aware: bool = True, weights: np.ndarray | None = None) -> dict:
     """Linear Prony spectrum G(t) = G_inf + sum_i G_i exp(-t/tau_i) from one relaxation test, by NNLS.
@@ -426,15 +420,6 @@ def fit_prony_relaxation(time_s: np.ndarray, stress_pa: np.ndarray, strain: np.n
     return {"g_inf_pa": float(coef[0]), "g_pa": coef[1:], "taus_s": taus,
             "rss": float(np.sum(((y - pred) * w) ** 2)), "n": int(y.size), "k": int(np.count_nonzero(coef)),
             "predicted": pred, "mask": mask}
-
-
-def prony_complex_modulus(g_inf_pa: float, g_pa: np.ndarray, taus_s: np.ndarray,
-                          omega_rad_s: np.ndarray) -> np.ndarray:
-    """G*(omega) of a Prony series: G' = G_inf + sum G_i w^2 t^2/(1+w^2 t^2), G'' = sum G_i w t/(1+w^2 t^2)."""
-    w = np.asarray(omega_rad_s, float)[:, None]
-    wt = w * np.asarray(taus_s, float)[None, :]
-    gi = np.asarray(g_pa, float)[None, :]
-    return g_inf_pa + np.sum(gi * wt ** 2 / (1 + wt ** 2), axis=1) + 1j * np.sum(gi * wt / (1 + wt ** 2), axis=1)
 
 
 def booij_thoone(omega_rad_s: np.ndarray, storage_pa: np.ndarray) -> np.ndarray:

@@ -52,7 +52,6 @@ that would separate them (:func:`tissuemech.diagnosis.generic.confounded_covaria
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Sequence
 from pathlib import Path
 
