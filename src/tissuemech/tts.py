@@ -427,3 +427,112 @@ def predict_from_mastercurve(master_x: np.ndarray, master_y: np.ndarray, log_w: 
             else:
                 out[i, k] = np.mean(my)
     return out - log_bT
+
+
+# ------------------------------------------------------------------------------------------------
+# the pipeline's TTS scope: tts.nc, the shift-function card, the Abaqus *TRS block
+# ------------------------------------------------------------------------------------------------
+#: temperatures closer than this [degC] are one temperature when counting the distinct ones of a dataset
+SAME_TEMPERATURE_C = 0.5
+
+
+def distinct_temperatures(temperatures_c) -> list[float]:
+    """Sorted distinct finite temperatures [degC] (values within :data:`SAME_TEMPERATURE_C` merged)."""
+    out: list[float] = []
+    for t in sorted(float(v) for v in temperatures_c if v is not None and np.isfinite(float(v))):
+        if not out or t - out[-1] > SAME_TEMPERATURE_C:
+            out.append(t)
+    return out
+
+
+def tts_dataset(sweeps: Sequence[Sweep], t_ref_c: float | None = None, vertical: bool = False) -> xr.Dataset:
+    """Shift factors, WLF and Arrhenius fits and the mastercurve of ``sweeps`` as one dataset (``tts.nc``).
+
+    Layout: dim ``temperature`` (sorted) with ``temperature_c`` [degC], ``shift_factor`` (a_T, reduced
+    omega = a_T omega), ``log_aT`` and ``log_aT_stderr`` [decades], ``log_bT`` and ``log_bT_stderr`` (vertical
+    shifts; zeros when not fitted), ``log_aT_wlf`` and ``log_aT_arrhenius`` (the fitted shift functions),
+    ``run`` (source run); dim ``pair`` (adjacent temperatures) with ``pair_rms`` [decades]; dim ``master``
+    with the reduced data ``log_omega_reduced``, ``log_storage_reduced``, ``log_loss_reduced`` (log10 of
+    rad/s and Pa) and ``master_temperature_c``. Attributes: ``t_ref_c``, ``vertical``, ``n_temperatures``,
+    ``n_shifted`` (finite shifts), ``wlf_<key>`` and ``arrhenius_<key>`` (parameters, ``*_stderr``,
+    ``rms_decades``, ``success``, ``n``) and ``criterion`` (where the shift criterion is documented).
+    """
+    sw = sorted(sweeps, key=lambda s: s.temperature_c)
+    res = shift_factors(sw, t_ref_c=t_ref_c, vertical=vertical)
+    wlf = fit_wlf(res.temperatures_c, res.log_aT, res.log_aT_stderr, res.t_ref_c)
+    arr = fit_arrhenius(res.temperatures_c, res.log_aT, res.log_aT_stderr, res.t_ref_c)
+    temps = res.temperatures_c
+    nan = np.full(temps.size, np.nan)
+    la_wlf = wlf_log_aT(temps, wlf["c1"], wlf["c2_k"], res.t_ref_c) if wlf.get("success") else nan
+    la_arr = arrhenius_log_aT(temps, arr["ea_j_per_mol"], res.t_ref_c) if arr.get("success") else nan
+    mx, my, mt = [], [], []
+    for s, a, b in zip(sw, res.log_aT, res.log_bT):
+        if np.isfinite(a) and np.isfinite(b):
+            mx.append(s.log_w + a)
+            my.append(s.log_g + b)
+            mt.append(np.full(s.omega.size, s.temperature_c))
+    mx, mt = (np.concatenate(v) if v else np.empty(0) for v in (mx, mt))
+    my = np.vstack(my) if my else np.empty((0, 2))
+    order = np.argsort(mx, kind="stable")
+    attrs = {"t_ref_c": res.t_ref_c, "vertical": int(vertical), "n_temperatures": int(temps.size),
+             "n_shifted": int(np.isfinite(res.log_aT).sum()),
+             "criterion": "tissuemech.tts module docstring (adjacent pairs, symmetric log G', log G'' misfit)"}
+    for prefix, fit in (("wlf", wlf), ("arrhenius", arr)):
+        for key, value in fit.items():
+            if key == "t_ref_c":
+                continue
+            attrs[f"{prefix}_{key}"] = int(value) if isinstance(value, bool) else value
+    return xr.Dataset(
+        {"shift_factor": ("temperature", 10.0 ** res.log_aT, {"units": "1", "long_name": "a_T (omega_r = a_T omega)"}),
+         "log_aT": ("temperature", res.log_aT, {"units": "1", "long_name": "log10 a_T"}),
+         "log_aT_stderr": ("temperature", res.log_aT_stderr, {"units": "1"}),
+         "log_bT": ("temperature", res.log_bT, {"units": "1", "long_name": "log10 b_T (G_r = b_T G)"}),
+         "log_bT_stderr": ("temperature", res.log_bT_stderr, {"units": "1"}),
+         "log_aT_wlf": ("temperature", la_wlf, {"units": "1", "long_name": "fitted WLF log10 a_T"}),
+         "log_aT_arrhenius": ("temperature", la_arr, {"units": "1", "long_name": "fitted Arrhenius log10 a_T"}),
+         "run": ("temperature", np.array(res.labels, dtype=str)),
+         "pair_rms": ("pair", res.pair_rms, {"units": "1", "long_name": "RMS log10 misfit of adjacent sweeps"}),
+         "log_omega_reduced": ("master", mx[order], {"units": "log10(rad/s)"}),
+         "log_storage_reduced": ("master", my[order, 0] if my.size else my[:, 0], {"units": "log10(Pa)"}),
+         "log_loss_reduced": ("master", my[order, 1] if my.size else my[:, 1], {"units": "log10(Pa)"}),
+         "master_temperature_c": ("master", mt[order], {"units": "degC"})},
+        coords={"temperature_c": ("temperature", temps, {"units": "degC"})}, attrs=attrs)
+
+
+def trs_abaqus_block(t_ref_c: float, c1: float, c2_k: float) -> str:
+    """Abaqus ``*TRS, DEFINITION=WLF`` block (data line ``theta_0, C1, C2``).
+
+    Abaqus's WLF form is log10 A = -C1 (theta - theta_0) / (C2 + theta - theta_0), the one of
+    :func:`wlf_log_aT`; theta in the model's temperature unit (degC here; C2 is a temperature difference, so K =
+    degC). In an input file the block follows the ``*VISCOELASTIC`` option of the same ``*MATERIAL``, whose
+    Prony times are those at theta_0."""
+    return ("** time-temperature shift (WLF), fitted by tissuemech.tts; place after *VISCOELASTIC\n"
+            f"*TRS, DEFINITION=WLF\n{t_ref_c:.6g}, {c1:.8g}, {c2_k:.8g}\n")
+
+
+def tts_card(ds: xr.Dataset, dataset: str = "") -> dict:
+    """Shift-function card (JSON-ready dict) of a :func:`tts_dataset` result: WLF (the card's form), Arrhenius
+    for comparison, standard errors, the temperature range it was fitted on and the Abaqus ``*TRS`` text
+    (None when the WLF fit failed, with the reason in ``notes``)."""
+    a = ds.attrs
+    temps = ds["temperature_c"].values
+    ok = np.isfinite(ds["log_aT"].values)
+    wlf_ok = bool(a.get("wlf_success"))
+    card = {
+        "kind": "time_temperature_shift", "dataset": dataset, "shift_function": "WLF" if wlf_ok else None,
+        "t_ref_c": float(a["t_ref_c"]), "vertical_shift": bool(a.get("vertical")),
+        "wlf": {k: a.get(f"wlf_{k}") for k in ("c1", "c1_stderr", "c2_k", "c2_k_stderr", "rms_decades", "n")},
+        "arrhenius": {k: a.get(f"arrhenius_{k}") for k in ("ea_j_per_mol", "ea_j_per_mol_stderr", "rms_decades",
+                                                            "n")},
+        "formula": {"wlf": "log10 aT = -C1 (T - Tref) / (C2 + T - Tref), T in degC, C2 in K",
+                    "arrhenius": "log10 aT = Ea / (R ln 10) (1/T - 1/Tref), T in K"},
+        "valid_range": {"temperature_c": [float(temps[ok].min()), float(temps[ok].max())] if ok.any() else None,
+                        "n_temperatures": int(temps.size), "n_shifted": int(ok.sum())},
+        "abaqus_trs": trs_abaqus_block(float(a["t_ref_c"]), float(a["wlf_c1"]), float(a["wlf_c2_k"]))
+        if wlf_ok else None,
+        "notes": [] if wlf_ok else [f"WLF fit failed: {a.get('wlf_message', '')}; no *TRS block"],
+    }
+    for key in ("wlf", "arrhenius"):   # JSON has no NaN: a missing or non-finite value is null
+        card[key] = {k: (None if v is None or not np.isfinite(float(v)) else int(v) if k == "n" else float(v))
+                     for k, v in card[key].items()}
+    return card
