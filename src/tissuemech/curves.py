@@ -84,10 +84,14 @@ _log = logging.getLogger(__name__)
 #: nominal condition attributes (run attrs) that, with the test, define a condition
 CONDITION_ATTRS: tuple[str, ...] = ("shear_rate_1_per_s", "strain_pct", "stress_pa", "frequency_hz")
 
-#: settings that become part of a test's condition where its runs carry two or more distinct values (rounded to
-#: 0.1): a temperature series (e.g. frequency sweeps for time-temperature superposition) gives one curve per
-#: temperature instead of an average across temperatures. A single temperature leaves the condition unchanged.
+#: settings that become part of a test's condition where its runs carry two or more distinct values (after
+#: rounding to :data:`SETTING_RESOLUTION`): a temperature series (e.g. frequency sweeps for time-temperature
+#: superposition) gives one curve per temperature instead of an average across temperatures. A single
+#: temperature leaves the condition unchanged.
 VARYING_CONDITION_ATTRS: tuple[str, ...] = ("temperature_c",)
+#: values of a varying setting closer than this are one value (rounded to its multiples); 0.5 degC separates
+#: temperature set points, not the +-0.1 degC stability of a Peltier or oven (the diagnosis' temperature rule)
+SETTING_RESOLUTION: dict[str, float] = {"temperature_c": 0.5}
 
 #: numeric run attributes summarised per curve (median over members; geometry is needed by plate fits)
 SETTING_ATTRS: tuple[str, ...] = ("radius_m", "gap_m", "temperature_c", "rise_time_s")
@@ -155,12 +159,18 @@ def condition_label(condition: Mapping[str, float] | None) -> str:
     return ";".join(parts) if parts else _NO_CONDITION
 
 
-def _setting(run: xr.Dataset, key: str) -> float | None:
+def rounded_setting(value, key: str = "temperature_c") -> float | None:
+    """``value`` rounded to the multiples of ``SETTING_RESOLUTION[key]``; None when not a finite number."""
     try:
-        value = float(run.attrs.get(key))
+        value = float(value)
     except (TypeError, ValueError):
         return None
-    return round(value, 1) if math.isfinite(value) else None
+    step = SETTING_RESOLUTION.get(key, 0.1)
+    return float(round(value / step) * step) if math.isfinite(value) else None
+
+
+def _setting(run: xr.Dataset, key: str) -> float | None:
+    return rounded_setting(run.attrs.get(key), key)
 
 
 def varying_settings(runs: Sequence[xr.Dataset]) -> set[tuple[str, str]]:

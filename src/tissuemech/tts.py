@@ -47,6 +47,7 @@ import numpy as np
 import xarray as xr
 from scipy.optimize import least_squares, minimize_scalar
 
+from .curves import rounded_setting
 from .stats import information_criteria
 
 #: gas constant, J/(mol K)
@@ -432,17 +433,11 @@ def predict_from_mastercurve(master_x: np.ndarray, master_y: np.ndarray, log_w: 
 # ------------------------------------------------------------------------------------------------
 # the pipeline's TTS scope: tts.nc, the shift-function card, the Abaqus *TRS block
 # ------------------------------------------------------------------------------------------------
-#: temperatures closer than this [degC] are one temperature when counting the distinct ones of a dataset
-SAME_TEMPERATURE_C = 0.5
-
-
 def distinct_temperatures(temperatures_c) -> list[float]:
-    """Sorted distinct finite temperatures [degC] (values within :data:`SAME_TEMPERATURE_C` merged)."""
-    out: list[float] = []
-    for t in sorted(float(v) for v in temperatures_c if v is not None and np.isfinite(float(v))):
-        if not out or t - out[-1] > SAME_TEMPERATURE_C:
-            out.append(t)
-    return out
+    """Sorted distinct finite temperatures [degC], rounded as the averaging rounds them
+    (:func:`tissuemech.curves.rounded_setting`: multiples of 0.5 degC), so that the DAG's "sweeps at >= 2
+    temperatures" and the per-temperature averages agree."""
+    return sorted({t for t in (rounded_setting(v) for v in temperatures_c) if t is not None})
 
 
 def tts_dataset(sweeps: Sequence[Sweep], t_ref_c: float | None = None, vertical: bool = False) -> xr.Dataset:
