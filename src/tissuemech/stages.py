@@ -489,39 +489,3 @@ def run_spectrum(averages_path, out_nc) -> xr.Dataset:
     ds = spectra_from_averages(read_netcdf(averages_path))
     write_netcdf(ds, out_nc)
     return ds
-
-
-def run_tts(runs_dir, out_nc, card_json, card_inp, figure, *, dataset: str = "", t_ref_c: float | None = None,
-            vertical: bool = False, exclude_flagged: bool = True) -> xr.Dataset:
-    """The TTS scope of a dataset: every frequency-sweep run of ``runs_dir`` (quality-flagged points dropped when
-    ``exclude_flagged``) at its logged temperature -> ``tts.nc`` (:func:`tissuemech.tts.tts_dataset`, plus
-    ``held_out_rms`` per temperature and its overall attributes ``held_out_rms_decades`` (shifted) and
-    ``held_out_rms_unshifted_decades``, from :func:`tissuemech.diagnosis.temperature.leave_one_temperature_out`), the
-    shift-function card (JSON, :func:`tissuemech.tts.tts_card`), its Abaqus ``*TRS`` block and the mastercurve
-    figure (none when ``figure`` is None). Raises ``ValueError`` when the sweeps carry fewer than two temperatures."""
-    from . import plots, tts
-    from .curves import drop_flagged
-
-    runs = [read_netcdf(p) for p in sorted(Path(runs_dir).glob("*.nc"))]
-    sweeps = tts.sweeps_from_runs([drop_flagged(r) if exclude_flagged else r for r in runs])
-    ds = tts.tts_dataset(sweeps, t_ref_c=t_ref_c, vertical=vertical)
-    ds.attrs["dataset"] = dataset
-    # held-out check: each temperature predicted from the mastercurve of the others (the diagnosis' fix test)
-    from .diagnosis.temperature import leave_one_temperature_out
-
-    held = leave_one_temperature_out(sweeps)
-    per_t = {round(float(t), 1): v[1] for t, v in held["per_temperature"].items()}
-    ds["held_out_rms"] = ("temperature", np.array([per_t.get(round(float(t), 1), np.nan)
-                                                   for t in ds["temperature_c"].values]),
-                          {"units": "1", "long_name": "RMS log10 error of the temperature predicted from the "
-                                                      "mastercurve of the others (leave-one-temperature-out)"})
-    ds.attrs.update(held_out_rms_decades=held["after"], held_out_rms_unshifted_decades=held["before"],
-                    held_out_folds=held["n_folds"])
-    write_netcdf(ds, out_nc)
-    card = tts.tts_card(ds, dataset)
-    write_text(json.dumps(card, indent=2, allow_nan=False, default=str) + "\n", card_json)
-    write_text(card["abaqus_trs"] or "** no WLF shift function: " + "; ".join(card["notes"]) + "\n", card_inp)
-    if figure is not None:
-        plots.plot_mastercurve(ds, figure, title=f"{dataset}: {ds.attrs['n_shifted']} of "
-                                                 f"{ds.attrs['n_temperatures']} temperatures shifted")
-    return ds

@@ -39,15 +39,18 @@ Entry points: :func:`sweeps_from_runs` (canonical runs -> :class:`Sweep`), :func
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+import json
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import lmfit
 import numpy as np
 import xarray as xr
 from scipy.optimize import least_squares, minimize_scalar
 
-from .curves import rounded_setting
+from .canonical import read_netcdf, write_netcdf, write_text
+from .curves import drop_flagged, rounded_setting
 from .stats import information_criteria
 
 #: gas constant, J/(mol K)
@@ -531,3 +534,43 @@ def tts_card(ds: xr.Dataset, dataset: str = "") -> dict:
         card[key] = {k: (None if v is None or not np.isfinite(float(v)) else int(v) if k == "n" else float(v))
                      for k, v in card[key].items()}
     return card
+
+
+def run_tts(runs_dir, out_nc, card_json, card_inp, figure=None, *, dataset: str = "", t_ref_c: float | None = None,
+            vertical: bool = False, exclude_flagged: bool = True,
+            held_out: Callable[[Sequence[Sweep]], dict] | None = None) -> xr.Dataset:
+    """The pipeline's TTS scope of one dataset (rule ``tts``).
+
+    Every frequency-sweep run of ``runs_dir`` (quality-flagged points dropped when ``exclude_flagged``) at its
+    logged temperature -> ``out_nc`` (:func:`tts_dataset`), the shift-function card ``card_json``
+    (:func:`tts_card`), its Abaqus ``*TRS`` block ``card_inp`` and the mastercurve figure (``figure``; none when
+    None). ``held_out``: a leave-one-temperature-out check, ``sweeps -> {"after", "before", "n_folds",
+    "per_temperature": {T: [before, after]}}`` (the workflow passes
+    :func:`tissuemech.diagnosis.temperature.leave_one_temperature_out`, which sits above this module), stored as
+    ``held_out_rms`` per temperature and the attributes ``held_out_rms_decades`` (shifted),
+    ``held_out_rms_unshifted_decades`` and ``held_out_folds``. Raises ``ValueError`` when the sweeps carry fewer
+    than two temperatures.
+    """
+    runs = [read_netcdf(p) for p in sorted(Path(runs_dir).glob("*.nc"))]
+    sweeps = sweeps_from_runs([drop_flagged(r) if exclude_flagged else r for r in runs])
+    ds = tts_dataset(sweeps, t_ref_c=t_ref_c, vertical=vertical)
+    ds.attrs["dataset"] = dataset
+    if held_out is not None:
+        held = held_out(sweeps)
+        per_t = {round(float(t), 1): v[1] for t, v in held["per_temperature"].items()}
+        ds["held_out_rms"] = ("temperature", np.array([per_t.get(round(float(t), 1), np.nan)
+                                                       for t in ds["temperature_c"].values]),
+                              {"units": "1", "long_name": "RMS log10 error of the temperature predicted from the "
+                                                          "mastercurve of the others (leave-one-temperature-out)"})
+        ds.attrs.update(held_out_rms_decades=held["after"], held_out_rms_unshifted_decades=held["before"],
+                        held_out_folds=held["n_folds"])
+    write_netcdf(ds, out_nc)
+    card = tts_card(ds, dataset)
+    write_text(json.dumps(card, indent=2, allow_nan=False, default=str) + "\n", card_json)
+    write_text(card["abaqus_trs"] or "** no WLF shift function: " + "; ".join(card["notes"]) + "\n", card_inp)
+    if figure is not None:
+        from .plots import plot_mastercurve
+
+        plot_mastercurve(ds, figure, title=f"{dataset}: {ds.attrs['n_shifted']} of {ds.attrs['n_temperatures']} "
+                                           "temperatures shifted")
+    return ds

@@ -98,7 +98,7 @@ def test_run_tts_writes_the_pipeline_scope(tmp_path):
     import json
 
     from tissuemech.canonical import make_run_dataset, read_netcdf, write_netcdf
-    from tissuemech.stages import run_tts
+    from tissuemech.diagnosis.temperature import leave_one_temperature_out
 
     temps = np.arange(20.0, 61.0, 10.0)
     for k, sw in enumerate(synthetic_sweeps(temps, noise=0.003)):
@@ -108,7 +108,8 @@ def test_run_tts_writes_the_pipeline_scope(tmp_path):
                                 "order": k + 1})
         write_netcdf(run, tmp_path / "runs" / f"s_{k}.nc")
     out = {name: tmp_path / name for name in ("tts.nc", "card.json", "card.inp")}
-    run_tts(tmp_path / "runs", *out.values(), None, dataset="synthetic", t_ref_c=TREF)  # figure: drawn below
+    tts.run_tts(tmp_path / "runs", *out.values(), dataset="synthetic", t_ref_c=TREF,   # figure: built below
+                held_out=leave_one_temperature_out)
     ds = read_netcdf(out["tts.nc"])
     np.testing.assert_allclose(ds["temperature_c"], temps)
     assert np.all(np.isfinite(ds["shift_factor"])) and ds.attrs["n_shifted"] == 5
