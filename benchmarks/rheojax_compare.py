@@ -8,6 +8,9 @@ Data, read in place from ``../shared/data/real`` (the real exports of issue 15; 
 * ``cnf``   -- the mean relaxation modulus of the ten CNF relaxations for t >= ``--t-min`` (default 1 s: before
   about 0.5 s the exported modulus rings through zero after the step), fitted as an ideal step of unit strain.
 
+Then the shift factors of all 20 LIMS sweeps at Tref = ``--temperature`` (tissuemech's automatic shift with
+standard errors beside RheoJAX's ``Mastercurve(auto_shift=True)``; the issue's RheoJAX run gave +8.55 .. -3.98).
+
 Models (tissuemech key -> RheoJAX class): prony3/prony4 -> GeneralizedMaxwell(n_modes=3/4), sls1 -> Zener,
 fractional_zener -> FractionalZenerSolidSolid, prony2 -> GeneralizedMaxwell(n_modes=2). Both sides are scored by
 the same relative RMSE, sqrt(mean(((model - data)/data)^2)) over G' and G'' (sweeps) or G(t) (relaxation), from
@@ -105,6 +108,42 @@ def theirs(rheojax, key: str, kind: str, x, y):
     return {n: float(params.get_value(n)) for n in names}, float(np.sqrt(np.mean(rel ** 2))), seconds
 
 
+def tts_comparison(rheojax, t_ref_c: float) -> None:
+    """Shift factors of the 20 LIMS sweeps at ``t_ref_c``: tissuemech (with standard errors) and, when present,
+    RheoJAX's automatic shift (``Mastercurve(auto_shift=True)``, temperatures in K)."""
+    from tissuemech import tts
+
+    blocks = read_export(REAL / "ta_lims" / "ares_g2_frequency_sweep_tts.txt")
+    sweeps = [tts.Sweep(float(np.nanmedian(b.data["temperature"])), b.data["angular_frequency"],
+                        b.data["storage_modulus"], b.data["loss_modulus"], b.name) for b in blocks]
+    t0 = time.perf_counter()
+    res = tts.shift_factors(sweeps, t_ref_c=t_ref_c)
+    ours_s = time.perf_counter() - t0
+    theirs_at, theirs_s, note = {}, float("nan"), "RheoJAX absent"
+    if rheojax is not None:
+        try:
+            from rheojax.core.data import RheoData
+            from rheojax.transforms.mastercurve import Mastercurve
+
+            data = [RheoData(x=s.omega, y=np.column_stack([s.storage, s.loss]), domain="frequency",
+                             metadata={"temperature": s.temperature_c + 273.15}) for s in sweeps]
+            t0 = time.perf_counter()
+            mc = Mastercurve(reference_temp=float(res.t_ref_c) + 273.15, auto_shift=True)
+            mc.transform(data)
+            theirs_s = time.perf_counter() - t0
+            temps_k, log_at = mc.get_auto_shift_factors()
+            theirs_at = {round(float(t) - 273.15): float(v) for t, v in zip(temps_k, log_at)}
+            note = "RheoJAX Mastercurve(auto_shift=True)"
+        except Exception as exc:  # noqa: BLE001 - reported, the table still prints our side
+            note = f"RheoJAX failed: {type(exc).__name__}: {exc}"
+    print(f"\nTTS of the LIMS series at Tref = {res.t_ref_c:.1f} degC: tissuemech {ours_s:.2f} s, {note}"
+          + (f" {theirs_s:.2f} s" if np.isfinite(theirs_s) else ""))
+    print(f"{'T [degC]':>9} {'log aT (ours)':>14} {'se':>7} {'log aT (RheoJAX)':>17} {'difference':>11}")
+    for t, la, se in zip(res.temperatures_c, res.log_aT, res.log_aT_stderr):
+        other = theirs_at.get(round(float(t)), float("nan"))
+        print(f"{t:>9.1f} {la:>14.3f} {se:>7.3f} {other:>17.3f} {la - other:>11.3f}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--temperature", type=float, default=30.0, help="LIMS sweep temperature [degC]")
@@ -133,6 +172,7 @@ def main() -> None:
                     print(f"{label:<18} {key:<17} {side:<10} {rmse:>10.4f} {seconds:>9.3f}  {text}")
                 except Exception as exc:  # noqa: BLE001 - one failed fit is a line of the table, not the end
                     print(f"{label:<18} {key:<17} {side:<10} {'failed':>10} {'':>9}  {type(exc).__name__}: {exc}")
+    tts_comparison(rheojax, args.temperature)
 
 
 def split(sweep):
