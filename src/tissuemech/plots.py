@@ -416,7 +416,8 @@ def figure_mastercurve(tts: xr.Dataset, title: str | None = None) -> Figure:
     cmap = matplotlib.colormaps["coolwarm"]
     for name, marker in (("log_storage_reduced", "o"), ("log_loss_reduced", "^")):
         sc = axes[0].scatter(x, 10.0 ** np.asarray(tts[name].values, float), c=mt, cmap=cmap, norm=norm, s=9,
-                             marker=marker, label="G′ (reduced)" if "storage" in name else "G″ (reduced)")
+                             marker=marker)
+        axes[0].plot([], [], marker, color="0.4", ms=4, label="G′ (reduced)" if "storage" in name else "G″ (reduced)")
     axes[0].set_xscale("log")
     axes[0].set_yscale("log")
     axes[0].set_xlabel("reduced angular frequency a_T ω [rad/s]")
