@@ -35,7 +35,9 @@ caller compares them).
 
 Entry points: :func:`sweeps_from_runs` (canonical runs -> :class:`Sweep`), :func:`shift_factors`,
 :func:`fit_wlf`, :func:`fit_arrhenius`, :func:`wlf_log_aT`, :func:`arrhenius_log_aT`,
-:func:`mastercurve`, :func:`predict_from_mastercurve`.
+:func:`mastercurve`, :func:`predict_from_mastercurve`; the pipeline's TTS scope: :func:`run_tts` (runs ->
+``tts.nc`` via :func:`tts_dataset`, the shift-function card :func:`tts_card` with its Abaqus ``*TRS`` block
+:func:`trs_abaqus_block`, the mastercurve figure) and :func:`distinct_temperatures` (when the scope runs).
 """
 from __future__ import annotations
 
