@@ -1,7 +1,8 @@
 """Sample averages of canonical runs per test and condition, on common grids.
 
 A *condition* is a test kind plus its nominal settings taken from the run attributes
-(:data:`CONDITION_ATTRS`: ``shear_rate_1_per_s``, ``strain_pct``, ``stress_pa``, ``frequency_hz``). All runs of
+(:data:`CONDITION_ATTRS`: ``shear_rate_1_per_s``, ``strain_pct``, ``stress_pa``, ``frequency_hz``; plus
+``temperature_c`` for a test whose runs carry several temperatures, :data:`VARYING_CONDITION_ATTRS`). All runs of
 one condition are resampled onto one grid of the test's independent variable (:data:`GRID_SPECS`): log-spaced
 time for stress relaxation and creep, log-spaced strain amplitude for amplitude sweeps, log-spaced frequency for
 frequency sweeps, log-spaced shear rate for flow curves, linear strain / stretch / displacement for ramps.
@@ -83,6 +84,15 @@ _log = logging.getLogger(__name__)
 #: nominal condition attributes (run attrs) that, with the test, define a condition
 CONDITION_ATTRS: tuple[str, ...] = ("shear_rate_1_per_s", "strain_pct", "stress_pa", "frequency_hz")
 
+#: settings that become part of a test's condition where its runs carry two or more distinct values (after
+#: rounding to :data:`SETTING_RESOLUTION`): a temperature series (e.g. frequency sweeps for time-temperature
+#: superposition) gives one curve per temperature instead of an average across temperatures. A single
+#: temperature leaves the condition unchanged.
+VARYING_CONDITION_ATTRS: tuple[str, ...] = ("temperature_c",)
+#: values of a varying setting closer than this are one value (rounded to its multiples); 0.5 degC separates
+#: temperature set points, not the +-0.1 degC stability of a Peltier or oven (the diagnosis' temperature rule)
+SETTING_RESOLUTION: dict[str, float] = {"temperature_c": 0.5}
+
 #: numeric run attributes summarised per curve (median over members; geometry is needed by plate fits)
 SETTING_ATTRS: tuple[str, ...] = ("radius_m", "gap_m", "temperature_c", "rise_time_s")
 
@@ -144,8 +154,34 @@ def condition_label(condition: Mapping[str, float] | None) -> str:
     """
     if not condition:
         return _NO_CONDITION
-    parts = [f"{key}={float(condition[key]):.6g}" for key in CONDITION_ATTRS if key in condition]
+    parts = [f"{key}={float(condition[key]):.6g}" for key in CONDITION_ATTRS + VARYING_CONDITION_ATTRS
+             if key in condition]
     return ";".join(parts) if parts else _NO_CONDITION
+
+
+def rounded_setting(value, key: str = "temperature_c") -> float | None:
+    """``value`` rounded to the multiples of ``SETTING_RESOLUTION[key]``; None when not a finite number."""
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        return None
+    step = SETTING_RESOLUTION.get(key, 0.1)
+    return float(round(value / step) * step) if math.isfinite(value) else None
+
+
+def _setting(run: xr.Dataset, key: str) -> float | None:
+    return rounded_setting(run.attrs.get(key), key)
+
+
+def varying_settings(runs: Sequence[xr.Dataset]) -> set[tuple[str, str]]:
+    """(test, setting) pairs of :data:`VARYING_CONDITION_ATTRS` whose runs carry >= 2 distinct values."""
+    seen: dict[tuple[str, str], set] = defaultdict(set)
+    for run in runs:
+        for key in VARYING_CONDITION_ATTRS:
+            value = _setting(run, key)
+            if value is not None:
+                seen[(str(run.attrs.get("test", "")), key)].add(value)
+    return {pair for pair, values in seen.items() if len(values) >= 2}
 
 
 def _grid_x(run: xr.Dataset, test: str) -> np.ndarray:
@@ -431,6 +467,7 @@ def average_runs(
     groups: dict[tuple[str, str], list[xr.Dataset]] = defaultdict(list)
     conditions: dict[tuple[str, str], dict[str, float]] = {}
     n_excluded = 0
+    varying = varying_settings(runs)
     for run in runs:
         test = str(run.attrs.get("test", ""))
         if test not in GRID_SPECS:
@@ -443,6 +480,9 @@ def average_runs(
                 continue
             run = kept
         condition = condition_of(run)
+        for setting in VARYING_CONDITION_ATTRS:
+            if (test, setting) in varying and _setting(run, setting) is not None:
+                condition[setting] = _setting(run, setting)
         key = (test, condition_label(condition))
         groups[key].append(run)
         conditions[key] = condition

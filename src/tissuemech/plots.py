@@ -403,6 +403,54 @@ def figure_curves(series: Mapping[str, tuple[np.ndarray, np.ndarray]], *, xlabel
     return fig
 
 
+def figure_mastercurve(tts: xr.Dataset, title: str | None = None) -> Figure:
+    """Time-temperature superposition (a ``tts.nc`` dataset): the reduced G', G'' against a_T omega coloured by
+    temperature (left), log a_T(T) with its standard errors and the fitted WLF/Arrhenius curves (right)."""
+    fig, axes = _new_figure(ncols=2)
+    temps = np.asarray(tts["temperature_c"].values, float)
+    mt = np.asarray(tts["master_temperature_c"].values, float)
+    x = 10.0 ** np.asarray(tts["log_omega_reduced"].values, float)
+    span = (np.nanmin(temps), np.nanmax(temps)) if temps.size else (0.0, 1.0)
+    norm = matplotlib.colors.Normalize(*span) if span[1] > span[0] else matplotlib.colors.Normalize(span[0] - 1,
+                                                                                                    span[0] + 1)
+    cmap = matplotlib.colormaps["coolwarm"]
+    for name, marker in (("log_storage_reduced", "o"), ("log_loss_reduced", "^")):
+        sc = axes[0].scatter(x, 10.0 ** np.asarray(tts[name].values, float), c=mt, cmap=cmap, norm=norm, s=9,
+                             marker=marker)
+        axes[0].plot([], [], marker, color="0.4", ms=4, label="G′ (reduced)" if "storage" in name else "G″ (reduced)")
+    axes[0].set_xscale("log")
+    axes[0].set_yscale("log")
+    axes[0].set_xlabel("reduced angular frequency a_T ω [rad/s]")
+    axes[0].set_ylabel("b_T G′, b_T G″ [Pa]")
+    axes[0].set_title(f"mastercurve at T_ref = {tts.attrs['t_ref_c']:.1f} °C", fontsize=9)
+    axes[0].legend(fontsize=8)
+    fig.colorbar(sc, ax=axes[0], label="temperature [°C]")
+    ax = axes[1]
+    ax.errorbar(temps, tts["log_aT"].values, yerr=tts["log_aT_stderr"].values, fmt="o", ms=3.5, color="0.2",
+                ecolor="0.6", label="shift factors ± se")
+    fine = np.linspace(*span, 200)
+    a = tts.attrs
+    if a.get("wlf_success"):
+        d = fine - a["t_ref_c"]
+        ax.plot(fine, -a["wlf_c1"] * d / (a["wlf_c2_k"] + d), "-", color="C3",
+                label=f"WLF C1 = {a['wlf_c1']:.3g}, C2 = {a['wlf_c2_k']:.3g} K")
+    if a.get("arrhenius_success"):
+        ax.plot(temps, tts["log_aT_arrhenius"].values, "--", color="C0",
+                label=f"Arrhenius Ea = {a['arrhenius_ea_j_per_mol'] / 1e3:.3g} kJ/mol")
+    ax.set_xlabel("temperature T [°C]")
+    ax.set_ylabel("log10 a_T")
+    ax.set_title("shift function", fontsize=9)
+    ax.legend(fontsize=8)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def plot_mastercurve(tts: xr.Dataset, path: str | Path, title: str | None = None) -> list[Path]:
+    """Write :func:`figure_mastercurve` as PNG + SVG."""
+    return save_figure(figure_mastercurve(tts, title=title), path)
+
+
 def plot_force_depth(series: Mapping[str, tuple[np.ndarray, np.ndarray]], path: str | Path, *,
                      reference: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None,
                      title: str | None = None) -> list[Path]:

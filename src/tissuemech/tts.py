@@ -35,18 +35,24 @@ caller compares them).
 
 Entry points: :func:`sweeps_from_runs` (canonical runs -> :class:`Sweep`), :func:`shift_factors`,
 :func:`fit_wlf`, :func:`fit_arrhenius`, :func:`wlf_log_aT`, :func:`arrhenius_log_aT`,
-:func:`mastercurve`, :func:`predict_from_mastercurve`.
+:func:`mastercurve`, :func:`predict_from_mastercurve`; the pipeline's TTS scope: :func:`run_tts` (runs ->
+``tts.nc`` via :func:`tts_dataset`, the shift-function card :func:`tts_card` with its Abaqus ``*TRS`` block
+:func:`trs_abaqus_block`, the mastercurve figure) and :func:`distinct_temperatures` (when the scope runs).
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+import json
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import lmfit
 import numpy as np
 import xarray as xr
 from scipy.optimize import least_squares, minimize_scalar
 
+from .canonical import read_netcdf, write_netcdf, write_text
+from .curves import drop_flagged, rounded_setting
 from .stats import information_criteria
 
 #: gas constant, J/(mol K)
@@ -427,3 +433,146 @@ def predict_from_mastercurve(master_x: np.ndarray, master_y: np.ndarray, log_w: 
             else:
                 out[i, k] = np.mean(my)
     return out - log_bT
+
+
+# ------------------------------------------------------------------------------------------------
+# the pipeline's TTS scope: tts.nc, the shift-function card, the Abaqus *TRS block
+# ------------------------------------------------------------------------------------------------
+def distinct_temperatures(temperatures_c) -> list[float]:
+    """Sorted distinct finite temperatures [degC], rounded as the averaging rounds them
+    (:func:`tissuemech.curves.rounded_setting`: multiples of 0.5 degC), so that the DAG's "sweeps at >= 2
+    temperatures" and the per-temperature averages agree."""
+    return sorted({t for t in (rounded_setting(v) for v in temperatures_c) if t is not None})
+
+
+def tts_dataset(sweeps: Sequence[Sweep], t_ref_c: float | None = None, vertical: bool = False) -> xr.Dataset:
+    """Shift factors, WLF and Arrhenius fits and the mastercurve of ``sweeps`` as one dataset (``tts.nc``).
+
+    Layout: dim ``temperature`` (sorted) with ``temperature_c`` [degC], ``shift_factor`` (a_T, reduced
+    omega = a_T omega), ``log_aT`` and ``log_aT_stderr`` [decades], ``log_bT`` and ``log_bT_stderr`` (vertical
+    shifts; zeros when not fitted), ``log_aT_wlf`` and ``log_aT_arrhenius`` (the fitted shift functions),
+    ``run`` (source run); dim ``pair`` (adjacent temperatures) with ``pair_rms`` [decades]; dim ``master``
+    with the reduced data ``log_omega_reduced``, ``log_storage_reduced``, ``log_loss_reduced`` (log10 of
+    rad/s and Pa) and ``master_temperature_c``. Attributes: ``t_ref_c``, ``vertical``, ``n_temperatures``,
+    ``n_shifted`` (finite shifts), ``wlf_<key>`` and ``arrhenius_<key>`` (parameters, ``*_stderr``,
+    ``rms_decades``, ``success``, ``n``) and ``criterion`` (where the shift criterion is documented).
+    """
+    sw = sorted(sweeps, key=lambda s: s.temperature_c)
+    res = shift_factors(sw, t_ref_c=t_ref_c, vertical=vertical)
+    wlf = fit_wlf(res.temperatures_c, res.log_aT, res.log_aT_stderr, res.t_ref_c)
+    arr = fit_arrhenius(res.temperatures_c, res.log_aT, res.log_aT_stderr, res.t_ref_c)
+    temps = res.temperatures_c
+    nan = np.full(temps.size, np.nan)
+    la_wlf = wlf_log_aT(temps, wlf["c1"], wlf["c2_k"], res.t_ref_c) if wlf.get("success") else nan
+    la_arr = arrhenius_log_aT(temps, arr["ea_j_per_mol"], res.t_ref_c) if arr.get("success") else nan
+    mx, my, mt = [], [], []
+    for s, a, b in zip(sw, res.log_aT, res.log_bT):
+        if np.isfinite(a) and np.isfinite(b):
+            mx.append(s.log_w + a)
+            my.append(s.log_g + b)
+            mt.append(np.full(s.omega.size, s.temperature_c))
+    mx, mt = (np.concatenate(v) if v else np.empty(0) for v in (mx, mt))
+    my = np.vstack(my) if my else np.empty((0, 2))
+    order = np.argsort(mx, kind="stable")
+    attrs = {"t_ref_c": res.t_ref_c, "vertical": int(vertical), "n_temperatures": int(temps.size),
+             "n_shifted": int(np.isfinite(res.log_aT).sum()),
+             "criterion": "tissuemech.tts module docstring (adjacent pairs, symmetric log G', log G'' misfit)"}
+    for prefix, fit in (("wlf", wlf), ("arrhenius", arr)):
+        for key, value in fit.items():
+            if key == "t_ref_c":
+                continue
+            attrs[f"{prefix}_{key}"] = int(value) if isinstance(value, bool) else value
+    return xr.Dataset(
+        {"shift_factor": ("temperature", 10.0 ** res.log_aT, {"units": "1", "long_name": "a_T (omega_r = a_T omega)"}),
+         "log_aT": ("temperature", res.log_aT, {"units": "1", "long_name": "log10 a_T"}),
+         "log_aT_stderr": ("temperature", res.log_aT_stderr, {"units": "1"}),
+         "log_bT": ("temperature", res.log_bT, {"units": "1", "long_name": "log10 b_T (G_r = b_T G)"}),
+         "log_bT_stderr": ("temperature", res.log_bT_stderr, {"units": "1"}),
+         "log_aT_wlf": ("temperature", la_wlf, {"units": "1", "long_name": "fitted WLF log10 a_T"}),
+         "log_aT_arrhenius": ("temperature", la_arr, {"units": "1", "long_name": "fitted Arrhenius log10 a_T"}),
+         "run": ("temperature", np.array(res.labels, dtype=str)),
+         "pair_rms": ("pair", res.pair_rms, {"units": "1", "long_name": "RMS log10 misfit of adjacent sweeps"}),
+         "log_omega_reduced": ("master", mx[order], {"units": "log10(rad/s)"}),
+         "log_storage_reduced": ("master", my[order, 0] if my.size else my[:, 0], {"units": "log10(Pa)"}),
+         "log_loss_reduced": ("master", my[order, 1] if my.size else my[:, 1], {"units": "log10(Pa)"}),
+         "master_temperature_c": ("master", mt[order], {"units": "degC"})},
+        coords={"temperature_c": ("temperature", temps, {"units": "degC"})}, attrs=attrs)
+
+
+def trs_abaqus_block(t_ref_c: float, c1: float, c2_k: float) -> str:
+    """Abaqus ``*TRS, DEFINITION=WLF`` block (data line ``theta_0, C1, C2``).
+
+    Abaqus's WLF form is log10 A = -C1 (theta - theta_0) / (C2 + theta - theta_0), the one of
+    :func:`wlf_log_aT`; theta in the model's temperature unit (degC here; C2 is a temperature difference, so K =
+    degC). In an input file the block follows the ``*VISCOELASTIC`` option of the same ``*MATERIAL``, whose
+    Prony times are those at theta_0."""
+    return ("** time-temperature shift (WLF), fitted by tissuemech.tts; place after *VISCOELASTIC\n"
+            f"*TRS, DEFINITION=WLF\n{t_ref_c:.6g}, {c1:.8g}, {c2_k:.8g}\n")
+
+
+def tts_card(ds: xr.Dataset, dataset: str = "") -> dict:
+    """Shift-function card (JSON-ready dict) of a :func:`tts_dataset` result: WLF (the card's form), Arrhenius
+    for comparison, standard errors, the temperature range it was fitted on and the Abaqus ``*TRS`` text
+    (None when the WLF fit failed, with the reason in ``notes``)."""
+    a = ds.attrs
+    temps = ds["temperature_c"].values
+    ok = np.isfinite(ds["log_aT"].values)
+    wlf_ok = bool(a.get("wlf_success"))
+    card = {
+        "kind": "time_temperature_shift", "dataset": dataset, "shift_function": "WLF" if wlf_ok else None,
+        "t_ref_c": float(a["t_ref_c"]), "vertical_shift": bool(a.get("vertical")),
+        "wlf": {k: a.get(f"wlf_{k}") for k in ("c1", "c1_stderr", "c2_k", "c2_k_stderr", "rms_decades", "n")},
+        "arrhenius": {k: a.get(f"arrhenius_{k}") for k in ("ea_j_per_mol", "ea_j_per_mol_stderr", "rms_decades",
+                                                            "n")},
+        "formula": {"wlf": "log10 aT = -C1 (T - Tref) / (C2 + T - Tref), T in degC, C2 in K",
+                    "arrhenius": "log10 aT = Ea / (R ln 10) (1/T - 1/Tref), T in K"},
+        "valid_range": {"temperature_c": [float(temps[ok].min()), float(temps[ok].max())] if ok.any() else None,
+                        "n_temperatures": int(temps.size), "n_shifted": int(ok.sum())},
+        "abaqus_trs": trs_abaqus_block(float(a["t_ref_c"]), float(a["wlf_c1"]), float(a["wlf_c2_k"]))
+        if wlf_ok else None,
+        "notes": [] if wlf_ok else [f"WLF fit failed: {a.get('wlf_message', '')}; no *TRS block"],
+    }
+    for key in ("wlf", "arrhenius"):   # JSON has no NaN: a missing or non-finite value is null
+        card[key] = {k: (None if v is None or not np.isfinite(float(v)) else int(v) if k == "n" else float(v))
+                     for k, v in card[key].items()}
+    return card
+
+
+def run_tts(runs_dir, out_nc, card_json, card_inp, figure=None, *, dataset: str = "", t_ref_c: float | None = None,
+            vertical: bool = False, exclude_flagged: bool = True,
+            held_out: Callable[[Sequence[Sweep]], dict] | None = None) -> xr.Dataset:
+    """The pipeline's TTS scope of one dataset (rule ``tts``).
+
+    Every frequency-sweep run of ``runs_dir`` (quality-flagged points dropped when ``exclude_flagged``) at its
+    logged temperature -> ``out_nc`` (:func:`tts_dataset`), the shift-function card ``card_json``
+    (:func:`tts_card`), its Abaqus ``*TRS`` block ``card_inp`` and the mastercurve figure (``figure``; none when
+    None). ``held_out``: a leave-one-temperature-out check, ``sweeps -> {"after", "before", "n_folds",
+    "per_temperature": {T: [before, after]}}`` (the workflow passes
+    :func:`tissuemech.diagnosis.temperature.leave_one_temperature_out`, which sits above this module), stored as
+    ``held_out_rms`` per temperature and the attributes ``held_out_rms_decades`` (shifted),
+    ``held_out_rms_unshifted_decades`` and ``held_out_folds``. Raises ``ValueError`` when the sweeps carry fewer
+    than two temperatures.
+    """
+    runs = [read_netcdf(p) for p in sorted(Path(runs_dir).glob("*.nc"))]
+    sweeps = sweeps_from_runs([drop_flagged(r) if exclude_flagged else r for r in runs])
+    ds = tts_dataset(sweeps, t_ref_c=t_ref_c, vertical=vertical)
+    ds.attrs["dataset"] = dataset
+    if held_out is not None:
+        held = held_out(sweeps)
+        per_t = {round(float(t), 1): v[1] for t, v in held["per_temperature"].items()}
+        ds["held_out_rms"] = ("temperature", np.array([per_t.get(round(float(t), 1), np.nan)
+                                                       for t in ds["temperature_c"].values]),
+                              {"units": "1", "long_name": "RMS log10 error of the temperature predicted from the "
+                                                          "mastercurve of the others (leave-one-temperature-out)"})
+        ds.attrs.update(held_out_rms_decades=held["after"], held_out_rms_unshifted_decades=held["before"],
+                        held_out_folds=held["n_folds"])
+    write_netcdf(ds, out_nc)
+    card = tts_card(ds, dataset)
+    write_text(json.dumps(card, indent=2, allow_nan=False, default=str) + "\n", card_json)
+    write_text(card["abaqus_trs"] or "** no WLF shift function: " + "; ".join(card["notes"]) + "\n", card_inp)
+    if figure is not None:
+        from .plots import plot_mastercurve
+
+        plot_mastercurve(ds, figure, title=f"{dataset}: {ds.attrs['n_shifted']} of {ds.attrs['n_temperatures']} "
+                                           "temperatures shifted")
+    return ds

@@ -93,21 +93,74 @@ def test_too_few_sweeps_raise():
         tts.shift_factors(synthetic_sweeps([40.0]))
 
 
+def test_run_tts_writes_the_pipeline_scope(tmp_path):
+    """The pipeline's TTS scope end to end on canonical run files: tts.nc, the WLF card, its *TRS block, the figure."""
+    import json
+
+    from tissuemech.canonical import make_run_dataset, read_netcdf, write_netcdf
+    from tissuemech.diagnosis.temperature import leave_one_temperature_out
+
+    temps = np.arange(20.0, 61.0, 10.0)
+    for k, sw in enumerate(synthetic_sweeps(temps, noise=0.003)):
+        run = make_run_dataset({"angular_frequency": sw.omega, "storage_modulus": sw.storage,
+                                "loss_modulus": sw.loss, "temperature": np.full(sw.omega.size, sw.temperature_c)},
+                               {"test": "frequency_sweep", "run": f"s_{k}", "specimen": "s", "sample": "a",
+                                "order": k + 1})
+        write_netcdf(run, tmp_path / "runs" / f"s_{k}.nc")
+    out = {name: tmp_path / name for name in ("tts.nc", "card.json", "card.inp")}
+    tts.run_tts(tmp_path / "runs", *out.values(), dataset="synthetic", t_ref_c=TREF,   # figure: built below
+                held_out=leave_one_temperature_out)
+    ds = read_netcdf(out["tts.nc"])
+    np.testing.assert_allclose(ds["temperature_c"], temps)
+    assert np.all(np.isfinite(ds["shift_factor"])) and ds.attrs["n_shifted"] == 5
+    np.testing.assert_allclose(ds["log_aT"], tts.wlf_log_aT(temps, C1, C2, TREF), atol=0.03)
+    # each temperature predicted from the others' mastercurve: near the noise, far better than unshifted
+    assert ds.attrs["held_out_rms_decades"] < 0.02 < ds.attrs["held_out_rms_unshifted_decades"]
+    assert np.isfinite(ds["held_out_rms"].values).sum() == ds.attrs["held_out_folds"] >= 3
+    card = json.loads(out["card.json"].read_text())
+    assert card["shift_function"] == "WLF" and card["t_ref_c"] == TREF
+    assert card["wlf"]["c1_stderr"] > 0 and card["valid_range"]["temperature_c"] == [20.0, 60.0]
+    # Abaqus: *TRS, DEFINITION=WLF with the data line theta_0, C1, C2
+    lines = [ln for ln in out["card.inp"].read_text().splitlines() if not ln.startswith("**")]
+    assert lines[0] == "*TRS, DEFINITION=WLF"
+    np.testing.assert_allclose([float(v) for v in lines[1].split(",")], [TREF, card["wlf"]["c1"], card["wlf"]["c2_k"]],
+                               rtol=1e-6)
+    # the mastercurve figure (built, not rendered: saving it costs seconds): reduced moduli + shift function
+    from tissuemech.plots import figure_mastercurve
+
+    fig = figure_mastercurve(ds)
+    assert len(fig.axes) == 3                       # mastercurve, shift function, temperature colour bar
+    assert len(fig.axes[1].get_lines()) >= 2        # WLF and Arrhenius curves beside the shift factors
+
+
 @pytest.mark.skipif(not LIMS.exists(), reason="real data (../shared/data/real) absent")
-def test_real_lims_cooling_series_every_temperature_shifted():
+def test_real_lims_cooling_series_every_temperature_shifted(repo_root):
+    """Through the pipeline descriptor (config/external/ta_lims): its blocks and nominal temperatures, the TTS
+    scope's dataset and card."""
+    import pandas as pd
+
     from tissuemech.io.dispatch import read_export
 
-    blocks = read_export(LIMS)
-    sweeps = [tts.Sweep(float(np.nanmedian(b.data["temperature"])), b.data["angular_frequency"],
-                        b.data["storage_modulus"], b.data["loss_modulus"], b.name) for b in blocks]
-    assert len(sweeps) == 20
-    res = tts.shift_factors(sweeps, t_ref_c=30.0)
-    assert np.all(np.isfinite(res.log_aT)) and np.all(np.isfinite(res.log_aT_stderr))
-    assert res.temperatures_c[0] == pytest.approx(-40, abs=1) and res.temperatures_c[-1] == pytest.approx(150, abs=1)
-    assert np.all(np.diff(res.log_aT) < 0)        # monotonic: colder is slower
+    blocks = {b.index: b for b in read_export(LIMS)}
+    sheet = pd.read_csv(repo_root / "config" / "external" / "ta_lims" / "samples.csv")
+    sweeps = []
+    for row in sheet.itertuples():
+        b = blocks[int(row.block)]
+        t = float(np.nanmedian(b.data["temperature"]))
+        assert t == pytest.approx(row.temperature_c, abs=0.5)     # the sheet's temperature is the step's own
+        sweeps.append(tts.Sweep(t, b.data["angular_frequency"], b.data["storage_modulus"], b.data["loss_modulus"],
+                                b.name))
+    assert len(sweeps) == 20 and len(tts.distinct_temperatures(sheet["temperature_c"])) == 20
+    ds = tts.tts_dataset(sweeps, t_ref_c=30.0)
+    la, se = ds["log_aT"].values, ds["log_aT_stderr"].values
+    assert ds.attrs["n_shifted"] == 20 and np.all(np.isfinite(la)) and np.all(np.isfinite(se))
+    temps = ds["temperature_c"].values
+    assert temps[0] == pytest.approx(-40, abs=1) and temps[-1] == pytest.approx(150, abs=1)
+    assert np.all(np.diff(la) < 0)        # monotonic: colder is slower
     # RheoJAX's published factors on this series span +8.55 .. -3.98 (12.5 decades); reference-dependent,
     # so compare the span loosely and the ends within a decade
-    assert res.log_aT[0] - res.log_aT[-1] == pytest.approx(8.55 + 3.98, abs=1.0)
-    assert res.log_aT[0] == pytest.approx(8.55, abs=1.0) and res.log_aT[-1] == pytest.approx(-3.98, abs=1.0)
-    wlf = tts.fit_wlf(res.temperatures_c, res.log_aT, res.log_aT_stderr, res.t_ref_c)
-    assert wlf["success"] and np.isfinite(wlf["c1_stderr"]) and np.isfinite(wlf["c2_k_stderr"])
+    assert la[0] - la[-1] == pytest.approx(8.55 + 3.98, abs=1.0)
+    assert la[0] == pytest.approx(8.55, abs=1.0) and la[-1] == pytest.approx(-3.98, abs=1.0)
+    card = tts.tts_card(ds, "ta_lims")
+    assert card["shift_function"] == "WLF" and card["wlf"]["c1_stderr"] > 0 and card["wlf"]["c2_k_stderr"] > 0
+    assert card["abaqus_trs"].splitlines()[1] == "*TRS, DEFINITION=WLF"

@@ -187,3 +187,23 @@ def test_disjoint_replicates_keep_the_union_and_are_flagged():
     assert curve["time"].values[0] == pytest.approx(0.01) and curve["time"].values[-1] == pytest.approx(10.0)
     assert "replicate ranges do not overlap" in curve.attrs["count_check"]
     assert curve["relaxation_modulus_n"].values.max() == 1  # nothing extrapolated into the gap
+
+
+def test_sweeps_at_several_temperatures_are_separate_curves():
+    """A temperature series (TTS) of one sample is one curve per temperature, never an average across them;
+    a single temperature leaves the condition label as it was."""
+    w = np.geomspace(0.1, 100.0, 12)
+
+    def sweep(t_c, sample="a", factor=1.0):
+        return make_run_dataset({"angular_frequency": w, "storage_modulus": factor * 1e3 * w ** 0.2,
+                                 "loss_modulus": factor * 3e2 * w ** 0.3},
+                                {"test": "frequency_sweep", "specimen": "x", "sample": sample, "temperature_c": t_c,
+                                 "run": f"x-{sample}-{t_c}"})
+
+    avg = curves.average_runs([sweep(20.0), sweep(40.0, factor=0.1), sweep(60.0, factor=0.01)])
+    assert list(curves.as_str(avg["condition"].values)) == [f"temperature_c={t}" for t in (20, 40, 60)]
+    hot = curves.select_average(avg, "frequency_sweep", "temperature_c=60")
+    np.testing.assert_allclose(hot["storage_modulus_mean"].values, 10.0 * w ** 0.2, rtol=1e-9)
+    assert hot.attrs["temperature_c"] == 60.0 and hot.attrs["n_runs"] == 1
+    one = curves.average_runs([sweep(20.0, "a"), sweep(20.04, "b")])
+    assert list(curves.as_str(one["condition"].values)) == ["default"] and int(one["n_samples"].values[0]) == 2

@@ -152,6 +152,24 @@ def has_spectrum_tests(name):
     return bool(set(dataset_tests(name)) & set(SPECTRUM_TESTS))
 
 
+def tts_temperatures(name):
+    """Distinct nominal temperatures (sample sheet ``temperature_c``) of a dataset's frequency sweeps."""
+    from tissuemech.tts import distinct_temperatures
+
+    sheet = pd.read_csv(Path(DATASETS[name]) / "samples.csv", dtype=str)
+    if "test" not in sheet or "temperature_c" not in sheet:
+        return []
+    sweeps = sheet[sheet["test"] == "frequency_sweep"]
+    return distinct_temperatures(
+        pd.to_numeric(sweeps["temperature_c"], errors="coerce")
+    )
+
+
+def has_tts(name):
+    """Frequency sweeps at >= 2 distinct temperatures: the dataset gets the TTS scope (rule tts)."""
+    return len(tts_temperatures(name)) >= 2
+
+
 def all_targets():
     targets = []
     for name in DATASETS:
@@ -162,6 +180,8 @@ def all_targets():
         ]
         if has_spectrum_tests(name):
             targets.append(f"results/{name}/spectrum.nc")
+        if has_tts(name):
+            targets.append(f"results/{name}/tts.nc")
         if dataset_scopes_of(name):
             targets += [f"results/{name}/ranking.csv", f"results/{name}/fits.csv"]
         if diagnosis_scope(name) and (

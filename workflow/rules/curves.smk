@@ -1,4 +1,5 @@
-# Sample averages per test and condition, LVE limits and their figures, relaxation/retardation spectra.
+# Sample averages per test and condition, LVE limits and their figures, relaxation/retardation spectra,
+# time-temperature superposition of sweeps at several temperatures.
 
 
 rule average:
@@ -72,3 +73,30 @@ rule spectrum:
         pkg=script_hash("workflow/scripts/spectrum.py"),
     script:
         "../scripts/spectrum.py"
+
+
+rule tts:
+    input:
+        runs="results/{dataset}/runs",
+    output:
+        tts="results/{dataset}/tts.nc",
+        card="results/{dataset}/tts_card.json",
+        abaqus="results/{dataset}/tts_card.inp",
+        figure=report(
+            "results/{dataset}/figures/tts_mastercurve.png",
+            caption="../report/tts.rst",
+            category="{dataset}",
+            subcategory="2 time-temperature superposition",
+            labels={"figure": "mastercurve"},
+        ),
+    log:
+        "logs/{dataset}/tts.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/tts.tsv"
+    params:
+        t_ref_c=config.get("tts", {}).get("t_ref_c"),
+        vertical=config.get("tts", {}).get("vertical", False),
+        exclude_flagged=config["fit"].get("exclude_flagged", True),
+        pkg=script_hash("workflow/scripts/tts.py"),
+    script:
+        "../scripts/tts.py"
