@@ -981,20 +981,22 @@ def detect_instrument_inertia(ctx: DiagnosisContext) -> dict:
     return make_finding(eff, t, "t", delta_i, "kg m^2", practical, evidence, fix)
 
 
-#: largest polynomial degree (in log omega) of a misfit shape of the relaxation spectrum shared by every
-#: predicted frequency sweep: the control of the inertia test here and the shape the generic scan removes
-#: (:func:`tissuemech.diagnosis.generic.shared_shape`)
+#: polynomial degree (in log omega) of the misfit shape of the relaxation spectrum shared by every predicted
+#: frequency sweep that the inertia test uses as its control (the generic scan's shared shape,
+#: :func:`tissuemech.diagnosis.generic.shared_shape`, chooses its own degree by BIC)
 SPECTRUM_SHAPE_DEGREE = 3
 
 
-def spectrum_shape_basis(frequency_sq) -> np.ndarray:
+def spectrum_shape_basis(frequency_sq, max_degree: int | None = SPECTRUM_SHAPE_DEGREE) -> np.ndarray:
     """Legendre polynomials P_1..P_d of log omega scaled to [-1, 1] over the given points (rows; 0 where omega^2
-    is not finite and positive), d = min(:data:`SPECTRUM_SHAPE_DEGREE`, distinct omegas - 2): the basis of a
-    misfit shape of the relaxation spectrum along a frequency sweep. Shape (n, d); d may be 0."""
+    is not finite and positive), d = min(``max_degree``, distinct omegas - 2) (no cap when ``max_degree`` is
+    None): the basis of a misfit shape of the relaxation spectrum along a frequency sweep. Shape (n, d); d may
+    be 0."""
     w2 = np.asarray(frequency_sq, float)
     ok = np.isfinite(w2) & (w2 > 0)
     logw = np.where(ok, 0.5 * np.log(np.where(ok, w2, 1.0)), np.nan)
-    degree = int(max(0, min(SPECTRUM_SHAPE_DEGREE, np.unique(logw[ok]).size - 2)))
+    distinct = np.unique(logw[ok]).size - 2
+    degree = int(max(0, distinct if max_degree is None else min(max_degree, distinct)))
     lo, hi = (np.min(logw[ok]), np.max(logw[ok])) if ok.any() else (0.0, 1.0)
     z = np.where(ok, 2.0 * (logw - lo) / max(hi - lo, 1e-12) - 1.0, 0.0)
     return np.polynomial.legendre.legvander(z, degree)[:, 1:]

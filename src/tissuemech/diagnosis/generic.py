@@ -133,8 +133,10 @@ def shared_shape(block: pd.DataFrame, coordinate: str) -> tuple[np.ndarray, dict
     """The misfit shape shared by every curve of a block along its spectrum coordinate, and a summary.
 
     Fits the per-curve demeaned log-residual with Legendre polynomials in log omega common to all curves
-    (:func:`tissuemech.diagnosis.catalogue.spectrum_shape_basis`: degree <= 3, at most the number of distinct
-    coordinate values minus 2), with curve-clustered covariance. Returns ``(shape, summary)``: ``shape`` (per row, log units,
+    (:func:`tissuemech.diagnosis.catalogue.spectrum_shape_basis`), with curve-clustered covariance. The degree
+    d is chosen by BIC, n ln(RSS_d / n) + d ln n, among 1 .. (distinct coordinate values - 2): how far the
+    baseline's spectrum misses the sweeps is a property of the data (a fast mode outside the window the fitted
+    tests resolve raises G'' over the last decade by a factor that no fixed-degree polynomial follows). Returns ``(shape, summary)``: ``shape`` (per row, log units,
     mean zero per curve) and ``summary`` with ``range_log`` (max - min of the shape over the block),
     ``degree``, ``n_curves``, ``wald_p`` (joint test of the shape coefficients, NaN when not computable); None
     when the block cannot carry a shape (fewer than :data:`MIN_CURVES` curves or 4 coordinate values).
@@ -145,10 +147,17 @@ def shared_shape(block: pd.DataFrame, coordinate: str) -> tuple[np.ndarray, dict
     if block.loc[ok, "curve"].nunique() < MIN_CURVES or np.unique(w2[ok]).size < 4:
         return None
     codes = pd.factorize(block["curve"])[0]
-    basis = spectrum_shape_basis(np.where(ok, w2, np.nan))
-    degree = basis.shape[1]
-    basis_d = np.column_stack([_demean(np.where(ok, b, 0.0), codes) for b in basis.T])
+    full = spectrum_shape_basis(np.where(ok, w2, np.nan), max_degree=None)
+    full_d = np.column_stack([_demean(np.where(ok, b, 0.0), codes) for b in full.T])
     yd = _demean(np.where(ok, y, 0.0), codes)
+    n = int(ok.sum())
+    bic = []
+    for d in range(1, full.shape[1] + 1):
+        coef_d, *_ = np.linalg.lstsq(full_d[ok, :d], yd[ok], rcond=None)
+        rss = float(np.sum((yd[ok] - full_d[ok, :d] @ coef_d) ** 2))
+        bic.append(n * np.log(max(rss, 1e-300) / n) + d * np.log(n))
+    degree = int(np.argmin(bic)) + 1
+    basis, basis_d = full[:, :degree], full_d[:, :degree]
     names = [f"P{k}" for k in range(1, degree + 1)]
     res = st.cluster_regression(yd[ok], pd.DataFrame(basis_d[ok], columns=names), groups=codes[ok])
     coef = res.params[names].to_numpy(float)

@@ -268,7 +268,7 @@ def _shape_evidence(shape: dict, model: str) -> str:
     size = 100 * (np.exp(shape["range_log"]) - 1)
     return (f"the {shape['test']} {shape['quantity']} predicted by {model} (not fitted to these curves) misfits by a "
             f"shape along the frequency shared by all {shape['n_curves']} curves ({size:.1f} % from its lowest to "
-            f"its highest point, degree-{shape['degree']} polynomial in log frequency, Wald p = "
+            f"its highest point, degree-{shape['degree']} polynomial in log frequency chosen by BIC, Wald p = "
             f"{shape['wald_p']:.2g}): the baseline's relaxation spectrum does not carry over to these tests. "
             f"It is removed before the covariate scan of these curves, which then tests only structure that "
             f"differs between curves; it is not a covariate effect, and instrument inertia, the catalogue's "
