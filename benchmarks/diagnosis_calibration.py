@@ -32,6 +32,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime as dt
 import json
 import os
@@ -213,11 +214,17 @@ def main(argv=None) -> int:
         rows = [r for f in a.from_json for r in json.loads(f.read_text(encoding="utf-8"))]
         a.power_reps = int(any(r["effect"] is not None for r in rows))
         a.magnitudes = sorted({r["magnitude"] for r in rows if r["effect"] is not None}) or a.magnitudes
-    elif a.jobs > 1:
-        with ProcessPoolExecutor(a.jobs) as ex:
-            rows = list(ex.map(one, jobs))
     else:
-        rows = [one(j) for j in jobs]
+        # every finished dataset is appended to <rows-json>.partial.jsonl at once, so that a run stopped early
+        # keeps what it measured (render it with --from-json after converting the lines to a list)
+        partial = a.rows_json.with_name(a.rows_json.name + ".partial.jsonl") if a.rows_json else None
+        rows = []
+        with ProcessPoolExecutor(a.jobs) if a.jobs > 1 else contextlib.nullcontext() as ex:
+            for row in (ex.map(one, jobs) if ex else map(one, jobs)):
+                rows.append(row)
+                if partial:
+                    with partial.open("a", encoding="utf-8") as fh:
+                        fh.write(json.dumps(row, default=str) + "\n")
     wall = time.perf_counter() - t0
     if a.rows_json and not a.from_json:   # first, so that no table bug can lose a long run
         write_text(json.dumps(rows, indent=1, default=str), a.rows_json)
