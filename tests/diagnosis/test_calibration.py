@@ -208,3 +208,18 @@ def test_nnls_relaxation_times_find_the_generators_modes(seed):
         if g < 0.05 or not window["t_min_s"] <= tau <= window["t_max_s"]:  # g: share of the reduced function
             continue
         assert np.min(np.abs(active - np.log10(tau))) <= 0.3, (tau, found["taus_s"])
+
+
+def test_nonseparable_relaxation_is_named_in_a_design_with_two_shear_rates():
+    """Power case of the independent generator (seed 20366124: 2 specimens, 2 CSR rates, relaxations at 11.7 %
+    and 34 %, relaxing weights x (1 + 4|gamma|) at 2x): the Pipkin-Rogers fix cannot be scored on held-out
+    rates (fewer than 3), so it is scored on the relaxations at the lowest and highest strain, and the cause is
+    named with a held-out gain (before this fold choice the fix was never evaluated and nothing was named)."""
+    runs, truth = ir.generate(20366124, {"nonseparable_relaxation": 2.0})
+    rates = {r.attrs["shear_rate_1_per_s"] for r in runs if r.attrs["test"] == "constant_shear_rate"}
+    assert len(rates) < 3
+    result = diagnose_runs(runs)
+    found = next(f for f in result["findings"] if f["effect"] == "nonseparable_relaxation")
+    assert found["detected"], found
+    assert found["fix"]["model"].startswith("pr_") and "relaxation at" in found["fix"]["cv"]
+    assert found["fix"]["gain"] > 0.05

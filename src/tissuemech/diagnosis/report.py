@@ -70,7 +70,7 @@ from .baseline import (baseline_adequacy, extension_gain, fit_runs, level_normal
                        window_taus)
 from .catalogue import DiagnosisContext, curve_levels, explains
 from .causes import CAUSE_IDS, DETECTORS
-from .evidence import estimate_noise, residual_table, residual_table_to_xarray
+from .evidence import estimate_noise, nominal_strain, residual_table, residual_table_to_xarray
 from .generic import confounded_covariates, serial_structure, structure_tests
 from .homogeneous import is_homogeneous, run_homogeneous_diagnosis
 
@@ -374,22 +374,33 @@ def _read_runs(runs_dir: str | Path) -> list[xr.Dataset]:
 
 
 def _nonseparable_fix(runs, baseline_key: str, target: str, taus_s: Sequence[float] | None = None) -> dict | None:
-    """Pipkin-Rogers counterpart of a QLV baseline, scored leaving out the extreme CSR rates; both refitted in
-    every fold on the baseline's relaxation times ``taus_s`` [s] (the runs-only path's NNLS times), or, when
-    None, on a one-per-decade grid spanning the window the tests resolve."""
+    """Pipkin-Rogers counterpart of a QLV baseline, scored on held-out extremes of the design: the lowest and
+    the highest CSR rate when there are >= 3 rates, else the relaxations at the lowest and at the highest
+    nominal strain when there are >= 2 (non-separability is a strain dependence of the relaxation, so a model
+    trained on the other strains must predict the extreme one). Both models are refitted in every fold on the
+    baseline's relaxation times ``taus_s`` [s] (the runs-only path's NNLS times), or, when None, on a
+    one-per-decade grid spanning the window the tests resolve. None when the design has neither."""
     if not baseline_key.startswith("qlv_"):
         return None
     ext = "pr_" + baseline_key[len("qlv_"):]
     if ext not in available_models():
         return None
-    rates = sorted({float(r.attrs["shear_rate_1_per_s"]) for r in runs
-                    if r.attrs.get("test") == "constant_shear_rate" and "shear_rate_1_per_s" in r.attrs})
-    if len(rates) < 3:
-        return None
     use = [r for r in runs if r.attrs.get("test") in ("constant_shear_rate", "stress_relaxation")]
-    folds = [(f"CSR {rate:g} 1/s", (lambda r, rate=rate: r.attrs.get("test") == "constant_shear_rate"
-                                    and float(r.attrs.get("shear_rate_1_per_s", -1)) == rate))
-             for rate in (rates[0], rates[-1])]
+    rates = sorted({float(r.attrs["shear_rate_1_per_s"]) for r in use
+                    if r.attrs.get("test") == "constant_shear_rate" and "shear_rate_1_per_s" in r.attrs})
+    strains = sorted({round(nominal_strain(r), 6) for r in use if r.attrs.get("test") == "stress_relaxation"}
+                     - {np.nan})
+    strains = [g for g in strains if np.isfinite(g)]
+    if len(rates) >= 3:
+        folds = [(f"CSR {rate:g} 1/s", (lambda r, rate=rate: r.attrs.get("test") == "constant_shear_rate"
+                                        and float(r.attrs.get("shear_rate_1_per_s", -1)) == rate))
+                 for rate in (rates[0], rates[-1])]
+    elif len(strains) >= 2:
+        folds = [(f"relaxation at {100 * g:g} %", (lambda r, g=g: r.attrs.get("test") == "stress_relaxation"
+                                                   and round(nominal_strain(r), 6) == g))
+                 for g in (strains[0], strains[-1])]
+    else:
+        return None
     # both models on the relaxation times these tests resolve (never the registry's fixed 0.1-100 s)
     window = resolved_window_s(use)
     taus = np.asarray(taus_s, float) if taus_s is not None and len(taus_s) else window_taus(window)
