@@ -1,0 +1,609 @@
+"""Causes read from curve levels (one level per curve from the baseline's residuals): elapsed-time drift,
+preconditioning (first load) and an outlier specimen, the level regressions they share
+(:func:`level_regression`, :func:`between_sample_test`) and the confounded-covariate bookkeeping. Part of
+:mod:`.catalogue`."""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pandas as pd
+import statsmodels.api as sm
+import xarray as xr
+
+from .. import stats as st
+from ..tts import run_temperature_c
+from .evidence import condition_label, run_id
+from .findings import (DiagnosisContext, curve_levels, demean_by, fix_record, fixed_effect_design, make_finding,
+                       primary_rows, rms, untested_finding)
+
+# ------------------------------------------------------------------------------------------------
+# curve-level scale: elapsed-time drift, preconditioning, outlier specimen
+# ------------------------------------------------------------------------------------------------
+#: fixed-effect sets tried in order for curve-level regressions: the sample absorbs sample-to-sample
+#: stiffness variability (so drift and first load are read within samples), the condition a misfit that
+#: differs by condition; a set is used when the design stays full rank with >= 3 residual dof
+FIXED_EFFECT_SETS = (("sample", "condition"), ("sample", "test"), ("sample",), ("specimen", "condition"),
+                     ("specimen", "test"), ("specimen",), ("condition",), ())
+
+
+def level_regression(levels: pd.DataFrame, y: str, columns: Sequence[str], require_condition: bool = False,
+                     sets: Sequence[tuple[str, ...]] | None = None):
+    """Curve-level OLS ``y ~ columns + fixed effects`` (first usable set of :data:`FIXED_EFFECT_SETS`),
+    standard errors clustered by sample (t with G - 1 df, :func:`tissuemech.stats.cluster_regression`). Returns the result (with
+    ``fixed_effects`` set) or None when no set leaves the columns estimable.
+
+    ``require_condition``: only sets with condition fixed effects are tried when the condition varies
+    (a covariate collinear with the condition is then reported as untestable rather than confounded)."""
+    sets = FIXED_EFFECT_SETS if sets is None else sets
+    if require_condition and levels["condition"].nunique() > 1:
+        sets = [fes for fes in sets if "condition" in fes]
+    for fes in sets:
+        # a covariate that is (nearly) constant within the fixed-effect groups is identified by noise only
+        # (e.g. a logged gap channel with its sensor noise inside one sample): not estimable there
+        if any(fe in levels and levels[c].std() > 0 and
+               (levels[c] - levels.groupby(fe)[c].transform("mean")).std() < 0.05 * levels[c].std()
+               for fe in fes if fe in ("sample", "specimen") for c in columns):
+            continue
+        X = fixed_effect_design(levels, columns, [fe for fe in fes if fe in levels])
+        X = X.loc[:, (X.std() > 0) | X.columns.isin(columns)]
+        if any(X[c].std() == 0 for c in columns) or len(levels) - X.shape[1] - 1 < 3:
+            continue
+        Xc = sm.add_constant(X, has_constant="add").to_numpy(float)
+        if np.linalg.matrix_rank(Xc) == Xc.shape[1]:
+            groups = levels["sample"].to_numpy() if "sample" in levels else None
+            res = st.cluster_regression(levels[y].to_numpy(float), X, groups=groups)
+            res.fixed_effects = list(fes)
+            return res
+    return None
+
+
+def between_sample_test(levels: pd.DataFrame, y: str, column: str) -> dict | None:
+    """Two-stage test of a covariate that varies between samples: condition effects are removed from the
+    curve levels (condition fixed effects), the residual levels and the covariate are averaged per sample,
+    and the sample means are regressed on the covariate with specimen fixed effects (plain OLS, df = samples
+    - parameters). Curves of one sample share its stiffness, so the sample -- not the curve -- is the unit
+    of replication for such covariates (curve-level cluster-robust errors are anti-conservative here)."""
+    lv = levels[np.isfinite(levels[y]) & np.isfinite(levels[column])]
+    if lv["sample"].nunique() < 5:
+        return None
+    r = lv[y] - lv.groupby("condition")[y].transform("mean")
+    xr_ = lv[column] - lv.groupby("condition")[column].transform("mean")
+    agg = pd.DataFrame({"r": r, "x": xr_, "sample": lv["sample"], "specimen": lv["specimen"]}).groupby("sample").agg(
+        r=("r", "mean"), x=("x", "mean"), specimen=("specimen", "first"))
+    if agg["x"].std() == 0:
+        return None
+    for fes in (["specimen"], []):
+        X = fixed_effect_design(agg.rename(columns={"x": column}), [column], fes)
+        Xc = sm.add_constant(X, has_constant="add").to_numpy(float)
+        if len(agg) - Xc.shape[1] >= 3 and np.linalg.matrix_rank(Xc) == Xc.shape[1] and X[column].std() > 0:
+            res = sm.OLS(agg["r"].to_numpy(float), Xc).fit()
+            k = list(X.columns).index(column) + 1
+            est, se = float(res.params[k]), float(res.bse[k])
+            tval = est / se if se > 0 else 0.0
+            out = st._pack(tval, st.log10_p_from_t(tval, res.df_resid), estimate=est, std_error=se,
+                           df=float(res.df_resid))
+            out["design"] = "sample means, " + ("specimen fixed effects" if fes else "no fixed effects")
+            return out
+    return None
+
+
+#: within-sample |correlation| above which two curve-level covariates are reported as confounded
+CONFOUND_CORRELATION = 0.9
+
+#: the design that would separate a curve-level covariate from each confounder (``condition``: the test
+#: condition when the covariate is collinear with it within samples, i.e. a fixed test order)
+SEPARATING_DESIGN = {
+    "position": "vary the pauses between tests, or start the samples of one session at different times, so "
+                "that elapsed time varies at a fixed position in the sequence (a drift of the instrument or "
+                "specimen follows the clock, an effect of the loading history follows the position)",
+    "first_load": "repeat the first test of each sample later in its sequence, or vary which test comes first",
+    "temperature_c": "hold the temperature constant over the session, or change it in steps that are not "
+                     "monotone in time (e.g. a randomised or up-and-down temperature sequence)",
+    "elapsed_h": "record started_at or total_time and run at least three tests per sample, so that a time "
+                 "trend can be read from the tests after the first load",
+    "condition": "randomise the test order across samples, or repeat a reference test (same kind and "
+                 "condition as an early one) at the end of each sample's sequence",
+}
+
+
+def _within_corr(levels: pd.DataFrame, a: str, b: str) -> float:
+    """Correlation of two curve-level covariates after removing sample means (NaN when undefined)."""
+    lv = levels[levels[a].notna() & levels[b].notna()]
+    if len(lv) < 3:
+        return np.nan
+    x, y = demean_by(lv, a, "sample"), demean_by(lv, b, "sample")
+    if x.std() == 0 or y.std() == 0:
+        return np.nan
+    return float(np.corrcoef(x, y)[0, 1])
+
+
+def _condition_share(levels: pd.DataFrame, column: str) -> float:
+    """Share of the within-sample variance of ``column`` explained by the test condition (1 for a fixed
+    test order with equal pauses; a squared multiple correlation)."""
+    lv = levels[levels[column].notna()]
+    x = demean_by(lv, column, "sample")
+    if len(lv) < 3 or x.std() == 0 or lv["condition"].nunique() < 2:
+        return 0.0
+    X = pd.get_dummies(lv[["sample", "condition"]].astype(str), drop_first=True, dtype=float).to_numpy(float)
+    X = np.column_stack([np.ones(len(lv)), X])
+    y = lv[column].to_numpy(float)
+    resid = y - X @ np.linalg.lstsq(X, y, rcond=None)[0]
+    return float(1.0 - np.sum(resid ** 2) / np.sum(x ** 2))
+
+
+def _usable(levels: pd.DataFrame, column: str) -> bool:
+    v = levels[column] if column in levels else pd.Series(dtype=float)
+    if column == "first_load":
+        return bool(v.notna().all() and 0 < v.sum() < len(v))
+    return bool(len(v) and v.notna().all() and v.nunique() > 2)
+
+
+def _level_tests(levels: pd.DataFrame, column: str):
+    """Curve-level tests of ``column`` (elapsed time or first load), each controlled for the other and for
+    the logged temperature where the design allows (the largest estimable set of controls): within samples with sample and condition fixed effects (clustered by sample) and,
+    for covariates that vary between samples, the two-stage :func:`between_sample_test`; the stronger with
+    a Bonferroni factor. Returns ``(test, design)`` or ``(None, None)``; ``test`` carries ``controls`` (the
+    covariates held fixed) and ``confounded_with`` (covariates whose within-sample correlation with
+    ``column`` reaches :data:`CONFOUND_CORRELATION`, or ``condition`` when the condition explains that
+    share squared of its within-sample variance, with the design that would separate them in
+    ``separating_design``). Elapsed time is read within samples only with the first-load control when the
+    first loads are known and not absorbed by the condition effects (a within-sample trend needs two curves
+    after the first load; otherwise the slope is the first-load contrast). Elapsed time falls back to the position in the sequence when no time was
+    recorded. Designs in which the covariate is collinear with the condition within samples (a fixed
+    test order) are not used within samples: a misfit that differs by condition would pass for the effect."""
+    time_recorded = _usable(levels, "elapsed_h")
+    if column == "elapsed_h" and not time_recorded:
+        if not _usable(levels, "position"):
+            return None, None
+        levels = levels.assign(elapsed_h=levels["position"].astype(float))
+    if column == "first_load":
+        levels = levels[levels["first_load"].notna()]
+        if not _usable(levels, "first_load"):
+            return None, None
+    other = "first_load" if column == "elapsed_h" else "elapsed_h"
+    controls = [c for c in (other, "temperature_c") if c in levels and _usable(levels, c)]
+    if "first_load" in controls and levels.groupby("condition")["first_load"].nunique().max() == 1:
+        controls.remove("first_load")  # each condition always or never first: the condition effects absorb it
+    found = []
+    combos = [[column] + controls] + ([[column, controls[0]]] if len(controls) > 1 else []) + [[column]]
+    if column == "elapsed_h" and "first_load" in controls:
+        # a trend within a sample needs two curves after its first load: without them the within-sample
+        # slope is the first-load contrast itself (preconditioning), so it is only read with that control
+        combos = [c for c in combos if "first_load" in c]
+    for cols in combos:
+        res = level_regression(levels, "log_scale", cols, sets=[("sample", "condition")])
+        if res is not None:
+            t = st.coefficient_test(res, column)
+            found.append((dict(t, controls=cols[1:]),
+                          "within samples (sample + condition fixed effects"
+                          + (f", controlled for {', '.join(cols[1:])})" if cols[1:] else ")")))
+            break
+    if column != "first_load":
+        b = between_sample_test(levels, "log_scale", column)
+        if b is not None:
+            found.append((dict(b, controls=[]), f"between samples ({b['design']})"))
+    if not found:
+        return None, None
+    t, design = min(found, key=lambda f: f[0]["log10_p"])
+    lp = min(0.0, t["log10_p"] + np.log10(len(found)))
+    confounded = []
+    # the first load is position 1: only time and temperature can be confounded with it
+    candidates = ("elapsed_h", "temperature_c") if column == "first_load" else (
+        ("position", "first_load", "temperature_c") if time_recorded else ("first_load", "temperature_c"))
+    for c in candidates:  # a control nearly collinear with the covariate still cannot be separated from it
+        if c in levels and abs(_within_corr(levels, column, c)) >= CONFOUND_CORRELATION:
+            confounded.append(c)
+    if _condition_share(levels, column) >= CONFOUND_CORRELATION ** 2:
+        confounded.append("condition")
+    return dict(t, log10_p=lp, p_value=10 ** lp, confounded_with=confounded,
+                separating_design=[SEPARATING_DESIGN[c] for c in confounded]), design
+
+
+def _run_sequences(runs: Sequence[xr.Dataset]) -> list[list[xr.Dataset]]:
+    """Runs of each sample in the order they were measured, from the ``order`` attribute when every run of
+    the sample has a distinct one, else ``started_at``, else the first ``total_time``; samples whose order
+    none of these gives are left out (their first load is unknown)."""
+    by_sample: dict[tuple, list[xr.Dataset]] = {}
+    for r in runs:
+        by_sample.setdefault((str(r.attrs.get("specimen")), str(r.attrs.get("sample"))), []).append(r)
+
+    def order_key(r):
+        return float(r.attrs["order"]) if "order" in r.attrs else np.nan
+
+    def start_key(r):
+        try:
+            return pd.Timestamp(str(r.attrs["started_at"])).value / 1e9
+        except (KeyError, ValueError):
+            return np.nan
+
+    def total_key(r):
+        return float(np.nanmin(r["total_time"].values)) if "total_time" in r and np.isfinite(
+            r["total_time"].values).any() else np.nan
+
+    out = []
+    for rs in by_sample.values():
+        for key in (order_key, start_key, total_key):
+            k = [key(r) for r in rs]
+            if np.all(np.isfinite(k)) and len(set(k)) == len(k):
+                out.append([rs[i] for i in np.argsort(k)])
+                break
+    return out
+
+
+def _primary_curve(run: xr.Dataset) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """(x, level, sign) of the quantity that carries a run's stiffness: G' over amplitude or frequency,
+    stress over time (relaxation) or strain (ramps), creep strain over time (sign -1: compliance)."""
+    test = run.attrs.get("test")
+    pairs = {"amplitude_sweep": ("shear_strain", "storage_modulus", 1.0),
+             "frequency_sweep": ("frequency", "storage_modulus", 1.0),
+             "stress_relaxation": ("time", "shear_stress", 1.0),
+             "constant_shear_rate": ("shear_strain", "shear_stress", 1.0),
+             "simple_shear": ("shear_strain", "shear_stress", 1.0),
+             "creep_recovery": ("time", "shear_strain", -1.0)}
+    if test not in pairs:
+        return None
+    xn, yn, sign = pairs[test]
+    if xn == "frequency" and xn not in run and "angular_frequency" in run:
+        x = run["angular_frequency"].values / (2 * np.pi)
+    elif xn in run:
+        x = run[xn].values
+    else:
+        return None
+    if yn not in run:
+        return None
+    x, y = np.abs(np.asarray(x, float)), np.asarray(run[yn].values, float)
+    ok = np.isfinite(x) & np.isfinite(y) & (x > 0) & (y > 0)
+    if test == "stress_relaxation" and "shear_strain" in run:
+        g = np.abs(run["shear_strain"].values)
+        ok &= g >= 0.99 * np.nanmax(g)  # the hold: the ramp depends on the rise time, not the stiffness
+    return (x[ok], y[ok], sign) if ok.sum() >= 2 else None
+
+
+def _log_contrast(first: xr.Dataset, later: xr.Dataset) -> float:
+    """Model-free ln(first/later) of the stiffness-carrying quantity of two runs of the same kind and
+    condition, as the median over the overlapping range of x (later run interpolated in log x)."""
+    a, b = _primary_curve(first), _primary_curve(later)
+    if a is None or b is None:
+        return np.nan
+    xa, ya, sign = a
+    xb, yb, _ = b
+    o = np.argsort(xb)
+    xb, yb = xb[o], yb[o]
+    inside = (xa >= xb[0]) & (xa <= xb[-1])
+    if inside.sum() < 2:
+        return np.nan
+    yi = np.exp(np.interp(np.log(xa[inside]), np.log(xb), np.log(yb)))
+    return float(sign * np.median(np.log(ya[inside] / yi)))
+
+
+def _linear_storage(sweep: xr.Dataset, f_hz: float) -> float:
+    """G' of a run at frequency ``f_hz`` (Pa): a frequency sweep interpolated in log f (NaN outside its
+    range), or the lower half of an amplitude sweep's amplitudes at its own frequency."""
+    if "storage_modulus" not in sweep:
+        return np.nan
+    gp = np.asarray(sweep["storage_modulus"].values, float)
+    if sweep.attrs.get("test") == "amplitude_sweep":
+        g0 = np.abs(sweep["shear_strain"].values) if "shear_strain" in sweep else None
+        if g0 is None:
+            return np.nan
+        small = g0 <= np.nanmedian(g0)
+        v = gp[small & (gp > 0)]
+        return float(np.median(v)) if v.size else np.nan
+    f = sweep["frequency"].values if "frequency" in sweep else (
+        sweep["angular_frequency"].values / (2 * np.pi) if "angular_frequency" in sweep else None)
+    if f is None:
+        return np.nan
+    ok = np.isfinite(f) & (f > 0) & (gp > 0)
+    f, gp = f[ok], gp[ok]
+    if f.size < 2 or not f.min() <= f_hz <= f.max():
+        return np.nan
+    o = np.argsort(f)
+    return float(np.exp(np.interp(np.log(f_hz), np.log(f[o]), np.log(gp[o]))))
+
+
+def _sweep_frequency(run: xr.Dataset) -> float:
+    if "frequency_hz" in run.attrs:
+        return float(run.attrs["frequency_hz"])
+    if "frequency" in run:
+        return float(np.nanmedian(run["frequency"].values))
+    if "angular_frequency" in run:
+        return float(np.nanmedian(run["angular_frequency"].values) / (2 * np.pi))
+    return np.nan
+
+
+def paired_first_load_test(ctx: DiagnosisContext) -> dict | None:
+    """Model-free paired test of the first load, whatever test came first.
+
+    For every sample whose measuring order is known (``order``, else ``started_at``, else ``total_time``;
+    :func:`_run_sequences`), the first run is compared with the later runs of the same sample that repeat
+    a comparable measurement: the same test kind and condition (ln ratio of the stiffness-carrying
+    quantity over the common range, :func:`_log_contrast`), or -- between an amplitude sweep and a
+    frequency sweep in either order -- the linear G' at the amplitude sweep's frequency (lower half of its
+    amplitudes vs the frequency sweep interpolated in log f). One contrast per sample (mean over its
+    comparable repeats); one-sample t-test over samples (>= 3). Returns None when fewer than 3 samples
+    have a comparable repeat. ``n`` samples, ``kinds`` the first-test kinds compared."""
+    logs, kinds = [], set()
+    for seq in _run_sequences(ctx.runs):
+        first, later = seq[0], seq[1:]
+        ft = first.attrs.get("test")
+        c = []
+        for r in later:
+            rt = r.attrs.get("test")
+            if rt == ft and condition_label(r) == condition_label(first):
+                c.append(_log_contrast(first, r))
+            elif {ft, rt} == {"amplitude_sweep", "frequency_sweep"}:
+                amp = first if ft == "amplitude_sweep" else r
+                f_as = _sweep_frequency(amp)
+                g_first, g_later = _linear_storage(first, f_as), _linear_storage(r, f_as)
+                if g_first > 0 and g_later > 0:
+                    c.append(float(np.log(g_first / g_later)))
+        c = [v for v in c if np.isfinite(v)]
+        if c:
+            logs.append(float(np.mean(c)))
+            kinds.add(str(ft))
+    if len(logs) < 3:
+        return None
+    x = np.asarray(logs)
+    sd = x.std(ddof=1)
+    tval = x.mean() / (sd / np.sqrt(x.size)) if sd > 0 else (np.inf if x.mean() else 0.0)
+    out = st._pack(tval, st.log10_p_from_t(tval, x.size - 1), estimate=float(x.mean()), n=x.size)
+    out["kinds"] = sorted(kinds)
+    return out
+
+
+def _scale_correction_cv(ctx: DiagnosisContext, levels: pd.DataFrame, column: str) -> tuple[float, float, str]:
+    """Held-out gain of a curve-level covariate (elapsed time, first load).
+
+    With >= 3 curves per sample: leave one curve out and predict its level from the other curves of the
+    same sample (baseline: their mean; fix: their mean adjusted by b * column, b fitted within samples
+    without the held-out curve). Otherwise leave one sample out and use the specimen's other samples.
+    Error: log(observed/predicted) at every point of the held-out curve."""
+    if column == "elapsed_h" and levels["elapsed_h"].isna().any():
+        levels = levels.assign(elapsed_h=levels["position"].astype(float))
+    levels = levels[levels[column].notna()]
+    if levels.empty:
+        return np.nan, np.nan, "curve"
+    rows = primary_rows(ctx.table)
+    point_errors = {c: g.to_numpy(float) for c, g in rows.groupby("curve")["log_ratio"]}
+    by_sample = levels.groupby("sample").size().min() >= 3
+    unit, held = ("sample", "curve") if by_sample else ("specimen", "sample")
+    unit_codes = pd.factorize(levels[unit])[0]
+    held_codes = pd.factorize(levels[held])[0]
+    x_all = levels[column].to_numpy(float)
+    y_all = levels["log_scale"].to_numpy(float)
+    curves = levels["curve"].to_numpy()
+    before, after = [], []
+    for g in np.unique(held_codes):
+        train = held_codes != g
+        # within-unit slope without the held-out group
+        xm = np.bincount(unit_codes[train], x_all[train], minlength=unit_codes.max() + 1)
+        ym = np.bincount(unit_codes[train], y_all[train], minlength=unit_codes.max() + 1)
+        nm = np.bincount(unit_codes[train], minlength=unit_codes.max() + 1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            xm, ym = xm / nm, ym / nm
+        dx = x_all[train] - xm[unit_codes[train]]
+        dy = y_all[train] - ym[unit_codes[train]]
+        slope = float(np.dot(dx, dy) / np.dot(dx, dx)) if np.dot(dx, dx) > 0 else 0.0
+        test_idx = np.nonzero(~train)[0]
+        u = unit_codes[test_idx[0]]
+        if nm[u] == 0:
+            continue
+        base = ym[u]
+        adj = ym[u] - slope * xm[u]
+        for i in test_idx:
+            e = point_errors.get(curves[i])
+            if e is None:
+                continue
+            before.append(e - base)
+            after.append(e - adj - slope * x_all[i])
+    if not before:
+        return np.nan, np.nan, held
+    return rms(np.concatenate(before)), rms(np.concatenate(after)), held
+
+
+#: elapsed time and run temperature explaining this share of each other's variance across curves cannot be
+#: separated (R^2 >= 0.9: VIF >= 10; :data:`tissuemech.diagnosis.generic.CONFOUNDED_R2`)
+TIME_TEMPERATURE_R2 = 0.9
+
+
+def _temperature_confound(ctx: DiagnosisContext, levels: pd.DataFrame) -> str:
+    """Why a drift cannot be tested when the run temperature follows the clock ('' when it can)."""
+    temps = {}
+    for r in ctx.runs:
+        t = run_temperature_c(r)
+        if np.isfinite(t):
+            temps[run_id(r)] = t
+    lv = levels.assign(temperature_c=levels["curve"].map(temps))
+    x = lv["elapsed_h"] if lv["elapsed_h"].notna().all() and lv["elapsed_h"].nunique() > 2 else lv["test_order"]
+    ok = lv["temperature_c"].notna() & x.notna()
+    if ok.sum() < 3 or lv.loc[ok, "temperature_c"].std() == 0 or x[ok].std() == 0:
+        return ""
+    r2 = float(np.corrcoef(lv.loc[ok, "temperature_c"], x[ok])[0, 1] ** 2)
+    if r2 < TIME_TEMPERATURE_R2:
+        return ""
+    return (f"not testable here: the run temperature follows the elapsed time (R^2 = {r2:.3f} across "
+            f"{int(ok.sum())} curves, {lv.loc[ok, 'temperature_c'].min():.3g}..{lv.loc[ok, 'temperature_c'].max():.3g} "
+            f"degC), so a drift at constant conditions cannot be separated from the temperature change; the "
+            f"temperature, which has a physical model (time-temperature superposition scored on a held-out "
+            f"temperature), is tested as temperature_dependence; a design that would separate them: repeat a "
+            f"reference temperature at the start and the end of the session.")
+
+
+def _confound_text(t: dict) -> str:
+    names = {"position": "the position in the test sequence", "first_load": "the first load of each sample",
+             "temperature_c": "the logged temperature", "elapsed_h": "elapsed time",
+             "condition": "the test condition (the test order is nearly fixed)"}
+    if not t.get("confounded_with"):
+        return ""
+    return (" The design cannot separate it from " + " or ".join(names[c] for c in t["confounded_with"])
+            + " (within-sample |r| >= " + f"{CONFOUND_CORRELATION:g}); a design that would: "
+            + "; ".join(t["separating_design"]) + ".")
+
+
+def detect_elapsed_time_drift(ctx: DiagnosisContext) -> dict:
+    """Per-curve stiffness scale regressed on elapsed time (``started_at``/``total_time``; the position in
+    the sequence only when no time was recorded), controlled for the first load where the order is known;
+    reports the covariates it is confounded with (order, temperature) and the design that would separate
+    them."""
+    eff = "elapsed_time_drift"
+    levels = curve_levels(ctx.table)
+    if len(levels) < 6:
+        return untested_finding(eff, "fewer than 6 curves: the per-curve scale cannot be regressed on elapsed time")
+    confound = _temperature_confound(ctx, levels)
+    if confound:
+        return untested_finding(eff, confound) | {
+            "confounded_with": ["temperature_c"],
+            "separating_design": ["repeat a reference temperature at the start and the end of the session"]}
+    t, design = _level_tests(levels, "elapsed_h")
+    if t is None:
+        return untested_finding(eff, "elapsed time (total_time/started_at) and the test order do not vary across "
+                              "curves in a way that is not confounded with the test conditions; a design that "
+                              f"would: {SEPARATING_DESIGN['condition']}"
+                              + ("" if _usable(levels, "elapsed_h") else f"; {SEPARATING_DESIGN['elapsed_h']}"))
+    kappa = float(np.expm1(t["estimate"]))
+    use_time = _usable(levels, "elapsed_h")
+    unit = "1/h" if use_time else "1/test"
+    span = float(levels["elapsed_h"].max() - levels["elapsed_h"].min()) if use_time else float(
+        levels["position"].max() - levels["position"].min())
+    before, after, group = _scale_correction_cv(ctx, levels, "elapsed_h")
+    order = levels.sort_values("elapsed_h" if use_time else "position")["log_scale"].to_numpy()
+    runs = st.runs_test(order - np.median(order))
+    source = ("hour of elapsed session time" if use_time else
+              "test in the sequence (no started_at or total_time recorded: drift cannot be told from a test-order "
+              "effect)")
+    evidence = (f"The per-test stiffness scale of {ctx.model} changes by {100 * kappa:+.1f} % per "
+                f"{source} across {len(levels)} "
+                f"curves ({', '.join(sorted(levels['test'].unique()))}; {design}; t = {t['statistic']:.2f}); "
+                f"over the {span:.2g} "
+                f"{'h' if use_time else 'tests'} of the session the model is off by "
+                f"{100 * np.expm1(abs(t['estimate']) * span):.0f} %; curve scales ordered by time have "
+                f"{int(runs['n_runs'])} runs (runs test p = {runs['p_value']:.2g})." + _confound_text(t))
+    fix = fix_record("elapsed-time covariate: prediction x exp(b0 + kappa t_elapsed)", "rms_log_residual",
+               before, after, f"leave-one-{group}-out", kappa_per_unit=kappa)
+    practical = abs(np.expm1(abs(t["estimate"]) * span)) >= 0.05
+    return make_finding(eff, t, "t", kappa, unit, practical, evidence, fix, time_source=(
+        "elapsed time" if use_time else "test order"), confounded_with=t["confounded_with"],
+        separating_design=t["separating_design"], design=design)
+
+
+def detect_preconditioning(ctx: DiagnosisContext) -> dict:
+    """First load of each sample stiffer than its later tests, whatever test came first: the model-free
+    paired comparison with later repeats of a comparable measurement (:func:`paired_first_load_test`) and
+    the first-load indicator in the curve-level regression with sample + condition fixed effects
+    (controlled for elapsed time where recorded), the stronger with a Bonferroni factor."""
+    eff = "preconditioning"
+    levels = curve_levels(ctx.table)
+    if levels["first_load"].isna().all():
+        return untested_finding(eff, "the measuring order of the tests on each sample is unknown (no order, started_at "
+                              "or total_time): the first load cannot be identified")
+    found = []
+    paired = paired_first_load_test(ctx)
+    if paired is not None:
+        found.append((dict(paired, confounded_with=[], separating_design=[]),
+                      f"model-free, paired over {paired['n']:.0f} samples: the first test "
+                      f"({', '.join(paired['kinds'])}) vs later repeats of a comparable measurement of the same "
+                      f"sample"))
+    if len(levels) >= 6:
+        lt, ldesign = _level_tests(levels, "first_load")
+        if lt is not None:
+            found.append((lt, ldesign))
+    if not found:
+        return untested_finding(eff, "no sample has a first load comparable with a later repeat of the same kind of "
+                              "measurement and the first-load indicator is confounded with the test conditions "
+                              "(one test per sample, or the first test is always the same kind); a design that "
+                              f"would: {SEPARATING_DESIGN['first_load']}")
+    t, design = min(found, key=lambda f: f[0]["log10_p"])
+    lp = min(0.0, t["log10_p"] + np.log10(len(found)))
+    t = dict(t, log10_p=lp, p_value=10 ** lp)
+    delta = float(np.expm1(t["estimate"]))
+    before, after, group = _scale_correction_cv(ctx, levels, "first_load")
+    known = levels[levels["first_load"].notna()]
+    n_first = int(known["first_load"].sum())
+    first_tests = known.loc[known["first_load"] == 1, "test"].value_counts().index.tolist()
+    evidence = (f"The first test of each sample ({n_first} first loads, mostly {', '.join(first_tests[:2])}; "
+                f"order from {', '.join(sorted(known['order_source'].unique()))}) "
+                f"is {100 * delta:+.1f} % {'stiffer' if delta > 0 else 'softer'} than "
+                f"the repeated tests of the same samples ({design}; t = {t['statistic']:.2f}"
+                + (f"; Bonferroni over {len(found)} tests" if len(found) > 1 else "") + ")."
+                + _confound_text(t))
+    fix = fix_record("first-load indicator (pseudo-elastic factor on virgin loading) / discard first cycle",
+               "rms_log_residual", before, after, f"leave-one-{group}-out", first_load_factor=1 + delta)
+    # preconditioning softens: only a stiffer first load is this cause (a softer one is another misfit)
+    return make_finding(eff, t, "t", delta, "1 (relative stiffness of first load)", delta >= 0.05, evidence, fix,
+                    confounded_with=t.get("confounded_with", []),
+                    separating_design=t.get("separating_design", []), design=design)
+
+
+def specimen_levels(levels: pd.DataFrame) -> pd.Series:
+    """Specimen stiffness levels (log scale) with the condition effects removed: least squares of the curve
+    levels on specimen + condition fixed effects (the condition misfit is shared by all specimens), each
+    specimen's level centred on the mean of all. Raises ValueError when specimen and condition are
+    confounded (the levels are then not identified)."""
+    lv = levels[np.isfinite(levels["log_scale"])]
+    spec = pd.get_dummies(lv["specimen"], dtype=float)
+    cond = pd.get_dummies(lv["condition"], drop_first=True, dtype=float)
+    X = pd.concat([spec, cond], axis=1).to_numpy(float)
+    if np.linalg.matrix_rank(X) < X.shape[1]:
+        raise ValueError("specimen and condition are confounded (specimens measured on disjoint sets of tests)")
+    coef, *_ = np.linalg.lstsq(X, lv["log_scale"].to_numpy(float), rcond=None)
+    out = pd.Series(coef[:spec.shape[1]], index=spec.columns)
+    return out - out.mean()
+
+
+def detect_outlier_specimen(ctx: DiagnosisContext) -> dict:
+    """Most extreme specimen level (curve scales with condition effects removed, :func:`specimen_levels`):
+    externally studentised deletion residual against the other specimens, t_{n-2}, Bonferroni over the n
+    specimens (:func:`tissuemech.stats.deletion_outlier_test`); valid from 3 specimens."""
+    eff = "outlier_specimen"
+    levels = curve_levels(ctx.table)
+    n_spec = levels["specimen"].nunique()
+    if n_spec < 3:
+        return untested_finding(eff, f"only {n_spec} specimen(s): an outlier specimen needs at least 3 specimens "
+                              "(one to test against the spread of at least two others)")
+    try:
+        spec = specimen_levels(levels)
+    except ValueError as exc:
+        return untested_finding(eff, f"{n_spec} specimens, but {exc}: a design that would: run at least one common "
+                              "test condition on every specimen")
+    t = st.deletion_outlier_test(spec.to_numpy())
+    if int(t["index"]) < 0:
+        return untested_finding(eff, f"{n_spec} specimens: the deletion test could not be formed")
+    name = str(spec.index[int(t["index"])])
+    ratio = float(np.exp(spec.iloc[int(t["index"])] - np.median(np.delete(spec.to_numpy(), int(t["index"])))))
+    resid = levels["log_scale"] - levels.groupby("condition")["log_scale"].transform("median")
+    levels = levels.assign(resid=resid)
+    mixed = None
+    try:
+        per_sample = levels.groupby("sample").agg(resid=("resid", "mean"), specimen=("specimen", "first"))
+        per_sample["value"] = np.exp(per_sample["resid"])
+        if per_sample["specimen"].value_counts().max() > 1:
+            mixed = st.mixed_log_params(per_sample, "value", "specimen")
+    except Exception:  # MixedLM may fail to converge on tiny designs; the deletion test stands alone
+        mixed = None
+    # held-out: predict each typical specimen's level from the others by mean (baseline) vs median (robust)
+    errs_before, errs_after = [], []
+    rows = primary_rows(ctx.table)
+    for s in spec.index:
+        if s == name:
+            continue
+        others = spec.drop(s)
+        r = rows.loc[rows["specimen"] == s, "log_ratio"].to_numpy()
+        r = r - float(np.median(r)) + spec[s]  # condition misfit removed as in the specimen levels
+        errs_before.append(r - others.mean())
+        errs_after.append(r - others.median())
+    before, after = rms(np.concatenate(errs_before)), rms(np.concatenate(errs_after))
+    mixed_txt = ""
+    if mixed is not None:
+        mixed_txt = (f"; MixedLM on log-scales: omega_between = {mixed['omega_between']:.2f}, omega_within = "
+                     f"{mixed['omega_within']:.2f}, standardized BLUP of {name} = "
+                     f"{mixed['blup_z'].get(name, np.nan):.1f}")
+    evidence = (f"Specimen {name} is {ratio:.2f}x the median of the other {spec.size - 1} specimens "
+                f"(externally studentised deletion t = {t['statistic']:.2f} on {spec.size - 2} df, "
+                f"Bonferroni over {spec.size} specimens; modified z = {t['modified_z']:.1f}){mixed_txt}.")
+    fix = fix_record("robust/hierarchical population fit (median specimen level; outlier specimen reported apart)",
+               "rms_log_residual_typical_specimens", before, after, "leave-one-specimen-out",
+               outlier_ratio=ratio)
+    practical = abs(np.log(ratio)) >= np.log(1.5)
+    return make_finding(eff, t, "t", ratio, "x median specimen", practical, evidence, fix, specimen=name,
+                    n_specimens=int(spec.size))
