@@ -57,7 +57,11 @@ import xarray as xr
 from scipy.optimize import nnls
 
 from .canonical import to_jsonable
-from .models.base import ConstitutiveModel, ParamSpec
+from .curves import as_str, select_average
+from .lve import lve_limit
+from .models.base import ConstitutiveModel, ParamSpec, ResponseNotSupported
+from .models.plate import forward_plate, rabinowitsch_rim_stress
+from .models.recursion import prony_branch_histories
 from .records import FitRecord
 from .spectra import log_spaced_taus, prony_oscillation_basis  # log_spaced_taus re-exported (fitting.__all__)
 from .stats import effective_sample_size, information_criteria
@@ -218,10 +222,10 @@ def curve_from_run(ds: xr.Dataset, relaxation: str = "measured") -> Curve:
     ds : canonical run dataset (attrs ``test``, geometry ``radius_m``/``gap_m``, nominal condition)
     relaxation : strain-history treatment of relaxation tests, see :func:`relaxation_history`
     """
-    return _curve_and_rows(ds, relaxation)[0]
+    return curve_and_rows(ds, relaxation)[0]
 
 
-def _curve_and_rows(ds: xr.Dataset, relaxation: str) -> tuple[Curve, np.ndarray]:
+def curve_and_rows(ds: xr.Dataset, relaxation: str) -> tuple[Curve, np.ndarray]:
     """The curve of a run and the rows of the run that are its observation points."""
     attrs = dict(ds.attrs)
     test = str(attrs.get("test", ""))
@@ -313,11 +317,10 @@ def curves_from_averages(avg: xr.Dataset, radius_m: float | Mapping[str, float] 
     Grid points where the mean is missing (fewer samples than needed) are dropped; the time of a CSR curve
     (grid: strain) is strain / nominal rate when the averaged time is absent.
     """
-    from .curves import _as_str, select_average
 
     out = []
-    tests_all = _as_str(avg["test"].values)
-    labels = _as_str(avg["condition"].values)
+    tests_all = as_str(avg["test"].values)
+    labels = as_str(avg["condition"].values)
     for test, label in zip(tests_all, labels):
         test, label = str(test), str(label)
         if tests is not None and test not in tests:
@@ -353,7 +356,7 @@ def curves_from_averages(avg: xr.Dataset, radius_m: float | Mapping[str, float] 
         rad = radius_m.get(test, np.nan) if isinstance(radius_m, Mapping) else radius_m
         gap = gap_m.get(test, np.nan) if isinstance(gap_m, Mapping) else gap_m
         run.attrs.update({"condition": label, "specimen": "mean", "radius_m": float(rad), "gap_m": float(gap)})
-        curve, rows = _curve_and_rows(run, relaxation)
+        curve, rows = curve_and_rows(run, relaxation)
         sd = {k: sds[k][ok][rows] for k in curve.observed if k in sds}
         out.append(replace(curve, sd=sd))
     return out
@@ -379,7 +382,6 @@ def amplitude_sweep_lve_curve(sweep: xr.Dataset, tolerance: float = 0.05) -> Cur
     -------
     Curve or None when the sweep has fewer than two usable points inside the LVE range.
     """
-    from .lve import lve_limit
 
     if "storage_modulus_mean" not in sweep:
         return None
@@ -545,7 +547,6 @@ def target_observations(curve: Curve, target: str) -> tuple[dict[str, np.ndarray
             sd["torque"] = torque_sd
         return obs, sd
     # corrected_stress: needs a monotone sweep of the rim strain (CSR) or rate (flow)
-    from .models.plate import rabinowitsch_rim_stress
 
     x = curve.obs_inputs("shear_strain") if curve.response == "shear_history" else curve.obs_inputs("shear_rate")
     if curve.test == "stress_relaxation" or np.any(np.diff(x) <= 0) or np.any(x <= 0):
@@ -564,7 +565,7 @@ def _shear_history_stress(model: ConstitutiveModel, p, time_s, strain) -> np.nda
     if model.supports("elastic_shear"):
         # a purely elastic (rate-independent) law: the stress follows the current strain
         return model.elastic_shear_stress(p, strain)
-    model._unsupported("shear_history")
+    raise ResponseNotSupported(f"model {model.name!r} ({model.family}) does not describe 'shear_history'")
 
 
 def predict(model: ConstitutiveModel, p: Mapping[str, float], curve: Curve, target: str) -> dict[str, np.ndarray]:
@@ -575,7 +576,6 @@ def predict(model: ConstitutiveModel, p: Mapping[str, float], curve: Curve, targ
         t = np.asarray(curve.inputs["time"], float)
         g = np.asarray(curve.inputs["shear_strain"], float)
         if curve.is_plate and target in ("torque", "apparent_stress"):
-            from .models.plate import forward_plate
 
             full = forward_plate(model, p, t, g, curve.radius_m, curve.gap_m, target=target)
             key = "torque" if target == "torque" else "shear_stress"
@@ -669,7 +669,7 @@ class FitProblem:
             raise ValueError("a fit needs at least one curve")
         if not self.model_key:
             self.model_key = self.model.name
-        self._obs = []
+        self.observations = []
         for c in self.curves:
             need = c.response
             if need == "shear_history" and not (self.model.supports("shear_history") or self.model.supports("elastic_shear")):
@@ -678,17 +678,17 @@ class FitProblem:
                 raise ValueError(f"model {self.model_key!r} ({self.model.family}) cannot describe {c.label} (needs {need})")
             obs, sd = target_observations(c, self.target)
             sig = {k: self.noise.sigma(k, v, sd.get(k)) for k, v in obs.items()}
-            self._obs.append((obs, sig))
+            self.observations.append((obs, sig))
 
     # --- parameters -------------------------------------------------------------------------------
     def spec(self, name: str) -> ParamSpec:
         return next(s for s in self.model.param_specs if s.name == name)
 
-    def _bounds(self, s: ParamSpec) -> tuple[float, float]:
+    def param_bounds(self, s: ParamSpec) -> tuple[float, float]:
         return tuple(self.bounds.get(s.name, (s.lower, s.upper)))
 
     def is_log(self, s: ParamSpec) -> bool:
-        lo, _ = self._bounds(s)
+        lo, _ = self.param_bounds(s)
         return bool(s.log and lo >= 0 and s.init > 0)
 
     def internal_name(self, s: ParamSpec) -> str:
@@ -699,7 +699,7 @@ class FitProblem:
         start = dict(start or {})
         pars = lmfit.Parameters()
         for s in self.model.param_specs:
-            lo, hi = self._bounds(s)
+            lo, hi = self.param_bounds(s)
             value = float(self.fixed.get(s.name, start.get(s.name, s.init)))
             vary = s.name not in self.fixed
             if self.is_log(s):
@@ -727,7 +727,7 @@ class FitProblem:
     def curve_terms(self, p: Mapping[str, float]) -> list[dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]]:
         """Per curve and observable: (observed, predicted, weighted residual)."""
         out = []
-        for c, (obs, sig) in zip(self.curves, self._obs):
+        for c, (obs, sig) in zip(self.curves, self.observations):
             pred = predict(self.model, p, c, self.target)
             terms = {}
             for k, y in obs.items():
@@ -750,7 +750,7 @@ class FitProblem:
 
     @property
     def n_obs(self) -> int:
-        return int(sum(v.size for obs, _ in self._obs for v in obs.values()))
+        return int(sum(v.size for obs, _ in self.observations for v in obs.values()))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -872,7 +872,7 @@ def _random_start(problem: FitProblem, rng: np.random.Generator) -> dict[str, fl
     for spec in problem.model.param_specs:
         if spec.name in problem.fixed:
             continue
-        lo, hi = problem._bounds(spec)
+        lo, hi = problem.param_bounds(spec)
         init = float(spec.init)
         if problem.is_log(spec):
             v = init * 10.0 ** rng.uniform(-1.0, 1.0)
@@ -977,7 +977,7 @@ def _record(problem: FitProblem, best, nfev: int, chis: list[float]) -> FitResul
                   "n_points": c.n_points, "n_samples": c.n_samples, "response": c.response,
                   "observables": sorted(o.keys()), "radius_m": c.radius_m, "gap_m": c.gap_m,
                   **{f"nominal_{k2}": v2 for k2, v2 in c.nominal.items()}}
-                 for c, (o, _) in zip(problem.curves, problem._obs)]
+                 for c, (o, _) in zip(problem.curves, problem.observations)]
     return FitResult(
         model_key=problem.model_key, family=model.family, scope=problem.scope, target=problem.target,
         params=p, stderr=stderr, units={s.name: s.unit for s in model.param_specs},
@@ -1034,7 +1034,6 @@ def prony_nnls(curves: Sequence[Curve], taus: np.ndarray, elastic: Callable[[np.
     function of QLV: G_r = g_inf + sum g_i exp(-t/tau_i)), the instantaneous scale ``a0 = a_inf + sum a``,
     and the weighted ``residual_norm``.
     """
-    from .models.recursion import prony_branch_histories
 
     noise = noise or NoiseModel()
     taus = np.asarray(taus, float)
@@ -1143,8 +1142,10 @@ def fits_csv_row(record: FitRecord | xr.Dataset, dataset: str = "", file: str = 
     return row
 
 
+_curve_and_rows = curve_and_rows  # old private name, still used by diagnosis.baseline (to be switched there)
+
 __all__ = [
-    "PLATE_TARGETS", "TEST_RESPONSE", "Curve", "amplitude_sweep_lve_curve", "curve_from_run", "curves_from_averages", "geometry_from_runs", "relaxation_history",
+    "PLATE_TARGETS", "TEST_RESPONSE", "Curve", "amplitude_sweep_lve_curve", "curve_from_run", "curve_and_rows", "curves_from_averages", "geometry_from_runs", "relaxation_history",
     "thin", "select_strain", "with_relaxation_history", "curve_ranges", "plate_factor", "target_observations", "predict",
     "NoiseModel", "FitProblem", "FitResult", "fit", "evaluate", "log_spaced_taus",
     "prony_nnls", "prony_start", "FitRecord", "fit_to_dataset", "write_fit_netcdf", "fits_csv_row", "FITS_CSV_ATTRS",

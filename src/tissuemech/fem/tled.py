@@ -45,6 +45,7 @@ from .kinematics import cofactor, left_cauchy_green, pull_back, push_forward
 from .materials import (FASTMATH, KIND_INVARIANT, KIND_INVARIANT_I1, KIND_SVK, Material,
                         constant_invariant_derivatives, j_minus_two_thirds, kirchhoff_deviatoric)
 from .mesh import TetMesh, element_min_altitudes, element_volumes
+from .mesh import boundary_nodes
 
 STATUS_OK = 0
 STATUS_INVERTED = 1
@@ -912,7 +913,6 @@ def build_model(mesh: TetMesh, material: Material, groups: list[BoundaryGroup] |
         d = np.asarray(contact.direction, float)
         a = np.asarray(contact.axis, float)
         cparams = np.concatenate([contact.center_m, d / np.linalg.norm(d), [contact.radius_m], a / np.linalg.norm(a)])
-        from .mesh import boundary_nodes
         cnodes = boundary_nodes(elements) if contact.nodes is None else np.asarray(contact.nodes)
         cnodes = cnodes[free[cnodes].all(axis=1)]
     else:
