@@ -818,6 +818,9 @@ def _flags(problem: FitProblem, best, names: list[str]) -> tuple[list[str], np.n
         with np.errstate(invalid="ignore", divide="ignore"):
             corr = cov / np.outer(sd, sd)
         np.fill_diagonal(corr, 1.0)
+        if not np.all(sd > 0):
+            # a finite covariance with a zero variance: lmfit's inverse of a singular Jacobian
+            flags.append("no_covariance: the Jacobian is singular (parameters not identifiable from these data)")
         for i in range(k):
             for j in range(i + 1, k):
                 if np.isfinite(corr[i, j]) and abs(corr[i, j]) > CORRELATION_FLAG:
