@@ -9,6 +9,8 @@ calls the loops. numba's cache does not see changes of inlined code in another f
 """
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit, prange
 
@@ -21,6 +23,17 @@ STATUS_OK = 0
 STATUS_INVERTED = 1
 STATUS_NOT_FINITE = 2
 STATUS_NOT_CONVERGED = 3
+
+#: the arrays the loops take, grouped (numba passes namedtuples of arrays as one typed argument)
+KernelMesh = namedtuple("KernelMesh", "X elements dndx vol0 chunk_lo vnode")
+KernelMesh.__doc__ = """Reference nodes, elements, dN/dX, element volumes, element chunks, nodal volumes."""
+KernelMaterial = namedtuple("KernelMaterial", "kind params kappa use_anp prony_g prony_tau branch_params")
+KernelMaterial.__doc__ = """Law kind, law parameters, bulk modulus, ANP on/off, Prony g_i and tau_i, branch parameters."""
+KernelLaws = namedtuple("KernelLaws", "w1fn w2fn wlfn bfn")
+KernelLaws.__doc__ = """The law's compiled functions dW/dI1, dW/dI2, dW/dlambda and the beyond-QLV branch dW/dI1."""
+KernelLoads = namedtuple("KernelLoads", "bc_nodes bc_group bc_mask bc_dir bc_rotate rot_center n_groups free "
+                                        "hist_time hist_vals fext_ref contact_kind cparams contact_nodes")
+KernelLoads.__doc__ = """Boundary groups and their histories, free dofs, external load, rigid contact."""
 
 
 # --------------------------------------------------------------------------------------------------
@@ -437,12 +450,16 @@ def _energy_increments(u_new, u, u_old, fint, fext_ref, s_ext, mass, damping, dt
 
 
 @njit(cache=True)
-def explicit_loop(X, elements, dndx, vol0, chunk_lo, vnode, mass, kind, w1fn, w2fn, wlfn, params, kappa,
-                  use_anp, prony_g, prony_tau, h_state, s_prev, bfn, branch_params, w_prev, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate,
-                  rot_center, n_groups, free, hist_time, hist_vals, fext_ref, contact_kind, cparams,
-                  contact_nodes, dt, n_steps, damping, out_every, u, u_old, fbuf, pbuf, track_energy, vec):
+def explicit_loop(mesh, mat, laws, loads, mass, h_state, s_prev, w_prev, dt, n_steps, damping, out_every, u, u_old,
+                  fbuf, pbuf, track_energy, vec):
     """Central-difference time loop. ``u``/``u_old`` hold the state at steps 0 and -1 on entry and the
-    last two states on exit (``u`` newest)."""
+    last two states on exit (``u`` newest). ``mesh``, ``mat``, ``laws``, ``loads``: :class:`KernelMesh`,
+    :class:`KernelMaterial`, :class:`KernelLaws`, :class:`KernelLoads`; ``mass``: lumped nodal masses."""
+    X, elements, dndx, vol0, chunk_lo, vnode = mesh
+    kind, params, kappa, use_anp, prony_g, prony_tau, branch_params = mat
+    w1fn, w2fn, wlfn, bfn = laws
+    (bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, n_groups, free, hist_time, hist_vals, fext_ref,
+     contact_kind, cparams, contact_nodes) = loads
     nn = X.shape[0]
     n_out = n_steps // out_every + 2  # every out_every-th step and always the last one
     out_t = np.zeros(n_out)
@@ -532,10 +549,8 @@ def _dr_node_pass(fint, fext_ref, s_ext, u, u_old, u_new, inv_mass, alpha, beta,
 
 
 @njit(cache=True)
-def dynamic_relaxation_loop(X, elements, dndx, vol0, chunk_lo, vnode, dr_mass, kind, w1fn, w2fn, wlfn, params, kappa, use_anp,
-            prony_g, prony_tau, h_state, s_prev, bfn, branch_params, w_prev, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center,
-            n_groups, free, hist_time, hist_vals, fext_ref, contact_kind, cparams, contact_nodes, times,
-            tol_m, min_iter, max_iter, u, fbuf, pbuf, vec):
+def dynamic_relaxation_loop(mesh, mat, laws, loads, dr_mass, h_state, s_prev, w_prev, times, tol_m, min_iter, max_iter,
+                            u, fbuf, pbuf, vec):
     """Dynamic relaxation to static equilibrium at each time in ``times`` (quasi-static loading path).
 
     Unit fictitious time step; ``dr_mass`` makes every element's stable step ~2 (lambda_max ~ 1). The
@@ -543,6 +558,11 @@ def dynamic_relaxation_loop(X, elements, dndx, vol0, chunk_lo, vnode, dr_mass, k
     committed after convergence. Returns status, failing increment, iterations used per increment and
     the reactions/torques/contact forces per increment.
     """
+    X, elements, dndx, vol0, chunk_lo, vnode = mesh
+    kind, params, kappa, use_anp, prony_g, prony_tau, branch_params = mat
+    w1fn, w2fn, wlfn, bfn = laws
+    (bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, n_groups, free, hist_time, hist_vals, fext_ref,
+     contact_kind, cparams, contact_nodes) = loads
     nn = X.shape[0]
     nk = times.size
     out_force = np.zeros((nk, n_groups, 3))

@@ -40,7 +40,8 @@ import numba
 import numpy as np
 
 from . import vectorised
-from ._kernels import STATUS_INVERTED, STATUS_NOT_CONVERGED, STATUS_NOT_FINITE, dynamic_relaxation_loop, explicit_loop
+from ._kernels import (STATUS_INVERTED, STATUS_NOT_CONVERGED, STATUS_NOT_FINITE, KernelLaws, KernelLoads, KernelMaterial,
+                       KernelMesh, dynamic_relaxation_loop, explicit_loop)
 from .materials import KIND_INVARIANT, KIND_INVARIANT_I1, KIND_SVK, Material, constant_invariant_derivatives
 from .mesh import TetMesh, boundary_nodes, element_min_altitudes, element_volumes
 
@@ -476,6 +477,18 @@ def _check_status(status, bad, where, time_s):
                                     -1, int(where.split()[-1]), time_s)
 
 
+def _kernel_arguments(model: TLEDModel) -> tuple[KernelMesh, KernelMaterial, KernelLaws, KernelLoads]:
+    """The model's arrays grouped as the compiled loops take them."""
+    m = model.material
+    mesh = KernelMesh(model.mesh.nodes, model.mesh.elements, model.dndx, model.vol0, model.chunk_lo, model.vnode)
+    mat = KernelMaterial(m.kind, m.params, m.bulk_modulus_pa, model.use_anp, m.prony_g, m.prony_tau_s, m.branch_params)
+    laws = KernelLaws(*m.functions(), m.branch_function())
+    loads = KernelLoads(model.bc_nodes, model.bc_group, model.bc_mask, model.bc_dir, model.bc_rotate, model.rot_center,
+                        max(1, len(model.groups)), model.free, model.hist_time, model.hist_vals, model.fext_ref,
+                        model.contact_kind, model.cparams, model.contact_nodes)
+    return mesh, mat, laws, loads
+
+
 def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None, safety: float = 0.7,
                  damping_1_s: float = 0.0, n_outputs: int = 100, u0_m: np.ndarray | None = None,
                  v0_m_s: np.ndarray | None = None, state: tuple | None = None,
@@ -496,7 +509,6 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
         without up to four QLV terms, except float64 meshes above :data:`AUTO_VECTORISED_MAX_FLOAT64_ELEMENTS`
         elements; the generic kernel for stretch-based laws and beyond-QLV), ``"vectorised"`` or ``"generic"``
     """
-    m = model.material
     dt = critical_time_step(model, safety) if dt_s is None else float(dt_s)
     n_steps = max(1, int(np.ceil(t_end_s / dt - 1e-9)))
     out_every = max(1, n_steps // max(1, n_outputs))
@@ -504,16 +516,9 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
     u_old = u.copy() if v0_m_s is None else (u - dt * np.asarray(v0_m_s)).astype(model.dtype)
     h_state, s_prev, w_prev = _state(model, state)
     vec, fbuf, pbuf = _vector_setup(model, kernel, h_state, s_prev)
-    w1, w2, wl = m.functions()
-    bfn = m.branch_function()
-    ng = max(1, len(model.groups))
     with numba_threads(n_threads):
-        res = explicit_loop(model.mesh.nodes, model.mesh.elements, model.dndx, model.vol0, model.chunk_lo,
-                        model.vnode, model.mass, m.kind, w1, w2, wl, m.params, m.bulk_modulus_pa, model.use_anp,
-                        m.prony_g, m.prony_tau_s, h_state, s_prev, bfn, m.branch_params, w_prev, model.bc_nodes, model.bc_group, model.bc_mask,
-                        model.bc_dir, model.bc_rotate, model.rot_center, ng, model.free, model.hist_time,
-                        model.hist_vals, model.fext_ref, model.contact_kind, model.cparams, model.contact_nodes,
-                        dt, n_steps, damping_1_s, out_every, u, u_old, fbuf, pbuf, bool(track_energy), vec)
+        res = explicit_loop(*_kernel_arguments(model), model.mass, h_state, s_prev, w_prev, dt, n_steps, damping_1_s,
+                            out_every, u, u_old, fbuf, pbuf, bool(track_energy), vec)
     _vector_state_back(vec, h_state, s_prev)
     status, bad, step, u, u_old, t, force, torque, cforce, ke, energy = res
     _check_status(status, bad, f"step {step}", step * dt)
@@ -538,7 +543,6 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
     n_threads : numba threads for this run (None: numba's current setting)
     kernel : ``"auto"``, ``"vectorised"`` or ``"generic"`` (see :func:`run_explicit`)
     """
-    m = model.material
     times = np.atleast_1d(np.asarray(times_s, float))
     if np.any(np.diff(times) < 0):
         raise ValueError("times_s must be non-decreasing")
@@ -546,16 +550,9 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
     u = np.zeros((model.mesh.n_nodes, 3), model.dtype) if u0_m is None else np.array(u0_m, dtype=model.dtype)
     h_state, s_prev, w_prev = _state(model, state)
     vec, fbuf, pbuf = _vector_setup(model, kernel, h_state, s_prev)
-    w1, w2, wl = m.functions()
-    bfn = m.branch_function()
-    ng = max(1, len(model.groups))
     with numba_threads(n_threads):
-        res = dynamic_relaxation_loop(model.mesh.nodes, model.mesh.elements, model.dndx, model.vol0, model.chunk_lo, model.vnode,
-                  model.dr_mass, m.kind, w1, w2, wl, m.params, m.bulk_modulus_pa, model.use_anp, m.prony_g,
-                  m.prony_tau_s, h_state, s_prev, bfn, m.branch_params, w_prev, model.bc_nodes, model.bc_group, model.bc_mask, model.bc_dir,
-                  model.bc_rotate, model.rot_center, ng, model.free, model.hist_time, model.hist_vals,
-                  model.fext_ref, model.contact_kind, model.cparams, model.contact_nodes, times, tol, min_iter,
-                  max_iter, u, fbuf, pbuf, vec)
+        res = dynamic_relaxation_loop(*_kernel_arguments(model), model.dr_mass, h_state, s_prev, w_prev, times, tol,
+                                      min_iter, max_iter, u, fbuf, pbuf, vec)
     _vector_state_back(vec, h_state, s_prev)
     status, bad, k, u, iters, force, torque, cforce = res
     if status == STATUS_NOT_CONVERGED:
