@@ -182,6 +182,8 @@ def _element_force_pass(u, elements, dndx, vol0, chunk_lo, fbuf, kind, w1fn, w2f
                     d5 = se5 - s_prev[e, 5]
                     s0, s1, s2 = g_inf * se0, g_inf * se1, g_inf * se2
                     s3, s4, s5 = g_inf * se3, g_inf * se4, g_inf * se5
+                    # the same six-component recursion as the beyond-QLV branch above with its drive
+                    # g_i (S_e - S_prev) in place of w_b Q - w_prev S_prev; written out per component (registers)
                     for i in range(nterm):
                         ee = prony_e[i]
                         gf = prony_g[i] * prony_f[i]
