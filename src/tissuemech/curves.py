@@ -589,7 +589,6 @@ def as_str(values) -> np.ndarray:
     return _str_array([v.decode() if isinstance(v, bytes) else v for v in np.asarray(values).ravel()])
 
 
-_as_str = as_str  # name used by early callers (fitting.curves_from_averages)
 
 
 def curve_index(averages: xr.Dataset, test: str, condition: Mapping[str, float] | str | None = None) -> int:

@@ -24,7 +24,7 @@ from matplotlib.colors import TwoSlopeNorm
 from matplotlib.figure import Figure
 
 from .canonical import CANONICAL_VARIABLES, atomic_write
-from .curves import QUALITY_FLAG_VARIABLE, unflagged_points
+from .curves import QUALITY_FLAG_VARIABLE, select_average, unflagged_points
 
 #: axis labels (symbol [unit]) of canonical variables
 AXIS_LABELS: dict[str, str] = {
@@ -88,13 +88,13 @@ def save_pyplot_figure(fig, path: str | Path, dpi: int = 120) -> Path:
     return Path(path)
 
 
-def _new_figure(ncols: int = 1, nrows: int = 1, width: float = 5.0, height: float = 3.8) -> tuple[Figure, np.ndarray]:
+def new_figure(ncols: int = 1, nrows: int = 1, width: float = 5.0, height: float = 3.8) -> tuple[Figure, np.ndarray]:
     fig = Figure(figsize=(width * ncols, height * nrows), layout="constrained")
     axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False)).ravel()
     return fig, axes
 
 
-def _positive(values: np.ndarray) -> bool:
+def all_positive(values: np.ndarray) -> bool:
     finite = np.asarray(values, dtype=float)
     finite = finite[np.isfinite(finite)]
     return finite.size > 0 and bool(np.all(finite > 0))
@@ -120,7 +120,7 @@ def figure_average(curve: xr.Dataset, variable: str, runs: Sequence[xr.Dataset] 
     x = np.asarray(curve[grid_name].values, dtype=float)
     mean = np.asarray(curve[f"{variable}_mean"].values, dtype=float)
     sd = np.asarray(curve[f"{variable}_sd"].values, dtype=float) if f"{variable}_sd" in curve else np.full_like(mean, np.nan)
-    fig, (ax,) = _new_figure()
+    fig, (ax,) = new_figure()
     meanings: set[str] = set()
     for run in runs:
         if variable not in run:
@@ -149,7 +149,7 @@ def figure_average(curve: xr.Dataset, variable: str, runs: Sequence[xr.Dataset] 
     log = curve.attrs.get("grid_scale") == "log"
     if log:
         ax.set_xscale("log")
-        if _positive(mean) and variable != "temperature":
+        if all_positive(mean) and variable != "temperature":
             ax.set_yscale("log")
     ax.set_xlabel(axis_label(grid_name))
     ax.set_ylabel(axis_label(variable))
@@ -195,7 +195,7 @@ def figure_lve(strain: np.ndarray, storage: np.ndarray, loss: np.ndarray, result
     storage_sd, loss_sd : optional SD bands (averaged sweeps).
     """
     strain = np.asarray(strain, dtype=float)
-    fig, (ax,) = _new_figure()
+    fig, (ax,) = new_figure()
     for values, sd, colour, label in ((storage, storage_sd, "C0", "G'"), (loss, loss_sd, "C1", "G''")):
         values = np.asarray(values, dtype=float)
         ax.plot(strain, values, "o-", ms=3, color=colour, label=label)
@@ -254,7 +254,7 @@ def figure_fit(x: np.ndarray, observed: np.ndarray, predicted: np.ndarray, *, xl
     observed = np.asarray(observed, dtype=float)
     predicted = np.asarray(predicted, dtype=float)
     xm = x if x_model is None else np.asarray(x_model, dtype=float)
-    fig, axes = _new_figure(ncols=2)
+    fig, axes = new_figure(ncols=2)
     for ax, log in zip(axes, (False, True)):
         if observed_sd is not None:
             ax.errorbar(x, observed, yerr=np.asarray(observed_sd, dtype=float), fmt="o", ms=3, color="0.3",
@@ -263,9 +263,9 @@ def figure_fit(x: np.ndarray, observed: np.ndarray, predicted: np.ndarray, *, xl
             ax.plot(x, observed, "o", ms=3, color="0.3", label="data")
         ax.plot(xm, predicted, "-", color="C3", lw=1.8, label=label)
         if log:
-            if _positive(x):
+            if all_positive(x):
                 ax.set_xscale("log")
-            if _positive(observed) and _positive(predicted):
+            if all_positive(observed) and all_positive(predicted):
                 ax.set_yscale("log")
         ax.set_xlabel(xlabel)
         ax.set_ylabel(ylabel)
@@ -356,7 +356,7 @@ def figure_residual_map(residuals: np.ndarray, x: np.ndarray, row_labels: Sequen
     edges = np.exp(edges) if log_x else edges
     limit = float(np.nanmax(np.abs(residuals))) if np.isfinite(residuals).any() else 1.0
     limit = limit if limit > 0 else 1.0
-    fig, (ax,) = _new_figure(width=6.0, height=1.2 + 0.35 * len(row_labels))
+    fig, (ax,) = new_figure(width=6.0, height=1.2 + 0.35 * len(row_labels))
     mesh = ax.pcolormesh(edges, np.arange(len(row_labels) + 1), np.ma.masked_invalid(residuals), cmap="RdBu_r",
                          norm=TwoSlopeNorm(vcenter=0.0, vmin=-limit, vmax=limit))
     ax.set_yticks(np.arange(len(row_labels)) + 0.5, labels=list(row_labels), fontsize=8)
@@ -385,7 +385,7 @@ def figure_curves(series: Mapping[str, tuple[np.ndarray, np.ndarray]], *, xlabel
                   reference: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None, log_x: bool = False,
                   log_y: bool = False, title: str | None = None) -> Figure:
     """Named (x, y) curves as lines, optional reference curves (e.g. closed form, measurement) as markers."""
-    fig, (ax,) = _new_figure()
+    fig, (ax,) = new_figure()
     for i, (name, (x, y)) in enumerate(series.items()):
         ax.plot(np.asarray(x, dtype=float), np.asarray(y, dtype=float), "-", color=f"C{i % 10}", lw=1.6, label=name)
     for i, (name, (x, y)) in enumerate((reference or {}).items()):
@@ -481,13 +481,13 @@ def figure_timings(names: Sequence[str], seconds: Sequence[float], *, budget_s: 
     seconds = np.asarray(seconds, dtype=float)
     if len(names) != seconds.size:
         raise ValueError(f"{len(names)} names for {seconds.size} timings")
-    fig, (ax,) = _new_figure(width=6.0, height=1.0 + 0.3 * max(len(names), 1))
+    fig, (ax,) = new_figure(width=6.0, height=1.0 + 0.3 * max(len(names), 1))
     positions = np.arange(len(names))
     colours = ["C3" if budget_s is not None and s > budget_s else "C0" for s in seconds]
     ax.barh(positions, seconds, color=colours)
     ax.set_yticks(positions, labels=list(names), fontsize=8)
     ax.invert_yaxis()
-    if _positive(seconds):
+    if all_positive(seconds):
         ax.set_xscale("log")
     if budget_s is not None:
         ax.axvline(budget_s, color="k", ls="--", lw=1, label=f"{budget_label} ({budget_s:.3g} s)")
@@ -510,8 +510,8 @@ def figure_scaling(x: np.ndarray, series: Mapping[str, np.ndarray], *, xlabel: s
     """Timing scaling curves (e.g. time per step vs number of elements, CPU vs GPU) on log-log axes."""
     x = np.asarray(x, dtype=float)
     return figure_curves({k: (x, np.asarray(v, dtype=float)) for k, v in series.items()}, xlabel=xlabel,
-                         ylabel=ylabel, log_x=_positive(x),
-                         log_y=all(_positive(v) for v in series.values()), title=title)
+                         ylabel=ylabel, log_x=all_positive(x),
+                         log_y=all(all_positive(v) for v in series.values()), title=title)
 
 
 def plot_scaling(x, series: Mapping[str, np.ndarray], path: str | Path, *, xlabel: str,
@@ -550,8 +550,6 @@ def plot_all_averages(averages: xr.Dataset, runs: Sequence[xr.Dataset], folder: 
     averages : output of :func:`tissuemech.curves.average_runs`.
     runs : the canonical runs it was built from (matched to curves through the member table).
     """
-    from .curves import select_average  # noqa: PLC0415
-
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     by_name = {str(r.attrs.get("run", "")): r for r in runs}
@@ -570,8 +568,6 @@ def plot_all_averages(averages: xr.Dataset, runs: Sequence[xr.Dataset], folder: 
 def plot_all_lve(summary: xr.Dataset, runs: Sequence[xr.Dataset], averages: xr.Dataset | None,
                  folder: str | Path) -> list[Path]:
     """One LVE figure per analysed amplitude sweep (runs and averages) of an :func:`tissuemech.lve.lve_summary`."""
-    from .curves import select_average  # noqa: PLC0415
-
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     by_name = {str(r.attrs.get("run", "")): r for r in runs}

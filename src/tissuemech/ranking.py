@@ -29,6 +29,8 @@ from scipy import stats as sps
 from .fitting import (Curve, FitProblem, FitResult, NoiseModel, at_bound_parameters, evaluate, fit, has_covariance,
                       prony_start)
 from .models.base import ConstitutiveModel
+from .models.registry import get_model
+from .plots import save_figure
 
 #: strain up to which the thesis treats brain tissue as linear elastic (10 %)
 LINEAR_STRAIN_LIMIT = 0.10
@@ -53,8 +55,6 @@ class RegistryFactory:
     key: str
 
     def __call__(self) -> ConstitutiveModel:
-        from .models.registry import get_model
-
         return get_model(self.key)
 
 
@@ -547,8 +547,6 @@ def plot_ranking(table: pd.DataFrame, path=None):
     fig.suptitle(f"model ranking {scope} (red: flagged fit)")
     fig.tight_layout()
     if path is not None:
-        from .plots import save_figure
-
         save_figure(fig, path, dpi=120)  # PNG and SVG side by side
     return fig
 

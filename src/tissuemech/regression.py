@@ -49,6 +49,12 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 import yaml
+from . import ranking as R
+from .canonical import write_text
+from .curves import average_runs
+from .io.ingest import ingest_dataset
+from .pipeline import load_runs
+from .stages import dataset_scopes, scope_curves
 
 #: model fits redone on every check: dataset -> scope (``stages.dataset_scopes``) -> registry keys. Chosen to
 #: cover every response kind the fitter handles (flow, shear history of relaxation and CSR ramps, creep,
@@ -125,10 +131,6 @@ def dataset_averages(dataset_dir, work_dir, exclude_flagged: bool = True) -> tup
     Returns the averages and the sorted test kinds of the dataset. Rejected runs are logged (the fits then
     move and the comparison says by how much).
     """
-    from .curves import average_runs
-    from .io.ingest import ingest_dataset
-    from .pipeline import load_runs
-
     dataset_dir, work_dir = Path(dataset_dir), Path(work_dir)
     if not (dataset_dir / "samples.csv").is_file():
         raise FileNotFoundError(f"{dataset_dir}: no samples.csv (is this a dataset folder?)")
@@ -224,9 +226,6 @@ def fresh_table(raw_dir=DEFAULT_RAW_DIR, config_path=DEFAULT_CONFIG,
     A fit that raises is recorded as a row with parameter ``<fit failed>`` and the error as its reason, so the
     comparison reports it instead of crashing.
     """
-    from . import ranking as R
-    from .stages import dataset_scopes, scope_curves
-
     selection = REFERENCE_FITS if selection is None else selection
     settings = fit_settings(config_path)
     rows: list[dict] = []
@@ -313,8 +312,6 @@ def read_reference(reference_dir=DEFAULT_REFERENCE_DIR) -> pd.DataFrame:
 
 def write_reference(table: pd.DataFrame, reference_dir=DEFAULT_REFERENCE_DIR, remove_stale: bool = True) -> list[Path]:
     """Write one CSV per dataset (full float precision); ``remove_stale`` deletes tables of other datasets."""
-    from .canonical import write_text
-
     reference_dir = Path(reference_dir)
     reference_dir.mkdir(parents=True, exist_ok=True)
     written = []

@@ -34,7 +34,11 @@ from . import ranking as R
 from . import spectra as S
 from .canonical import read_netcdf, write_json, write_netcdf, write_text
 from .curves import as_str, select_average
+from .fem.experiments import flat_punch_indentation, rheometer_torsion
+from .fem.materials import available_laws
+from .fem.tled import DynamicRelaxationError, ElementInversionError
 from .models.registry import available_models, get_model
+from .plots import plot_force_depth, plot_torque
 
 logger = logging.getLogger(__name__)
 
@@ -192,8 +196,6 @@ def select_cards(ranking_csv, cards_root, scopes: Sequence[str] = TORSION_SCOPES
     A scope without a recommendation, without the card or with a law the FEM lacks contributes no card (logged):
     the FEM never falls back to another model than the ranking's choice.
     """
-    from .fem.materials import available_laws
-
     chosen_models = R.recommended_models(ranking_csv)
     laws = available_laws()
     chosen: list[Path] = []
@@ -235,10 +237,6 @@ def run_fem_torsion(card_paths: Sequence, averages_path, out_nc, out_csv, figure
     (``shear_stress * pi R^3 / 2`` of the averaged apparent rim stress); the error table reports the
     normalised RMS error and the error at the largest strain, per card and rate.
     """
-    from .fem.experiments import rheometer_torsion
-    from .fem.tled import DynamicRelaxationError, ElementInversionError
-    from .plots import plot_torque
-
     avg = read_netcdf(averages_path)
     tests = [str(t) for t in avg["test"].values]
     idx = [i for i, t in enumerate(tests) if t == "constant_shear_rate"]
@@ -314,10 +312,6 @@ def run_fem_indentation(card_paths: Sequence, out_nc, figure_path, punch_diamete
                         vtu_dir=None, n_threads: int = 1) -> xr.Dataset:
     """Flat-punch indentation (8 and 15 mm punches, constant slow speed) of a tissue sample per card
     (``n_threads`` numba threads per solve)."""
-    from .fem.experiments import flat_punch_indentation
-    from .fem.tled import DynamicRelaxationError, ElementInversionError
-    from .plots import plot_force_depth
-
     series, parts, status = {}, [], {}
     for path in card_paths:
         card = _card_for_fem(Path(path))

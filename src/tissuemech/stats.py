@@ -55,12 +55,16 @@ def log10_p_from_chi2(x: float, df: float) -> float:
     return float(sps.chi2.logsf(max(x, 0.0), df) / np.log(10.0))
 
 
-def _pack(statistic: float, log10_p: float, **extra) -> dict:
+def statistic_result(statistic: float, log10_p: float, **extra) -> dict:
+    """A test's result as the tests of this module return it: ``statistic``, ``p_value``, ``log10_p``
+    (capped at 0) and the extra fields as floats."""
     log10_p = float(min(log10_p, 0.0))
     out = {"statistic": float(statistic), "p_value": float(10.0 ** log10_p), "log10_p": log10_p}
     out.update({k: (float(v) if isinstance(v, (int, float, np.floating, np.integer)) else v)
                 for k, v in extra.items()})
     return out
+
+
 
 
 # ------------------------------------------------------------------------------------------------
@@ -78,10 +82,10 @@ def runs_test(residuals: np.ndarray) -> dict:
     if n_pos == 0 or n_neg == 0:
         # every residual of one sign: maximal structure; the exact probability under H0 is 2 * 0.5**n
         n = e.size
-        return _pack(-np.inf if n else 0.0, (1 - n) * np.log10(2.0) if n else 0.0, n_runs=1 if n else 0)
+        return statistic_result(-np.inf if n else 0.0, (1 - n) * np.log10(2.0) if n else 0.0, n_runs=1 if n else 0)
     z, _ = runstest_1samp(e, cutoff=0.0, correction=e.size < 50)
     n_runs = int(1 + np.count_nonzero(np.diff(np.sign(e))))
-    return _pack(z, log10_p_from_z(z), n_runs=n_runs)
+    return statistic_result(z, log10_p_from_z(z), n_runs=n_runs)
 
 
 def durbin_watson(residuals: np.ndarray) -> float:
@@ -142,7 +146,7 @@ def coefficient_test(result, name: str) -> dict:
     if getattr(result, "cov_type", "") == "cluster":
         df = float(_n_clusters(result) - 1)
     t = est / se if se > 0 else (np.inf if est else 0.0)
-    return _pack(t, log10_p_from_t(t, df), estimate=est, std_error=se, df=df)
+    return statistic_result(t, log10_p_from_t(t, df), estimate=est, std_error=se, df=df)
 
 
 def _n_clusters(result) -> int:
@@ -159,13 +163,13 @@ def nested_f_test(rss_restricted: float, rss_full: float, n: float, k_full: int,
     """
     df2 = max(n - k_full, 1.0)
     f = ((rss_restricted - rss_full) / dk) / (rss_full / df2) if rss_full > 0 else np.inf
-    return _pack(f, log10_p_from_f(f, dk, df2), df1=dk, df2=df2)
+    return statistic_result(f, log10_p_from_f(f, dk, df2), df1=dk, df2=df2)
 
 
 def likelihood_ratio_test(loglik_restricted: float, loglik_full: float, dk: int) -> dict:
     """LRT: 2 (lnL1 - lnL0) ~ chi2(dk)."""
     lr = 2.0 * (loglik_full - loglik_restricted)
-    return _pack(lr, log10_p_from_chi2(lr, dk), df=dk)
+    return statistic_result(lr, log10_p_from_chi2(lr, dk), df=dk)
 
 
 def gaussian_loglik(rss: float, n: float) -> float:
@@ -237,7 +241,7 @@ def deletion_outlier_test(values: np.ndarray) -> dict:
     x = np.asarray(values, float)
     n = x.size
     if n < 3:
-        return _pack(0.0, 0.0, index=-1, modified_z=0.0)
+        return statistic_result(0.0, 0.0, index=-1, modified_z=0.0)
     ts = np.empty(n)
     for b in range(n):
         rest = np.delete(x, b)
@@ -245,7 +249,7 @@ def deletion_outlier_test(values: np.ndarray) -> dict:
         ts[b] = (x[b] - rest.mean()) / (sd * np.sqrt(1.0 + 1.0 / rest.size)) if sd > 0 else np.inf
     b = int(np.argmax(np.abs(ts)))
     lp = min(0.0, log10_p_from_t(ts[b], n - 2) + np.log10(n))
-    return _pack(ts[b], lp, index=b, modified_z=float(modified_z_scores(x)[b]))
+    return statistic_result(ts[b], lp, index=b, modified_z=float(modified_z_scores(x)[b]))
 
 
 def mixed_log_params(table: pd.DataFrame, value: str, group: str) -> dict:

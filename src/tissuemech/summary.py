@@ -30,10 +30,14 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator, NullFormatter
 
 from .canonical import read_netcdf, write_text
+from .fem.mesh import TET_FACES, read_mesh
+from .fitting import target_observations
 from .pipeline import progress
+from .plots import (all_positive, axis_label, figure_curves, figure_table, new_figure, safe_name,
+                    save_figure)
 from .ranking import recommended_models
 from .records import FitRecord
-from .plots import _new_figure, _positive, axis_label, figure_curves, figure_table, safe_name, save_figure
+from .stages import scope_curves
 
 # ------------------------------------------------------------------------------------------------------
 # fits over their data
@@ -80,8 +84,6 @@ def fit_panels(fit: FitRecord | xr.Dataset, curves: Sequence) -> dict[tuple[str,
     abscissa of :data:`FIT_ABSCISSA` at the fitted points; when a curve cannot be matched (its data changed
     since the fit) the point index is used and ``xname`` is ``"point"``.
     """
-    from .fitting import target_observations
-
     by_label = {c.label: c for c in curves}
     rec = fit if isinstance(fit, FitRecord) else FitRecord.from_dataset(fit)
     observed, predicted = rec.observed, rec.predicted
@@ -130,7 +132,7 @@ def figure_scope_fit(fit: FitRecord | xr.Dataset, curves: Sequence, title: str |
     """
     rec = fit if isinstance(fit, FitRecord) else FitRecord.from_dataset(fit)
     panels = fit_panels(rec, curves)
-    fig, axes = _new_figure(ncols=2, nrows=max(len(panels), 1), width=4.6, height=3.4)
+    fig, axes = new_figure(ncols=2, nrows=max(len(panels), 1), width=4.6, height=3.4)
     axes = axes.reshape(-1, 2)
     for row, ((test, name), series) in enumerate(panels.items()):
         factor, ylabel = _DISPLAY_UNITS.get(name, (1.0, axis_label(name)))
@@ -148,10 +150,10 @@ def figure_scope_fit(fit: FitRecord | xr.Dataset, curves: Sequence, title: str |
                     ax.plot(x, y, "o", ms=3, color=colour, alpha=0.8, label=f"{s['label']} data")
                 ax.plot(x, f, "-", color=colour, lw=1.6)
             if log:
-                if _positive(xs):
+                if all_positive(xs):
                     ax.set_xscale("log")
                     _quiet_minor_labels(ax.xaxis, xs)
-                if _positive(ys):
+                if all_positive(ys):
                     ax.set_yscale("log")
                     _quiet_minor_labels(ax.yaxis, ys)
             ax.set_xlabel(axis_label(series[0]["xname"]) if series[0]["xname"] != "point" else "point index")
@@ -176,8 +178,6 @@ def plot_scope_fits(averages_path, fits_dir, tests: Sequence[str], out_dir) -> l
     The curves are rebuilt from the averages exactly as the fit stage builds them
     (:func:`tissuemech.stages.scope_curves`), so each fitted point is drawn at its own time/strain/rate/frequency.
     """
-    from .stages import scope_curves
-
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     averages = read_netcdf(averages_path)
@@ -254,8 +254,6 @@ def plot_cards(cards_root, ranking_csv, out_dir, out_csv) -> list[Path]:
 # ------------------------------------------------------------------------------------------------------
 def boundary_faces(elements: np.ndarray) -> np.ndarray:
     """Triangles (node triples) that belong to exactly one tetrahedron: the surface of the mesh."""
-    from .fem.mesh import TET_FACES
-
     faces = np.asarray(elements, np.int64)[:, TET_FACES].reshape(-1, 3)
     keys = np.sort(faces, axis=1)
     _, first, counts = np.unique(keys, axis=0, return_index=True, return_counts=True)
@@ -306,8 +304,6 @@ def plot_meshes(vtu_dirs: Mapping[str, str | Path], out_dir, max_per_experiment:
     vtu_dirs : experiment name (``torsion``, ``indentation``) -> folder of ``*.vtu`` written by the FEM rules.
     max_per_experiment : pictures per experiment (the meshes of one experiment differ only by card).
     """
-    from .fem.mesh import read_mesh
-
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
@@ -345,11 +341,11 @@ def plot_timing(timing_csv, step_path, realtime_path) -> list[Path]:
         n = rows["n_elements"].to_numpy(float)
         step[name] = (n, 1.0 / rows["steps_per_s"].to_numpy(float))
         realtime[name] = (n, rows["real_time_factor"].to_numpy(float))
-    log_y = all(_positive(v[1]) for v in step.values())
+    log_y = all(all_positive(v[1]) for v in step.values())
     written = save_figure(figure_curves(step, xlabel="tetrahedra", ylabel="wall time per step [s]", log_x=True,
                                         log_y=log_y, title="TLED explicit step time"), step_path)
     fig = figure_curves(realtime, xlabel="tetrahedra", ylabel="real-time factor [–]", log_x=True,
-                        log_y=all(_positive(v[1]) for v in realtime.values()),
+                        log_y=all(all_positive(v[1]) for v in realtime.values()),
                         title="TLED real-time factor (> 1: faster than real time)")
     fig.axes[0].axhline(1.0, color="k", ls="--", lw=1)
     written += save_figure(fig, realtime_path)

@@ -67,13 +67,10 @@ def test_card_round_trip_and_errors():
 
 
 def test_fitting_law_table_entries_are_used(monkeypatch):
-    """Laws of models.hyperelastic.HYPERELASTIC_LAWS reach the FEM with their own parameter names."""
-    import sys
-    import types
-
+    """Laws of a HYPERELASTIC_LAWS-shaped table reach the FEM with their own parameter names; an entry that
+    is not a law (wrong shape) is no law."""
     from numba import njit
 
-    import tissuemech.models as models_pkg
     from tissuemech.fem import materials
 
     @njit(cache=False)
@@ -84,21 +81,38 @@ def test_fitting_law_table_entries_are_used(monkeypatch):
     def w2(p, i1, i2):
         return 0.0
 
-    fake = types.ModuleType("tissuemech.models.hyperelastic")
-    fake.HYPERELASTIC_LAWS = {"yeoh2_test": ("invariant", w1, w2, ("C10", "C20")),
-                              "broken": ("invariant", "not a function", ("x",))}
-    monkeypatch.setitem(sys.modules, "tissuemech.models.hyperelastic", fake)
-    monkeypatch.setattr(models_pkg, "hyperelastic", fake, raising=False)
-    materials.available_laws.cache_clear()
-    try:
-        laws = materials.available_laws()
-        assert "broken" not in laws and laws["yeoh2_test"].param_names == ("C10", "C20")
-        mat = make_material("yeoh2_test", {"C10": 200.0, "C20": 50.0}, bulk_modulus_pa=1e7)
-        F = np.eye(3)
-        F[0, 1] = 0.5
-        assert cauchy_stress(mat, F)[0, 1] == pytest.approx(2 * (200.0 + 50.0 * 0.25) * 0.5, rel=1e-12)
-    finally:
-        materials.available_laws.cache_clear()
+    laws = materials.laws_from_table({"yeoh2_test": ("invariant", w1, w2, ("C10", "C20")),
+                                      "broken": ("invariant", "not a function", ("x",))})
+    assert "broken" not in laws and laws["yeoh2_test"].param_names == ("C10", "C20")
+    monkeypatch.setattr(materials, "available_laws", lambda: laws)
+    mat = make_material("yeoh2_test", {"C10": 200.0, "C20": 50.0}, bulk_modulus_pa=1e7)
+    F = np.eye(3)
+    F[0, 1] = 0.5
+    assert cauchy_stress(mat, F)[0, 1] == pytest.approx(2 * (200.0 + 50.0 * 0.25) * 0.5, rel=1e-12)
+
+
+def test_law_that_does_not_compile_is_an_error():
+    """A law whose function does not compile with the kernel signature raises, naming the law (it used to
+    drop out of the table silently, so a test of that law skipped)."""
+    from numba import njit
+
+    from tissuemech.fem import materials
+
+    @njit(cache=False)
+    def wrong_arity(p, i1):
+        return p[0]
+
+    with pytest.raises(materials.LawCompileError, match="wrong_law"):
+        materials.laws_from_table({"wrong_law": ("invariant", wrong_arity, ("mu",))})
+
+
+def test_every_registered_law_compiles():
+    """The package's own table compiles entirely (a failure here names the broken law)."""
+    from tissuemech.fem import materials
+    from tissuemech.models.hyperelastic import HYPERELASTIC_LAWS
+
+    laws = materials.laws_from_table(HYPERELASTIC_LAWS)
+    assert set(HYPERELASTIC_LAWS) <= set(laws)
 
 
 def test_full_cards_json_shape_uses_the_elastic_law():

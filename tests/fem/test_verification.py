@@ -5,6 +5,7 @@ single-element simple shear equals the *fitting code's* closed form for every hy
 QLV; torsion of the rheometer cylinder equals FElupe's implicit solution on the same mesh; a damped,
 loaded dynamic run balances its energy; inversion is reported in explicit runs too.
 """
+import felupe as fem  # test extra: a missing felupe is an error, not a skip
 import numpy as np
 import pytest
 from fem_reference import neo_hookean_energy_j, polar_moment_m4
@@ -148,8 +149,6 @@ def test_explicit_inversion_is_reported_with_element_and_step():
     # the plate passes the mid-plane nodes (5 mm) after 0.33 ms
     assert 0 <= info.value.element < mesh.n_elements and 2e-4 < info.value.time_s < 1e-3
 
-
-fem = pytest.importorskip("felupe")
 
 
 def _felupe_torsion(mesh, mu, kappa, height, angles):

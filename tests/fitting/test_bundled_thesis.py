@@ -30,8 +30,7 @@ THESIS_LINEAR_G_CSR_0001_PA = 82.3  # science.md section 0: linear G from the 0.
 
 @pytest.fixture(scope="module")
 def brain(tmp_path_factory):
-    if not (BRAIN / "samples.csv").is_file():
-        pytest.skip("bundled brain dataset not present")
+    assert (BRAIN / "samples.csv").is_file(), f"{BRAIN} is tracked in git; regenerate it"
     sheet = pd.read_csv(BRAIN / "samples.csv")
     keep = ((sheet["test"] == "amplitude_sweep")
             | ((sheet["test"] == "constant_shear_rate") & sheet["shear_rate_1_per_s"].isin([0.001, 0.1]))

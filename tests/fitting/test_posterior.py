@@ -2,13 +2,12 @@
 the lmfit standard errors, and the diagnostics flag a chain that is too short."""
 from __future__ import annotations
 
+import emcee  # noqa: F401  (test extra: a missing emcee is an error, not a skip)
+import lmfit
 import numpy as np
 import pytest
 
-pytest.importorskip("emcee")
-import lmfit  # noqa: E402
-
-from tissuemech import posterior as P  # noqa: E402
+from tissuemech import posterior as P
 
 X = np.linspace(0.0, 10.0, 40)
 

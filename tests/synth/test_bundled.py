@@ -9,7 +9,6 @@ import pandas as pd
 import pytest
 import yaml
 
-from tissuemech.models.registry import available_models
 from tissuemech.synth.generator import generate_dataset
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -17,10 +16,6 @@ BRAIN_CFG = ROOT / "config" / "synth" / "porcine_brain_thesis.yaml"
 AGAR_CFG = ROOT / "config" / "synth" / "agar_3pct_thesis.yaml"
 SEEDS = {"porcine_brain_thesis": 20150137, "agar_3pct_thesis": 20150102}
 
-needs_rp3 = pytest.mark.skipif("reduced_polynomial3" not in available_models(),
-                               reason="hyperelastic family (RP3 law of the brain truth) not available")
-needs_power_law = pytest.mark.skipif("power_law" not in available_models(),
-                                     reason="viscous family (flow-curve truth of the agar) not available")
 
 QUIET = {"torque_noise_floor_nm": 0.0, "torque_noise_rel": 0.0, "torque_resolution_nm": 0.0,
          "normal_force_noise_n": 0.0, "temperature_noise_c": 0.0, "gap_noise_m": 0.0}
@@ -53,8 +48,7 @@ THESIS_COUNTS = {("amplitude_sweep", None): (17, 3), ("frequency_sweep", None): 
 @pytest.mark.parametrize("name", sorted(SEEDS))
 def test_bundled_dataset_is_reproducible_from_its_config(name, tmp_path):
     folder = ROOT / "raw" / name
-    if not (folder / "samples.csv").is_file():
-        pytest.skip(f"{folder} not generated")
+    assert (folder / "samples.csv").is_file(), f"{folder} is tracked in git; regenerate it"
     cfg = yaml.safe_load((ROOT / "config" / "synth" / f"{name}.yaml").read_text())
     cfg["config_path"] = f"config/synth/{name}.yaml"
     generate_dataset(cfg, SEEDS[name], tmp_path)
@@ -123,8 +117,7 @@ def assert_same_export(committed: Path, regenerated: Path):
 
 def test_bundled_brain_design_has_thesis_sample_counts():
     folder = ROOT / "raw" / "porcine_brain_thesis"
-    if not (folder / "samples.csv").is_file():
-        pytest.skip("bundled brain dataset not generated")
+    assert (folder / "samples.csv").is_file(), f"{folder} is tracked in git; regenerate it"
     s = pd.read_csv(folder / "samples.csv")
     for (test, cond), (n_samples, n_brains) in THESIS_COUNTS.items():
         rows = s[s["test"] == test]
@@ -138,7 +131,6 @@ def test_bundled_brain_design_has_thesis_sample_counts():
     assert truth["truth_model"]["family"] == "beyond_qlv" and truth["truth_model"]["params"]["kappa"] > 0
 
 
-@needs_rp3
 def test_brain_population_truth_matches_thesis_sweeps(tmp_path):
     res = population(BRAIN_CFG, [{"test": "frequency_sweep", "samples": 1, "specimens": 1},
                                  {"test": "amplitude_sweep", "samples": 1, "specimens": 1,
@@ -166,7 +158,6 @@ def test_agar_population_truth_matches_thesis_amplitude_sweep(tmp_path):
     assert flow_point == pytest.approx(0.043, rel=0.1)                         # thesis flow point 4.3 %
 
 
-@needs_power_law
 def test_agar_flow_curve_apparent_power_law_is_thesis_fit(tmp_path):
     res = population(AGAR_CFG, [{"test": "flow_curve", "samples": 1, "specimens": 1}], gap_mm=2.5, tmp=tmp_path)
     fc = next(iter(res["runs"].values()))["channels"]

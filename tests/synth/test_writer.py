@@ -1,5 +1,4 @@
 """RheoCompass writer layout (against the real export), round trip through ingest, determinism from the seed."""
-import importlib.util
 import json
 
 import numpy as np
@@ -101,9 +100,6 @@ def test_determinism_from_seed(tmp_path):
     assert differs and all(differs)
 
 
-@pytest.mark.skipif(importlib.util.find_spec("tissuemech.io") is None
-                    or importlib.util.find_spec("tissuemech.io.rheocompass") is None,
-                    reason="RheoCompass reader (tissuemech.io) not available yet")
 @pytest.mark.parametrize("header", ["simple", "project"])
 def test_round_trip_through_ingest(dataset, header, tmp_path):
     from tissuemech.io.dispatch import read_export

@@ -181,7 +181,7 @@ def predict_run(model: ConstitutiveModel, params: Mapping[str, float], run: xr.D
             return {}
         if test not in fitting.TEST_RESPONSE:
             return {}
-        curve, rows = fitting._curve_and_rows(run, relaxation)
+        curve, rows = fitting.curve_and_rows(run, relaxation)
         tgt = target if curve.is_plate else "none"
         if curve.response != "shear_history" or not curve.is_plate:
             tgt = target if target in fitting.PLATE_TARGETS else "apparent_stress"

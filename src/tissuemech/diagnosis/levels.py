@@ -81,7 +81,7 @@ def between_sample_test(levels: pd.DataFrame, y: str, column: str) -> dict | Non
             k = list(X.columns).index(column) + 1
             est, se = float(res.params[k]), float(res.bse[k])
             tval = est / se if se > 0 else 0.0
-            out = st._pack(tval, st.log10_p_from_t(tval, res.df_resid), estimate=est, std_error=se,
+            out = st.statistic_result(tval, st.log10_p_from_t(tval, res.df_resid), estimate=est, std_error=se,
                            df=float(res.df_resid))
             out["design"] = "sample means, " + ("specimen fixed effects" if fes else "no fixed effects")
             return out
@@ -347,7 +347,7 @@ def paired_first_load_test(ctx: DiagnosisContext) -> dict | None:
     x = np.asarray(logs)
     sd = x.std(ddof=1)
     tval = x.mean() / (sd / np.sqrt(x.size)) if sd > 0 else (np.inf if x.mean() else 0.0)
-    out = st._pack(tval, st.log10_p_from_t(tval, x.size - 1), estimate=float(x.mean()), n=x.size)
+    out = st.statistic_result(tval, st.log10_p_from_t(tval, x.size - 1), estimate=float(x.mean()), n=x.size)
     out["kinds"] = sorted(kinds)
     return out
 

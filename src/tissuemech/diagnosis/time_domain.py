@@ -313,11 +313,11 @@ def detect_rim_stress_nonlinearity(ctx: DiagnosisContext) -> dict:
     # practical null: |n - 1| <= 0.2, i.e. a rim-stress bias within 5 %
     tval = (abs(n_mean - 1.0) - 0.2) / se if se > 0 else np.inf
     lp = float(np.log10(max(st.sps.t.sf(tval, ns.size - 1), 1e-300)))
-    t = st._pack(tval, lp)
+    t = st.statistic_result(tval, lp)
     if target not in RIM_BIASED_TARGETS:
         evidence = (f"n = dlnM/dln(gamma_R) = {n_mean:.2f} +- {se:.2f} at {100 * gmax:.0f} % ({source}), but the "
                     f"baseline was fitted through {target}, which already accounts for the radial strain field.")
-        return make_finding(eff, st._pack(tval, 0.0), "t", 0.0, "relative stress bias", False, evidence, None)
+        return make_finding(eff, st.statistic_result(tval, 0.0), "t", 0.0, "relative stress bias", False, evidence, None)
     evidence = (f"The material {'stiffens' if n_mean > 1 else 'softens'} (n = dlnM/dln(gamma_R) = {n_mean:.2f} +- "
                 f"{se:.2f} at {100 * gmax:.0f} %, {source}) while {ctx.model} was fitted to the reported "
                 f"2M/(pi R^3) as if it were the rim stress: the reported stress is {100 * bias:+.0f} % off the rim "
@@ -340,7 +340,7 @@ def detect_wall_slip(ctx: DiagnosisContext) -> dict:
         return untested_finding(eff, "needs >= 4 constant-shear-rate ramps")
     best, k = _best_slip(c)
     if best is None:
-        return make_finding(eff, st._pack(0.0, 0.0), "t", 0.0, "Pa", False,
+        return make_finding(eff, st.statistic_result(0.0, 0.0), "t", 0.0, "Pa", False,
                         "No stress-threshold loss of stress in the ramps.", None)
     sigma_c, t, res = best
     lp = min(0.0, t["log10_p"] + np.log10(k))
@@ -454,7 +454,7 @@ def detect_finite_rise_time(ctx: DiagnosisContext) -> dict:
         e_ramp = np.array([sweep_err(p[1]) for p in fits])
         d = e_step - e_ramp
         tval = d.mean() / (d.std(ddof=1) / np.sqrt(d.size)) if d.size > 1 and d.std(ddof=1) > 0 else 0.0
-        parts.append(st._pack(tval, st.log10_p_from_t(tval, max(d.size - 1, 1))))
+        parts.append(st.statistic_result(tval, st.log10_p_from_t(tval, max(d.size - 1, 1))))
         before, after = float(np.mean(e_step)), float(np.mean(e_ramp))
         fix = fix_record("ramp-aware relaxation fit (exact recursion over the measured strain history)",
                    "rms_log_error_frequency_sweep_predicted_from_relaxation", before, after,

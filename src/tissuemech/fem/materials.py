@@ -31,8 +31,8 @@ import numpy as np
 from numba import cfunc, njit, types
 
 from ..models.base import bulk_modulus
-from ..models.hyperelastic import (lopez_pamies_dw_di1, mooney_rivlin_dw_di1, mooney_rivlin_dw_di2,
-                                  neo_hookean_dw_di1, ogden_dw_dlambda, reduced_polynomial_dw_di1)
+from ..models.hyperelastic import (HYPERELASTIC_LAWS, lopez_pamies_dw_di1, mooney_rivlin_dw_di1, mooney_rivlin_dw_di2,
+                                  neo_hookean_dw_di1, ogden_dw_dlambda, reduced_polynomial_dw_di1, zero_dw_di2)
 from .kinematics import FASTMATH, left_cauchy_green, symmetric_eigen3, symmetric_square
 
 KIND_INVARIANT = 0
@@ -98,31 +98,42 @@ def _fallback_laws() -> dict[str, LawSpec]:
 
 @functools.lru_cache(maxsize=1)
 def available_laws() -> dict[str, LawSpec]:
-    """Law table: ``models.hyperelastic.HYPERELASTIC_LAWS`` when present (entries whose functions compile
-    with the kernel signatures ``(params, I1bar, I2bar)`` / ``(params, lambda_bar)``), completed by the
-    fallbacks of this module. Cached: call ``available_laws.cache_clear()`` after changing the table."""
-    from ..models import hyperelastic
+    """Law table: ``models.hyperelastic.HYPERELASTIC_LAWS`` completed by the fallbacks of this module
+    (:func:`laws_from_table`). Cached."""
+    return laws_from_table(HYPERELASTIC_LAWS)
 
+
+class LawCompileError(ValueError):
+    """A law of the table whose functions do not compile with the kernels' signatures."""
+
+
+def laws_from_table(table: Mapping) -> dict[str, LawSpec]:
+    """The fallback laws of this module, overridden by the entries of ``table`` (``HYPERELASTIC_LAWS`` form).
+
+    Every entry of a recognised shape must compile with the kernel signatures ``(params, I1bar, I2bar)`` /
+    ``(params, lambda_bar)``: one that does not raises :class:`LawCompileError` naming it (a broken law is an
+    error, not a law that silently goes missing). Entries of another shape are not laws and are skipped.
+    """
     laws = _fallback_laws()
-    table = hyperelastic.HYPERELASTIC_LAWS
     for key, entry in table.items():
         spec = _law_from_table_entry(entry)
-        if spec is not None and _compiles(spec):
+        if spec is not None:
+            _compile(key, spec)
             laws[key] = spec
     return laws
 
 
-def _compiles(spec: LawSpec) -> bool:
-    """True when the law's functions compile with the kernels' signatures (else the entry is not usable)."""
+def _compile(key: str, spec: LawSpec) -> None:
+    """Compile the law's functions with the kernels' signatures; numba's typing error becomes a
+    :class:`LawCompileError` naming the law."""
     try:
         if spec.kind == "invariant":
             _as_cfunc(spec.dw_di1, INVARIANT_SIG)
             _as_cfunc(spec.dw_di2, INVARIANT_SIG)
         elif spec.kind == "stretch":
             _as_cfunc(spec.dw_dlambda, STRETCH_SIG)
-    except Exception:  # noqa: BLE001 - numba typing errors of a foreign signature
-        return False
-    return True
+    except Exception as exc:  # numba raises TypingError and others; re-raised with the law's key
+        raise LawCompileError(f"hyperelastic law {key!r} does not compile with the FEM kernel signature: {exc}") from exc
 
 
 def _law_from_table_entry(entry) -> LawSpec | None:
@@ -216,22 +227,13 @@ class Material:
 
 def _is_zero_law(fn) -> bool:
     """True for the shared ``dW/dI2 = 0`` functions (this module's and the fitting code's)."""
-    zeros = {_zero_w.py_func}
-    try:
-        from ..models import hyperelastic
-        zeros.add(getattr(hyperelastic._zero, "py_func", hyperelastic._zero))
-    except (ImportError, AttributeError):
-        pass
-    return getattr(fn, "py_func", fn) in zeros
+    return getattr(fn, "py_func", fn) in {_zero_w.py_func, zero_dw_di2.py_func}
 
 
 def _invariant_independent_functions() -> set:
     """The shared law derivatives whose value does not depend on the invariants (``W`` linear in ``I1``,
     ``I2``: neo-Hookean, Mooney-Rivlin, and the zero ``dW/dI2`` of I1-only laws)."""
-    from ..models import hyperelastic
-
-    fns = {_zero_w, neo_hookean_dw_di1, mooney_rivlin_dw_di1, mooney_rivlin_dw_di2,
-           getattr(hyperelastic, "_zero", _zero_w)}
+    fns = {_zero_w, neo_hookean_dw_di1, mooney_rivlin_dw_di1, mooney_rivlin_dw_di2, zero_dw_di2}
     return {getattr(f, "py_func", f) for f in fns}
 
 

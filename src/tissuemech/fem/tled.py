@@ -23,9 +23,10 @@ Two kernels compute the internal forces (``kernel=`` of :func:`run_explicit` / :
 the generic one below (any law) and the vectorised structure-of-arrays passes of :mod:`.vectorised` (SVK
 and invariant laws, with up to four Prony terms; chosen by ``"auto"``), which agree to rounding.
 
-The whole time loop runs inside one compiled function (no Python per step). The element stress of
+The whole time loop runs inside one compiled function (no Python per step); the compiled passes and loops are
+in :mod:`._kernels` (this module assembles the model and dispatches). The element stress of
 :mod:`.materials` is inlined into the kernels: numba's cache does not see changes of inlined code in
-another file, so after editing ``materials.py`` touch this module (or clear ``NUMBA_CACHE_DIR``). Reaction forces are sums of
+another file, so after editing ``materials.py`` touch ``_kernels.py`` (or clear ``NUMBA_CACHE_DIR``). Reaction forces are sums of
 internal nodal forces over a constrained group; torques are about the z axis through the group's centre.
 Storage precision is float64 or float32; in float32 the arithmetic of an element is done in registers at
 double precision and stored in single precision (halves the memory traffic, which bounds the CPU rate).
@@ -37,19 +38,12 @@ from dataclasses import dataclass, field
 
 import numba
 import numpy as np
-from numba import njit, prange
 
-from ..models.recursion import relaxation_factors
 from . import vectorised
-from .kinematics import cofactor, left_cauchy_green, pull_back, push_forward
-from .materials import (FASTMATH, KIND_INVARIANT, KIND_INVARIANT_I1, KIND_SVK, Material,
-                        constant_invariant_derivatives, j_minus_two_thirds, kirchhoff_deviatoric)
-from .mesh import TetMesh, element_min_altitudes, element_volumes
-
-STATUS_OK = 0
-STATUS_INVERTED = 1
-STATUS_NOT_FINITE = 2
-STATUS_NOT_CONVERGED = 3
+from ._kernels import (STATUS_INVERTED, STATUS_NOT_CONVERGED, STATUS_NOT_FINITE, KernelLaws, KernelLoads, KernelMaterial,
+                       KernelMesh, dynamic_relaxation_loop, explicit_loop)
+from .materials import KIND_INVARIANT, KIND_INVARIANT_I1, KIND_SVK, Material, constant_invariant_derivatives
+from .mesh import TetMesh, boundary_nodes, element_min_altitudes, element_volumes
 
 #: cumulative energy terms of an explicit run (``RunResult.energy_j``)
 ENERGY_TERMS = ("internal_work", "external_work", "damping_work", "constraint_work")
@@ -65,631 +59,6 @@ class ElementInversionError(RuntimeError):
 
 class DynamicRelaxationError(RuntimeError):
     """Dynamic relaxation did not converge within the iteration limit."""
-
-
-# --------------------------------------------------------------------------------------------------
-# compiled passes
-# --------------------------------------------------------------------------------------------------
-@njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _anp_element_pass(u, elements, dndx, vol0, chunk_lo, pbuf, kappa, bad):
-    """Accumulate ``kappa (J_e - 1) V0_e`` into per-chunk nodal pressure buffers."""
-    nchunk = chunk_lo.size - 1
-    for c in prange(nchunk):
-        for e in range(chunk_lo[c], chunk_lo[c + 1]):
-            n0, n1, n2, n3 = elements[e, 0], elements[e, 1], elements[e, 2], elements[e, 3]
-            f11 = 1.0 + u[n0, 0] * dndx[e, 0] + u[n1, 0] * dndx[e, 3] + u[n2, 0] * dndx[e, 6] + u[n3, 0] * dndx[e, 9]
-            f12 = u[n0, 0] * dndx[e, 1] + u[n1, 0] * dndx[e, 4] + u[n2, 0] * dndx[e, 7] + u[n3, 0] * dndx[e, 10]
-            f13 = u[n0, 0] * dndx[e, 2] + u[n1, 0] * dndx[e, 5] + u[n2, 0] * dndx[e, 8] + u[n3, 0] * dndx[e, 11]
-            f21 = u[n0, 1] * dndx[e, 0] + u[n1, 1] * dndx[e, 3] + u[n2, 1] * dndx[e, 6] + u[n3, 1] * dndx[e, 9]
-            f22 = 1.0 + u[n0, 1] * dndx[e, 1] + u[n1, 1] * dndx[e, 4] + u[n2, 1] * dndx[e, 7] + u[n3, 1] * dndx[e, 10]
-            f23 = u[n0, 1] * dndx[e, 2] + u[n1, 1] * dndx[e, 5] + u[n2, 1] * dndx[e, 8] + u[n3, 1] * dndx[e, 11]
-            f31 = u[n0, 2] * dndx[e, 0] + u[n1, 2] * dndx[e, 3] + u[n2, 2] * dndx[e, 6] + u[n3, 2] * dndx[e, 9]
-            f32 = u[n0, 2] * dndx[e, 1] + u[n1, 2] * dndx[e, 4] + u[n2, 2] * dndx[e, 7] + u[n3, 2] * dndx[e, 10]
-            f33 = 1.0 + u[n0, 2] * dndx[e, 2] + u[n1, 2] * dndx[e, 5] + u[n2, 2] * dndx[e, 8] + u[n3, 2] * dndx[e, 11]
-            J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
-            if not J > 0.0:
-                bad[c] = e
-            pv = kappa * (J - 1.0) * vol0[e]
-            pbuf[c, n0] += pv
-            pbuf[c, n1] += pv
-            pbuf[c, n2] += pv
-            pbuf[c, n3] += pv
-
-
-@njit(parallel=True, cache=True)
-def _anp_node_pass(pbuf, vnode, p_node):
-    nchunk = pbuf.shape[0]
-    for n in prange(p_node.size):
-        s = 0.0
-        for c in range(nchunk):
-            s += pbuf[c, n]
-            pbuf[c, n] = 0.0
-        p_node[n] = s / vnode[n]
-
-
-@njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _element_force_pass(u, elements, dndx, vol0, chunk_lo, fbuf, kind, w1fn, w2fn, wlfn, params, kappa,
-                        use_anp, p_node, prony_g, prony_e, prony_f, h_state, s_prev, bfn, branch_params, w_prev, commit, bad):
-    """Internal nodal forces of all elements into per-chunk buffers ``fbuf[chunk, node, dof]``.
-
-    QLV (``prony_g.size > 0``): isochoric 2nd PK ``S = g_inf S_e + sum_i h_i``, ``h_i`` advanced with the
-    exact factors ``prony_e = exp(-dt/tau)``, ``prony_f = (1 - exp(-dt/tau))/(dt/tau)``; the new states are
-    written only when ``commit`` (dynamic relaxation evaluates trial states without committing).
-    Beyond QLV (``branch_params`` with one row per term): branch energies ``W_i(I1bar)`` through ``bfn``,
-    drive ``S_i = 2 W_i' dI1bar/dC``; ``s_prev`` then holds ``2 F^-1 dev(bbar) F^-T`` and ``w_prev`` the
-    previous ``W_i'``.
-    """
-    nchunk = chunk_lo.size - 1
-    nterm = prony_g.size
-    g_inf = 1.0
-    for i in range(nterm):
-        g_inf -= prony_g[i]
-    for c in prange(nchunk):
-        for e in range(chunk_lo[c], chunk_lo[c + 1]):
-            n0, n1, n2, n3 = elements[e, 0], elements[e, 1], elements[e, 2], elements[e, 3]
-            d0x, d0y, d0z = dndx[e, 0], dndx[e, 1], dndx[e, 2]
-            d1x, d1y, d1z = dndx[e, 3], dndx[e, 4], dndx[e, 5]
-            d2x, d2y, d2z = dndx[e, 6], dndx[e, 7], dndx[e, 8]
-            d3x, d3y, d3z = dndx[e, 9], dndx[e, 10], dndx[e, 11]
-            ux0, ux1, ux2, ux3 = u[n0, 0], u[n1, 0], u[n2, 0], u[n3, 0]
-            uy0, uy1, uy2, uy3 = u[n0, 1], u[n1, 1], u[n2, 1], u[n3, 1]
-            uz0, uz1, uz2, uz3 = u[n0, 2], u[n1, 2], u[n2, 2], u[n3, 2]
-            f11 = 1.0 + ux0 * d0x + ux1 * d1x + ux2 * d2x + ux3 * d3x
-            f12 = ux0 * d0y + ux1 * d1y + ux2 * d2y + ux3 * d3y
-            f13 = ux0 * d0z + ux1 * d1z + ux2 * d2z + ux3 * d3z
-            f21 = uy0 * d0x + uy1 * d1x + uy2 * d2x + uy3 * d3x
-            f22 = 1.0 + uy0 * d0y + uy1 * d1y + uy2 * d2y + uy3 * d3y
-            f23 = uy0 * d0z + uy1 * d1z + uy2 * d2z + uy3 * d3z
-            f31 = uz0 * d0x + uz1 * d1x + uz2 * d2x + uz3 * d3x
-            f32 = uz0 * d0y + uz1 * d1y + uz2 * d2y + uz3 * d3y
-            f33 = 1.0 + uz0 * d0z + uz1 * d1z + uz2 * d2z + uz3 * d3z
-            c11, c12, c13, c21, c22, c23, c31, c32, c33, J = cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-            if not J > 0.0:
-                bad[c] = e
-                continue
-            t11, t22, t33, t12, t23, t13 = kirchhoff_deviatoric(kind, w1fn, w2fn, wlfn, params, kappa,
-                                                                f11, f12, f13, f21, f22, f23, f31, f32, f33, J)
-            if nterm > 0:
-                se0, se1, se2, se3, se4, se5 = pull_back(c11, c12, c13, c21, c22, c23, c31, c32, c33, J,
-                                                         t11, t22, t33, t12, t23, t13)
-                if branch_params.shape[0] > 0:
-                    # beyond QLV: branch energies W_i(I1bar), S_i = 2 W_i' dI1bar/dC = 2 W_i' F^-1 dev(bbar) F^-T;
-                    # the drive increments are S_i(C_n+1) - S_i(C_n) (science.md 1.1 "3D/TLED"), the
-                    # equilibrium stress S_e is the main law in full (g_inf = 1)
-                    bb11, bb22, bb33, bb12, bb23, bb13 = left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-                    jm23 = j_minus_two_thirds(J)
-                    bb11 *= jm23
-                    bb22 *= jm23
-                    bb33 *= jm23
-                    bb12 *= jm23
-                    bb23 *= jm23
-                    bb13 *= jm23
-                    bi1 = bb11 + bb22 + bb33
-                    bi2 = 0.5 * (bi1 * bi1 - (bb11 * bb11 + bb22 * bb22 + bb33 * bb33
-                                              + 2.0 * (bb12 * bb12 + bb23 * bb23 + bb13 * bb13)))
-                    mb = bi1 / 3.0
-                    q0, q1, q2, q3, q4, q5 = pull_back(c11, c12, c13, c21, c22, c23, c31, c32, c33, J,
-                                                       2.0 * (bb11 - mb), 2.0 * (bb22 - mb), 2.0 * (bb33 - mb),
-                                                       2.0 * bb12, 2.0 * bb23, 2.0 * bb13)
-                    s0, s1, s2, s3, s4, s5 = se0, se1, se2, se3, se4, se5
-                    for i in range(nterm):
-                        ee = prony_e[i]
-                        ff = prony_f[i]
-                        wb = bfn(branch_params[i], bi1, bi2)
-                        wo = w_prev[e, i]
-                        h0 = ee * h_state[e, i, 0] + ff * (wb * q0 - wo * s_prev[e, 0])
-                        h1 = ee * h_state[e, i, 1] + ff * (wb * q1 - wo * s_prev[e, 1])
-                        h2 = ee * h_state[e, i, 2] + ff * (wb * q2 - wo * s_prev[e, 2])
-                        h3 = ee * h_state[e, i, 3] + ff * (wb * q3 - wo * s_prev[e, 3])
-                        h4 = ee * h_state[e, i, 4] + ff * (wb * q4 - wo * s_prev[e, 4])
-                        h5 = ee * h_state[e, i, 5] + ff * (wb * q5 - wo * s_prev[e, 5])
-                        s0 += h0
-                        s1 += h1
-                        s2 += h2
-                        s3 += h3
-                        s4 += h4
-                        s5 += h5
-                        if commit:
-                            h_state[e, i, 0] = h0
-                            h_state[e, i, 1] = h1
-                            h_state[e, i, 2] = h2
-                            h_state[e, i, 3] = h3
-                            h_state[e, i, 4] = h4
-                            h_state[e, i, 5] = h5
-                            w_prev[e, i] = wb
-                    if commit:
-                        s_prev[e, 0] = q0
-                        s_prev[e, 1] = q1
-                        s_prev[e, 2] = q2
-                        s_prev[e, 3] = q3
-                        s_prev[e, 4] = q4
-                        s_prev[e, 5] = q5
-                else:
-                    d0 = se0 - s_prev[e, 0]
-                    d1 = se1 - s_prev[e, 1]
-                    d2 = se2 - s_prev[e, 2]
-                    d3 = se3 - s_prev[e, 3]
-                    d4 = se4 - s_prev[e, 4]
-                    d5 = se5 - s_prev[e, 5]
-                    s0, s1, s2 = g_inf * se0, g_inf * se1, g_inf * se2
-                    s3, s4, s5 = g_inf * se3, g_inf * se4, g_inf * se5
-                    for i in range(nterm):
-                        ee = prony_e[i]
-                        gf = prony_g[i] * prony_f[i]
-                        h0 = ee * h_state[e, i, 0] + gf * d0
-                        h1 = ee * h_state[e, i, 1] + gf * d1
-                        h2 = ee * h_state[e, i, 2] + gf * d2
-                        h3 = ee * h_state[e, i, 3] + gf * d3
-                        h4 = ee * h_state[e, i, 4] + gf * d4
-                        h5 = ee * h_state[e, i, 5] + gf * d5
-                        s0 += h0
-                        s1 += h1
-                        s2 += h2
-                        s3 += h3
-                        s4 += h4
-                        s5 += h5
-                        if commit:
-                            h_state[e, i, 0] = h0
-                            h_state[e, i, 1] = h1
-                            h_state[e, i, 2] = h2
-                            h_state[e, i, 3] = h3
-                            h_state[e, i, 4] = h4
-                            h_state[e, i, 5] = h5
-                    if commit:
-                        s_prev[e, 0] = se0
-                        s_prev[e, 1] = se1
-                        s_prev[e, 2] = se2
-                        s_prev[e, 3] = se3
-                        s_prev[e, 4] = se4
-                        s_prev[e, 5] = se5
-                t11, t22, t33, t12, t23, t13 = push_forward(f11, f12, f13, f21, f22, f23, f31, f32, f33,
-                                                            s0, s1, s2, s3, s4, s5)
-            if kind != KIND_SVK:
-                if use_anp:
-                    pr = 0.25 * (p_node[n0] + p_node[n1] + p_node[n2] + p_node[n3])
-                else:
-                    pr = kappa * (J - 1.0)
-                jp = J * pr
-                t11 += jp
-                t22 += jp
-                t33 += jp
-            # f_a = V0 tau (cof dN_a) / J
-            sc = vol0[e] / J
-            for a in range(4):
-                dx, dy, dz = dndx[e, 3 * a], dndx[e, 3 * a + 1], dndx[e, 3 * a + 2]
-                gx = (c11 * dx + c12 * dy + c13 * dz) * sc
-                gy = (c21 * dx + c22 * dy + c23 * dz) * sc
-                gz = (c31 * dx + c32 * dy + c33 * dz) * sc
-                na = elements[e, a]
-                fbuf[c, na, 0] += t11 * gx + t12 * gy + t13 * gz
-                fbuf[c, na, 1] += t12 * gx + t22 * gy + t23 * gz
-                fbuf[c, na, 2] += t13 * gx + t23 * gy + t33 * gz
-
-
-@njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _reduce_forces(fbuf, fint):
-    """``fint[n] = sum_chunks fbuf[chunk, n]`` and clear the buffers for the next pass."""
-    nchunk = fbuf.shape[0]
-    for n in prange(fint.shape[0]):
-        for i in range(3):
-            s = 0.0
-            for c in range(nchunk):
-                s += fbuf[c, n, i]
-                fbuf[c, n, i] = 0.0
-            fint[n, i] = s
-
-
-@njit(cache=True)
-def _first_bad(bad):
-    for c in range(bad.size):
-        if bad[c] >= 0:
-            return bad[c]
-    return -1
-
-
-@njit(cache=True)
-def _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind, w1fn, w2fn,
-                     wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f, h_state, s_prev, bfn, branch_params, w_prev, commit, bad,
-                     vec, reduce=True):
-    """One complete internal-force evaluation (optional ANP passes + element pass + optional reduction
-    into ``fint``; without it the forces stay in ``fbuf`` for a fused node pass).
-
-    ``vec = (enabled, workspace, svk, constant, dW/dI1, dW/dI2)``: when enabled the vectorised passes
-    (:func:`.vectorised.internal_forces`, QLV states in the workspace) compute the forces instead and
-    ``fbuf`` is not used; without ``reduce`` they stay as element forces in the workspace for
-    :func:`_cd_node_pass`. Returns the id of an inverted element or -1.
-    """
-    if vec[0]:
-        return vectorised.internal_forces(u, vec[1], vec[2], vec[3], vec[4], vec[5], w1fn, w2fn, params,
-                                          kind == KIND_INVARIANT, kappa, use_anp, prony_g, prony_e, prony_f, commit,
-                                          fint, reduce)
-    bad[:] = -1
-    if use_anp:
-        _anp_element_pass(u, elements, dndx, vol0, chunk_lo, pbuf, kappa, bad)
-        _anp_node_pass(pbuf, vnode, p_node)
-    _element_force_pass(u, elements, dndx, vol0, chunk_lo, fbuf, kind, w1fn, w2fn, wlfn, params, kappa,
-                        use_anp, p_node, prony_g, prony_e, prony_f, h_state, s_prev, bfn, branch_params, w_prev, commit, bad)
-    if reduce:
-        _reduce_forces(fbuf, fint)
-    return _first_bad(bad)
-
-
-@njit(cache=True)
-def _history_values(t, hist_time, hist_vals, out):
-    for r in range(hist_vals.shape[0]):
-        out[r] = np.interp(t, hist_time, hist_vals[r])
-
-
-@njit(cache=True)
-def _apply_bcs(u, X, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups):
-    """Set prescribed dofs: ``u = s_g dir`` (+ rotation about z by angle theta_g around the group centre)."""
-    for k in range(bc_nodes.size):
-        n = bc_nodes[k]
-        g = bc_group[k]
-        s = hv[g]
-        ux = s * bc_dir[k, 0]
-        uy = s * bc_dir[k, 1]
-        uz = s * bc_dir[k, 2]
-        if bc_rotate[k]:
-            th = hv[n_groups + g]
-            ct, st = np.cos(th), np.sin(th)
-            rx, ry = X[n, 0] - rot_center[g, 0], X[n, 1] - rot_center[g, 1]
-            ux += ct * rx - st * ry - rx
-            uy += st * rx + ct * ry - ry
-        if bc_mask[k, 0]:
-            u[n, 0] = ux
-        if bc_mask[k, 1]:
-            u[n, 1] = uy
-        if bc_mask[k, 2]:
-            u[n, 2] = uz
-
-
-@njit(cache=True)
-def _reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_out, torque_out):
-    """Reaction force (sum of internal forces) and z-torque about the group centre, per group."""
-    force_out[:] = 0.0
-    torque_out[:] = 0.0
-    for k in range(bc_nodes.size):
-        n = bc_nodes[k]
-        g = bc_group[k]
-        fx, fy, fz = fint[n, 0], fint[n, 1], fint[n, 2]
-        force_out[g, 0] += fx
-        force_out[g, 1] += fy
-        force_out[g, 2] += fz
-        x = X[n, 0] + u[n, 0] - rot_center[g, 0]
-        y = X[n, 1] + u[n, 1] - rot_center[g, 1]
-        torque_out[g] += x * fy - y * fx
-
-
-@njit(cache=True)
-def _contact_project(u, X, contact_nodes, in_contact, contact_kind, cparams, s_contact):
-    """Project nodes inside a rigid sphere (kind 1), infinite cylinder (kind 2) or flat cylindrical punch
-    (kind 3) onto its surface.
-
-    ``cparams = [c0x, c0y, c0z, dx, dy, dz, radius, ax, ay, az]``: centre at ``c0 + s d``; cylinder axis ``a``.
-    The flat punch is the half-infinite cylinder of radius ``radius`` behind its face centre ``c0 + s d``
-    (it advances along ``d``): a node within the radius that has fallen behind the face is moved back onto
-    the face along ``d``. Frictionless: the projection is along the surface normal. Returns the number of
-    nodes in contact.
-    """
-    cx = cparams[0] + s_contact * cparams[3]
-    cy = cparams[1] + s_contact * cparams[4]
-    cz = cparams[2] + s_contact * cparams[5]
-    r = cparams[6]
-    ax, ay, az = cparams[7], cparams[8], cparams[9]
-    count = 0
-    for k in range(contact_nodes.size):
-        n = contact_nodes[k]
-        px = X[n, 0] + u[n, 0] - cx
-        py = X[n, 1] + u[n, 1] - cy
-        pz = X[n, 2] + u[n, 2] - cz
-        if contact_kind == 3:
-            dx, dy, dz = cparams[3], cparams[4], cparams[5]
-            ahead = px * dx + py * dy + pz * dz
-            qx, qy, qz = px - ahead * dx, py - ahead * dy, pz - ahead * dz
-            if ahead < 0.0 and qx * qx + qy * qy + qz * qz <= r * r * (1.0 + 1e-9):
-                u[n, 0] -= ahead * dx
-                u[n, 1] -= ahead * dy
-                u[n, 2] -= ahead * dz
-                in_contact[k] = 1
-                count += 1
-            else:
-                in_contact[k] = 0
-            continue
-        if contact_kind == 2:
-            along = px * ax + py * ay + pz * az
-            px -= along * ax
-            py -= along * ay
-            pz -= along * az
-        d = np.sqrt(px * px + py * py + pz * pz)
-        if d < r and d > 0.0:
-            fac = (r - d) / d
-            u[n, 0] += fac * px
-            u[n, 1] += fac * py
-            u[n, 2] += fac * pz
-            in_contact[k] = 1
-            count += 1
-        else:
-            in_contact[k] = 0
-    return count
-
-
-@njit(cache=True)
-def _contact_force(fint, contact_nodes, in_contact, out):
-    out[:] = 0.0
-    for k in range(contact_nodes.size):
-        if in_contact[k]:
-            n = contact_nodes[k]
-            out[0] += fint[n, 0]
-            out[1] += fint[n, 1]
-            out[2] += fint[n, 2]
-
-
-@njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _cd_node_pass(fbuf, fint, fext_ref, s_ext, u, u_old, u_new, coef_a, coef_b, coef_c, free, vec):
-    """Collect the internal forces into ``fint`` (reduce the chunk force buffers and clear them, or with
-    the vectorised kernel gather the element forces of the workspace) and advance the free dofs."""
-    nchunk = fbuf.shape[0]
-    gather = vec[0]
-    ws = vec[1]
-    node_ptr, inc_slot, fe_flat, ne = ws[3], ws[5], ws[12].reshape(-1), ws[12].shape[1]
-    for n in prange(u.shape[0]):
-        if gather:
-            fint[n, 0], fint[n, 1], fint[n, 2] = vectorised.node_force(fe_flat, node_ptr, inc_slot, ne, n)
-        a, b, cc = coef_a[n], coef_b[n], coef_c[n]
-        for i in range(3):
-            if nchunk > 0:
-                f = 0.0
-                for c in range(nchunk):
-                    f += fbuf[c, n, i]
-                    fbuf[c, n, i] = 0.0
-                fint[n, i] = f
-            else:
-                f = fint[n, i]
-            if free[n, i]:
-                u_new[n, i] = a * (s_ext * fext_ref[n, i] - f) + b * u[n, i] + cc * u_old[n, i]
-            else:
-                u_new[n, i] = u[n, i]
-
-
-@njit(cache=True)
-def _energy_increments(u_new, u, u_old, fint, fext_ref, s_ext, mass, damping, dt, acc):
-    """Add one central-difference step's energy increments to ``acc``.
-
-    With ``dc = (u_new - u_old)/2`` (the displacement over the step centred at ``u``):
-    ``acc[0]`` internal work ``sum f_int . dc`` (equals the stored energy for a conservative law),
-    ``acc[1]`` work of the applied loads, ``acc[2]`` mass-proportional damping dissipation
-    ``alpha m |dc|^2 / dt`` (all dofs: a prescribed node's drag is carried by its support), ``acc[3]`` work of the kinematic constraints (prescribed dofs
-    and contact projection): the force ``m a + alpha m v + f_int - f_ext`` they exert, times ``dc``.
-    Discretely, ``KE_(n+1/2) - KE_(1/2) + W_int + W_damp = W_ext + W_constraint`` holds for the
-    update actually performed, so the balance checks the integrator against the damping law it claims.
-    """
-    idt2 = 1.0 / (dt * dt)
-    for n in range(u.shape[0]):
-        m = mass[n]
-        for i in range(3):
-            dc = 0.5 * (u_new[n, i] - u_old[n, i])
-            fe = s_ext * fext_ref[n, i]
-            acc[0] += fint[n, i] * dc
-            damp = damping * m * dc / dt
-            acc[1] += fe * dc
-            acc[2] += damp * dc
-            r = m * (u_new[n, i] - 2.0 * u[n, i] + u_old[n, i]) * idt2 + damp + fint[n, i] - fe
-            # free dofs carry no constraint force except where the contact projection moved them
-            acc[3] += r * dc
-    return acc
-
-
-@njit(cache=True)
-def _run_explicit(X, elements, dndx, vol0, chunk_lo, vnode, mass, kind, w1fn, w2fn, wlfn, params, kappa,
-                  use_anp, prony_g, prony_tau, h_state, s_prev, bfn, branch_params, w_prev, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate,
-                  rot_center, n_groups, free, hist_time, hist_vals, fext_ref, contact_kind, cparams,
-                  contact_nodes, dt, n_steps, damping, out_every, u, u_old, fbuf, pbuf, track_energy, vec):
-    """Central-difference time loop. ``u``/``u_old`` hold the state at steps 0 and -1 on entry and the
-    last two states on exit (``u`` newest)."""
-    nn = X.shape[0]
-    n_out = n_steps // out_every + 2  # every out_every-th step and always the last one
-    out_t = np.zeros(n_out)
-    out_force = np.zeros((n_out, n_groups, 3))
-    out_torque = np.zeros((n_out, n_groups))
-    out_contact = np.zeros((n_out, 3))
-    out_ke = np.zeros(n_out)
-    out_energy = np.zeros((n_out, 4))
-    energy = np.zeros(4)
-    fint = np.zeros((nn, 3), dtype=u.dtype)
-    u_new = np.empty_like(u)
-    p_node = np.zeros(nn)
-    hv = np.zeros(hist_vals.shape[0])
-    in_contact = np.zeros(contact_nodes.size, dtype=np.uint8)
-    bad = np.full(chunk_lo.size - 1, -1, dtype=np.int64)
-    force_g = np.zeros((n_groups, 3))
-    torque_g = np.zeros(n_groups)
-    cforce = np.zeros(3)
-    coef_a = np.empty(nn)
-    coef_b = np.empty(nn)
-    coef_c = np.empty(nn)
-    for n in range(nn):
-        m = mass[n]
-        a = 1.0 / (m / dt**2 + damping * m / (2.0 * dt))
-        coef_a[n] = a
-        coef_b[n] = 2.0 * m * a / dt**2
-        coef_c[n] = damping * m * a / (2.0 * dt) - 0.5 * coef_b[n]
-    nterm = prony_g.size
-    prony_e = np.empty(nterm)
-    prony_f = np.empty(nterm)
-    for i in range(nterm):
-        prony_e[i], prony_f[i] = relaxation_factors(dt, prony_tau[i])
-    k_out = 0
-    for step in range(n_steps + 1):
-        t = step * dt
-        bad_e = _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind,
-                                 w1fn, w2fn, wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f, h_state,
-                                 s_prev, bfn, branch_params, w_prev, True, bad, vec, False)
-        if bad_e >= 0:
-            return STATUS_INVERTED, bad_e, step, u, u_old, out_t[:k_out], out_force[:k_out], \
-                out_torque[:k_out], out_contact[:k_out], out_ke[:k_out], out_energy[:k_out]
-        # the balance at step n uses the loads at t_n; the prescribed motions are needed at t_(n+1)
-        _history_values(t, hist_time, hist_vals, hv)
-        s_ext = hv[2 * n_groups + 1]
-        _history_values(t + dt, hist_time, hist_vals, hv)
-        # reduces fbuf into fint and computes u_new on the free dofs
-        _cd_node_pass(fbuf, fint, fext_ref, s_ext, u, u_old, u_new, coef_a, coef_b, coef_c, free, vec)
-        if step % out_every == 0 or step == n_steps:
-            _reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_g, torque_g)
-            _contact_force(fint, contact_nodes, in_contact, cforce)
-            ke = 0.0
-            for n in range(nn):
-                for i in range(3):
-                    v = (u[n, i] - u_old[n, i]) / dt
-                    ke += 0.5 * mass[n] * v * v
-            if not np.isfinite(ke):
-                return STATUS_NOT_FINITE, -1, step, u, u_old, out_t[:k_out], out_force[:k_out], \
-                    out_torque[:k_out], out_contact[:k_out], out_ke[:k_out], out_energy[:k_out]
-            out_t[k_out] = t
-            out_energy[k_out] = energy
-            out_force[k_out] = force_g
-            out_torque[k_out] = torque_g
-            out_contact[k_out] = cforce
-            out_ke[k_out] = ke
-            k_out += 1
-        if step == n_steps:
-            break
-        _apply_bcs(u_new, X, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups)
-        if contact_kind > 0:
-            _contact_project(u_new, X, contact_nodes, in_contact, contact_kind, cparams, hv[2 * n_groups])
-        if track_energy:
-            _energy_increments(u_new, u, u_old, fint, fext_ref, s_ext, mass, damping, dt, energy)
-        u_old, u, u_new = u, u_new, u_old
-    return STATUS_OK, -1, n_steps, u, u_old, out_t[:k_out], out_force[:k_out], out_torque[:k_out], \
-        out_contact[:k_out], out_ke[:k_out], out_energy[:k_out]
-
-
-@njit(parallel=True, cache=True, fastmath=FASTMATH)
-def _dr_node_pass(fint, fext_ref, s_ext, u, u_old, u_new, inv_mass, alpha, beta, free):
-    for n in prange(u.shape[0]):
-        am = alpha * inv_mass[n]
-        for i in range(3):
-            if free[n, i]:
-                u_new[n, i] = u[n, i] + beta * (u[n, i] - u_old[n, i]) + am * (s_ext * fext_ref[n, i] - fint[n, i])
-            else:
-                u_new[n, i] = u[n, i]
-
-
-@njit(cache=True)
-def _run_dr(X, elements, dndx, vol0, chunk_lo, vnode, dr_mass, kind, w1fn, w2fn, wlfn, params, kappa, use_anp,
-            prony_g, prony_tau, h_state, s_prev, bfn, branch_params, w_prev, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center,
-            n_groups, free, hist_time, hist_vals, fext_ref, contact_kind, cparams, contact_nodes, times,
-            tol_m, min_iter, max_iter, u, fbuf, pbuf, vec):
-    """Dynamic relaxation to static equilibrium at each time in ``times`` (quasi-static loading path).
-
-    Unit fictitious time step; ``dr_mass`` makes every element's stable step ~2 (lambda_max ~ 1). The
-    viscoelastic states advance between consecutive times with ``dt = times[k] - times[k-1]`` and are
-    committed after convergence. Returns status, failing increment, iterations used per increment and
-    the reactions/torques/contact forces per increment.
-    """
-    nn = X.shape[0]
-    nk = times.size
-    out_force = np.zeros((nk, n_groups, 3))
-    out_torque = np.zeros((nk, n_groups))
-    out_contact = np.zeros((nk, 3))
-    iters = np.zeros(nk, dtype=np.int64)
-    fint = np.zeros((nn, 3), dtype=u.dtype)
-    fint_prev = np.zeros((nn, 3), dtype=u.dtype)
-    u_old = u.copy()
-    u_new = u.copy()
-    p_node = np.zeros(nn)
-    hv = np.zeros(hist_vals.shape[0])
-    in_contact = np.zeros(contact_nodes.size, dtype=np.uint8)
-    bad = np.full(chunk_lo.size - 1, -1, dtype=np.int64)
-    force_g = np.zeros((n_groups, 3))
-    torque_g = np.zeros(n_groups)
-    cforce = np.zeros(3)
-    inv_mass = 1.0 / dr_mass
-    nterm = prony_g.size
-    prony_e = np.empty(nterm)
-    prony_f = np.empty(nterm)
-    lam_max = 1.0
-    t_prev = 0.0
-    for k in range(nk):
-        dt = times[k] - t_prev
-        for i in range(nterm):
-            if dt > 0.0:
-                prony_e[i], prony_f[i] = relaxation_factors(dt, prony_tau[i])
-            else:
-                prony_e[i], prony_f[i] = 1.0, 1.0
-        _history_values(times[k], hist_time, hist_vals, hv)
-        _apply_bcs(u, X, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups)
-        if contact_kind > 0:
-            _contact_project(u, X, contact_nodes, in_contact, contact_kind, cparams, hv[2 * n_groups])
-        u_old[:] = u
-        lam_min = 1e-6
-        c = 2.0 * np.sqrt(lam_min)
-        alpha = 2.0 / (2.0 + c)
-        beta = (2.0 - c) / (2.0 + c)
-        n_ok = 0
-        converged = False
-        it = 0
-        while it < max_iter:
-            bad_e = _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind,
-                                     w1fn, w2fn, wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f,
-                                     h_state, s_prev, bfn, branch_params, w_prev, False, bad, vec)
-            if bad_e >= 0:
-                return STATUS_INVERTED, bad_e, k, u, iters, out_force, out_torque, out_contact
-            if it > 0:
-                # Rayleigh quotient of the last increment: lowest-mode estimate (Joldes et al. 2011)
-                num = 0.0
-                den = 0.0
-                for n in range(nn):
-                    for i in range(3):
-                        if free[n, i]:
-                            du = u[n, i] - u_old[n, i]
-                            num += du * (fint[n, i] - fint_prev[n, i])
-                            den += du * du * dr_mass[n]
-                if den > 0.0 and num > 0.0:
-                    est = num / den
-                    if est < lam_max:
-                        lam_min = est
-                        c = 2.0 * np.sqrt(lam_min)
-                        alpha = 2.0 / (2.0 + c)
-                        beta = (2.0 - c) / (2.0 + c)
-            _dr_node_pass(fint, fext_ref, hv[2 * n_groups + 1], u, u_old, u_new, inv_mass, alpha, beta, free)
-            if contact_kind > 0:
-                _contact_project(u_new, X, contact_nodes, in_contact, contact_kind, cparams, hv[2 * n_groups])
-            dmax = 0.0
-            for n in range(nn):
-                for i in range(3):
-                    d = abs(u_new[n, i] - u[n, i])
-                    if d > dmax:
-                        dmax = d
-            if not np.isfinite(dmax):
-                return STATUS_NOT_FINITE, -1, k, u, iters, out_force, out_torque, out_contact
-            sq = np.sqrt(lam_min / lam_max)
-            rho = (1.0 - sq) / (1.0 + sq)
-            err = rho / (1.0 - rho) * dmax
-            fint_prev, fint = fint, fint_prev
-            u_old, u, u_new = u, u_new, u_old
-            it += 1
-            if it >= min_iter and err < tol_m:
-                n_ok += 1
-                if n_ok >= 3:
-                    converged = True
-                    break
-            else:
-                n_ok = 0
-        iters[k] = it
-        if not converged:
-            return STATUS_NOT_CONVERGED, -1, k, u, iters, out_force, out_torque, out_contact
-        # commit viscoelastic states at the converged configuration and record reactions
-        _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind, w1fn, w2fn,
-                         wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f, h_state, s_prev, bfn, branch_params, w_prev, True, bad,
-                         vec)
-        _reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_g, torque_g)
-        _contact_force(fint, contact_nodes, in_contact, cforce)
-        out_force[k] = force_g
-        out_torque[k] = torque_g
-        out_contact[k] = cforce
-        t_prev = times[k]
-    return STATUS_OK, -1, nk, u, iters, out_force, out_torque, out_contact
 
 
 # --------------------------------------------------------------------------------------------------
@@ -912,7 +281,6 @@ def build_model(mesh: TetMesh, material: Material, groups: list[BoundaryGroup] |
         d = np.asarray(contact.direction, float)
         a = np.asarray(contact.axis, float)
         cparams = np.concatenate([contact.center_m, d / np.linalg.norm(d), [contact.radius_m], a / np.linalg.norm(a)])
-        from .mesh import boundary_nodes
         cnodes = boundary_nodes(elements) if contact.nodes is None else np.asarray(contact.nodes)
         cnodes = cnodes[free[cnodes].all(axis=1)]
     else:
@@ -1109,6 +477,18 @@ def _check_status(status, bad, where, time_s):
                                     -1, int(where.split()[-1]), time_s)
 
 
+def _kernel_arguments(model: TLEDModel) -> tuple[KernelMesh, KernelMaterial, KernelLaws, KernelLoads]:
+    """The model's arrays grouped as the compiled loops take them."""
+    m = model.material
+    mesh = KernelMesh(model.mesh.nodes, model.mesh.elements, model.dndx, model.vol0, model.chunk_lo, model.vnode)
+    mat = KernelMaterial(m.kind, m.params, m.bulk_modulus_pa, model.use_anp, m.prony_g, m.prony_tau_s, m.branch_params)
+    laws = KernelLaws(*m.functions(), m.branch_function())
+    loads = KernelLoads(model.bc_nodes, model.bc_group, model.bc_mask, model.bc_dir, model.bc_rotate, model.rot_center,
+                        max(1, len(model.groups)), model.free, model.hist_time, model.hist_vals, model.fext_ref,
+                        model.contact_kind, model.cparams, model.contact_nodes)
+    return mesh, mat, laws, loads
+
+
 def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None, safety: float = 0.7,
                  damping_1_s: float = 0.0, n_outputs: int = 100, u0_m: np.ndarray | None = None,
                  v0_m_s: np.ndarray | None = None, state: tuple | None = None,
@@ -1129,7 +509,6 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
         without up to four QLV terms, except float64 meshes above :data:`AUTO_VECTORISED_MAX_FLOAT64_ELEMENTS`
         elements; the generic kernel for stretch-based laws and beyond-QLV), ``"vectorised"`` or ``"generic"``
     """
-    m = model.material
     dt = critical_time_step(model, safety) if dt_s is None else float(dt_s)
     n_steps = max(1, int(np.ceil(t_end_s / dt - 1e-9)))
     out_every = max(1, n_steps // max(1, n_outputs))
@@ -1137,16 +516,9 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
     u_old = u.copy() if v0_m_s is None else (u - dt * np.asarray(v0_m_s)).astype(model.dtype)
     h_state, s_prev, w_prev = _state(model, state)
     vec, fbuf, pbuf = _vector_setup(model, kernel, h_state, s_prev)
-    w1, w2, wl = m.functions()
-    bfn = m.branch_function()
-    ng = max(1, len(model.groups))
     with numba_threads(n_threads):
-        res = _run_explicit(model.mesh.nodes, model.mesh.elements, model.dndx, model.vol0, model.chunk_lo,
-                        model.vnode, model.mass, m.kind, w1, w2, wl, m.params, m.bulk_modulus_pa, model.use_anp,
-                        m.prony_g, m.prony_tau_s, h_state, s_prev, bfn, m.branch_params, w_prev, model.bc_nodes, model.bc_group, model.bc_mask,
-                        model.bc_dir, model.bc_rotate, model.rot_center, ng, model.free, model.hist_time,
-                        model.hist_vals, model.fext_ref, model.contact_kind, model.cparams, model.contact_nodes,
-                        dt, n_steps, damping_1_s, out_every, u, u_old, fbuf, pbuf, bool(track_energy), vec)
+        res = explicit_loop(*_kernel_arguments(model), model.mass, h_state, s_prev, w_prev, dt, n_steps, damping_1_s,
+                            out_every, u, u_old, fbuf, pbuf, bool(track_energy), vec)
     _vector_state_back(vec, h_state, s_prev)
     status, bad, step, u, u_old, t, force, torque, cforce, ke, energy = res
     _check_status(status, bad, f"step {step}", step * dt)
@@ -1171,7 +543,6 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
     n_threads : numba threads for this run (None: numba's current setting)
     kernel : ``"auto"``, ``"vectorised"`` or ``"generic"`` (see :func:`run_explicit`)
     """
-    m = model.material
     times = np.atleast_1d(np.asarray(times_s, float))
     if np.any(np.diff(times) < 0):
         raise ValueError("times_s must be non-decreasing")
@@ -1179,16 +550,9 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
     u = np.zeros((model.mesh.n_nodes, 3), model.dtype) if u0_m is None else np.array(u0_m, dtype=model.dtype)
     h_state, s_prev, w_prev = _state(model, state)
     vec, fbuf, pbuf = _vector_setup(model, kernel, h_state, s_prev)
-    w1, w2, wl = m.functions()
-    bfn = m.branch_function()
-    ng = max(1, len(model.groups))
     with numba_threads(n_threads):
-        res = _run_dr(model.mesh.nodes, model.mesh.elements, model.dndx, model.vol0, model.chunk_lo, model.vnode,
-                  model.dr_mass, m.kind, w1, w2, wl, m.params, m.bulk_modulus_pa, model.use_anp, m.prony_g,
-                  m.prony_tau_s, h_state, s_prev, bfn, m.branch_params, w_prev, model.bc_nodes, model.bc_group, model.bc_mask, model.bc_dir,
-                  model.bc_rotate, model.rot_center, ng, model.free, model.hist_time, model.hist_vals,
-                  model.fext_ref, model.contact_kind, model.cparams, model.contact_nodes, times, tol, min_iter,
-                  max_iter, u, fbuf, pbuf, vec)
+        res = dynamic_relaxation_loop(*_kernel_arguments(model), model.dr_mass, h_state, s_prev, w_prev, times, tol,
+                                      min_iter, max_iter, u, fbuf, pbuf, vec)
     _vector_state_back(vec, h_state, s_prev)
     status, bad, k, u, iters, force, torque, cforce = res
     if status == STATUS_NOT_CONVERGED:

@@ -40,7 +40,8 @@ from .base import ConstitutiveModel, ParamSpec, Params
 
 
 @njit(cache=True)
-def _zero(p, i1, i2):
+def zero_dw_di2(p, i1, i2):
+    """``dW/dI2 = 0`` of laws without an I2 part (shared with the FEM, which skips it)."""
     return 0.0
 
 
@@ -297,7 +298,7 @@ class HyperelasticModel(ConstitutiveModel):
         g = np.ascontiguousarray(np.asarray(strain, dtype=np.float64))
         flat = g.ravel()
         if self.kind == "invariant":
-            s, n2 = _invariant_shear(self.dw_di1, self.dw_di2 or _zero, self._vector(p), flat)
+            s, n2 = _invariant_shear(self.dw_di1, self.dw_di2 or zero_dw_di2, self._vector(p), flat)
         else:
             s, n2 = _stretch_shear(self.dw_dlambda, self._vector(p), flat)
         return s.reshape(g.shape), n2.reshape(g.shape)
@@ -319,7 +320,7 @@ class HyperelasticModel(ConstitutiveModel):
         lam = np.ascontiguousarray(np.asarray(stretch, dtype=np.float64))
         flat = lam.ravel()
         if self.kind == "invariant":
-            out = _invariant_uniaxial(self.dw_di1, self.dw_di2 or _zero, self._vector(p), flat)
+            out = _invariant_uniaxial(self.dw_di1, self.dw_di2 or zero_dw_di2, self._vector(p), flat)
         else:
             out = _stretch_uniaxial(self.dw_dlambda, self._vector(p), flat)
         return out.reshape(lam.shape)
@@ -469,7 +470,7 @@ for _n in (1, 2):
 def _law_entry(model: HyperelasticModel) -> dict:
     if model.kind == "stretch":
         return {"kind": "stretch", "dW_dlambda": model.dw_dlambda, "param_names": model.param_names}
-    return {"kind": "invariant", "dW_dI1": model.dw_di1, "dW_dI2": model.dw_di2 or _zero,
+    return {"kind": "invariant", "dW_dI1": model.dw_di1, "dW_dI2": model.dw_di2 or zero_dw_di2,
             "param_names": model.param_names}
 
 

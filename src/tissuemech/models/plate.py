@@ -29,6 +29,7 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 from .base import ConstitutiveModel
+from .qlv import stress_controlled_strain, stress_controlled_strain_by_history
 
 Params = Mapping[str, float]
 
@@ -144,7 +145,6 @@ def creep_rim_strain(model: ConstitutiveModel, p: Params, time_s: np.ndarray, ap
     O(n^2) :func:`tissuemech.models.qlv.stress_controlled_strain_by_history`. For a linear material the
     result equals the homogeneous ``creep_strain``.
     """
-    from .qlv import stress_controlled_strain, stress_controlled_strain_by_history
     r, w = gauss_radii(n_gauss, radius_m)
     if hasattr(model, "branch_drives"):
         drives, taus = model.branch_drives(p)

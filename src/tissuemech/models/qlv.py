@@ -29,6 +29,7 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 from numba import njit
 
+from . import hyperelastic
 from .base import ConstitutiveModel, InstantaneousLawModel, ParamSpec, Params, initial_shear_modulus
 from .recursion import qlv_stress_batch, relaxation_factors
 
@@ -443,20 +444,17 @@ INSTANTANEOUS_KEYS = {
 
 
 def instantaneous_law(tag: str) -> ConstitutiveModel:
-    """Instantaneous law by short tag: ``linear`` (built in) or a hyperelastic registry model (lazy lookup,
-    so this module imports before/without the hyperelastic family)."""
+    """Instantaneous law by short tag: ``linear`` (built in) or a hyperelastic model
+    (``hyperelastic.MODELS``; this module does not go through the registry, which imports it)."""
     if tag == "linear":
         return LinearElasticShear()
-    from .registry import get_model  # lazy: the registry imports this module
-    return get_model(INSTANTANEOUS_KEYS[tag])
+    return hyperelastic.MODELS[INSTANTANEOUS_KEYS[tag]]()
 
 
 def available_instantaneous_tags() -> tuple[str, ...]:
-    """Tags whose instantaneous law exists now (``linear`` always; hyperelastic ones once that family
-    registers them), so no key is registered for a law that cannot be built."""
-    from . import hyperelastic
-
-    known = getattr(hyperelastic, "MODELS", {})
+    """Tags whose instantaneous law exists (``linear`` always; hyperelastic ones that family registers),
+    so no key is registered for a law that cannot be built."""
+    known = hyperelastic.MODELS
     return ("linear", *(tag for tag, key in INSTANTANEOUS_KEYS.items() if key in known))
 
 

@@ -39,6 +39,7 @@ import numpy as np
 from ..models.base import ConstitutiveModel, Params, initial_shear_modulus
 from ..models.qlv import QLVModel, sub_params
 from .instrument import Artefacts
+from ..models.beyond_qlv import PipkinRogersModel
 
 EFFECT_IDS: tuple[str, ...] = (
     "nonseparable_relaxation", "rim_stress_nonlinearity", "wall_slip", "elapsed_time_drift",
@@ -128,7 +129,6 @@ class AugmentedElasticLaw(ConstitutiveModel):
 def _rebuild_with_law(model: ConstitutiveModel, law: ConstitutiveModel, kappa: float | None = None,
                       gamma_s: float | None = None):
     """Same viscoelastic structure (QLV or Pipkin-Rogers) on a new instantaneous law."""
-    from ..models.beyond_qlv import PipkinRogersModel
     taus = list(model._taus)
     if isinstance(model, PipkinRogersModel):
         return PipkinRogersModel(law, model.n_prony, taus_s=taus, per_branch=model.per_branch, name=model.name)
@@ -142,7 +142,6 @@ def _rebuild_with_law(model: ConstitutiveModel, law: ConstitutiveModel, kappa: f
 def modify_truth(model: ConstitutiveModel, params: Params, effects: Mapping[str, Mapping[str, float]]):
     """Apply the material-model effects; returns ``(model, params, record)`` with ``record`` the derived
     magnitudes written to truth.json (e.g. the C20/C01 actually added, in Pa)."""
-    from ..models.beyond_qlv import PipkinRogersModel
     params = dict(params)
     record: dict[str, dict] = {}
     if not any(e in effects for e in ("nonseparable_relaxation", "rim_stress_nonlinearity",

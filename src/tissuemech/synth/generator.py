@@ -46,6 +46,10 @@ from . import effects as fx
 from .instrument import Geometry, InstrumentSettings, run_protocol
 from .protocols import build_protocol
 from .writer import RESULT_NAMES, write_json, write_rheocompass_csv, write_samples_csv, write_yaml
+from ..models.beyond_qlv import PipkinRogersModel
+from ..models.plate import gauss_radii
+from ..models.qlv import QLVModel, instantaneous_law
+from ..models.registry import get_model
 
 GENERATOR = "tissuemech.synth virtual rheometer 1"
 
@@ -53,10 +57,7 @@ GENERATOR = "tissuemech.synth virtual rheometer 1"
 def build_model(spec) -> ConstitutiveModel:
     """Truth model from a registry key or a structure mapping (see module docstring)."""
     if isinstance(spec, str):
-        from ..models.registry import get_model
         return get_model(spec)
-    from ..models.beyond_qlv import PipkinRogersModel
-    from ..models.qlv import QLVModel, instantaneous_law
     kind = spec.get("kind")
     law = instantaneous_law(spec.get("instantaneous", "linear"))
     taus = spec.get("taus_s")
@@ -74,7 +75,6 @@ def instantaneous_rim_ratio(model: ConstitutiveModel, params: Mapping[str, float
     ``rim_strain`` (1 for a linear law; < 1 for stiffening laws: the rim-stress error inherent in the data)."""
     if not model.supports("elastic_shear"):
         return None
-    from ..models.plate import gauss_radii
     r, w = gauss_radii(16, 1.0)
     sigma = np.asarray(model.elastic_shear_stress(params, rim_strain * r), float)
     apparent = 4.0 * np.sum(w * r * r * sigma)          # 2M/(pi R^3) with M = 2 pi int sigma r^2 dr, R = 1

@@ -1,0 +1,266 @@
+"""Plate targets, model predictions and the fit problem (:class:`NoiseModel`, :class:`FitProblem`) (part of
+:mod:`tissuemech.fitting`, which re-exports every public name)."""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import lmfit
+import numpy as np
+
+from ..models.base import ConstitutiveModel, ParamSpec, ResponseNotSupported
+from ..models.plate import forward_plate, rabinowitsch_rim_stress
+from ._data import Curve
+
+PLATE_TARGETS: tuple[str, ...] = ("thesis", "apparent_stress", "corrected_stress", "torque", "none")
+
+#: responses fitted with log residuals (the data span decades)
+LOG_RESPONSES: frozenset[str] = frozenset({"oscillation", "flow"})
+
+
+# ------------------------------------------------------------------------------------------------
+# plate targets and predictions
+# ------------------------------------------------------------------------------------------------
+def plate_factor(radius_m: float) -> float:
+    """Torque per unit apparent rim stress, pi R^3 / 2 [N m / Pa]."""
+    return math.pi * radius_m ** 3 / 2.0
+
+
+def target_observations(curve: Curve, target: str) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Observed values and SDs a fit compares predictions with, for a plate ``target``.
+
+    Only shear histories (relaxation, CSR) and flow curves measured between plates depend on the target;
+    oscillation (linear, where apparent stress is exact), creep, and homogeneous tests are unchanged.
+    """
+    obs = {k: np.asarray(v, float) for k, v in curve.observed.items()}
+    sd = {k: np.asarray(v, float) for k, v in curve.sd.items()}
+    if target not in PLATE_TARGETS:
+        raise ValueError(f"unknown plate target {target!r}; use one of {PLATE_TARGETS}")
+    plate_dependent = curve.response in ("shear_history", "flow") and curve.is_plate
+    torque = obs.pop("torque", None)
+    torque_sd = sd.pop("torque", None)
+    if not plate_dependent:
+        return obs, sd
+    if target == "none":
+        raise ValueError(f"{curve.label} was measured between plates: choose a plate target "
+                         f"('thesis', 'apparent_stress', 'corrected_stress' or 'torque')")
+    if target in ("thesis", "apparent_stress"):
+        return obs, sd
+    k = plate_factor(curve.radius_m)
+    stress_sd = sd.pop("shear_stress", None)
+    stress = obs.pop("shear_stress")
+    if torque is None:
+        torque = stress * k
+    if torque_sd is None and stress_sd is not None:
+        torque_sd = stress_sd * k
+    if target == "torque":
+        obs["torque"] = torque
+        if torque_sd is not None:
+            sd["torque"] = torque_sd
+        return obs, sd
+    # corrected_stress: needs a monotone sweep of the rim strain (CSR) or rate (flow)
+
+    x = curve.obs_inputs("shear_strain") if curve.response == "shear_history" else curve.obs_inputs("shear_rate")
+    if curve.test == "stress_relaxation" or np.any(np.diff(x) <= 0) or np.any(x <= 0):
+        raise ValueError(f"corrected rim stress needs a monotone positive strain/rate sweep; {curve.label} has "
+                         f"none (fit it with target='torque' or 'apparent_stress')")
+    corrected = rabinowitsch_rim_stress(torque, x, curve.radius_m)
+    obs["shear_stress"] = corrected
+    if torque_sd is not None:
+        sd["shear_stress"] = torque_sd / k * np.abs(corrected / np.where(stress != 0, stress, np.nan))
+    return obs, sd
+
+
+def _shear_history_stress(model: ConstitutiveModel, p, time_s, strain) -> np.ndarray:
+    if model.supports("shear_history"):
+        return model.shear_stress_history(p, time_s, strain)
+    if model.supports("elastic_shear"):
+        # a purely elastic (rate-independent) law: the stress follows the current strain
+        return model.elastic_shear_stress(p, strain)
+    raise ResponseNotSupported(f"model {model.name!r} ({model.family}) does not describe 'shear_history'")
+
+
+def predict(model: ConstitutiveModel, p: Mapping[str, float], curve: Curve, target: str) -> dict[str, np.ndarray]:
+    """Model prediction of every observable of ``curve`` (at its observation points) for a plate target."""
+    r = curve.response
+    idx = curve.obs_index
+    if r == "shear_history":
+        t = np.asarray(curve.inputs["time"], float)
+        g = np.asarray(curve.inputs["shear_strain"], float)
+        if curve.is_plate and target in ("torque", "apparent_stress"):
+
+            full = forward_plate(model, p, t, g, curve.radius_m, curve.gap_m, target=target)
+            key = "torque" if target == "torque" else "shear_stress"
+            return {key: full if idx is None else full[idx]}
+        full = _shear_history_stress(model, p, t, g)
+        return {"shear_stress": full if idx is None else full[idx]}
+    if r == "oscillation":
+        gstar = model.complex_modulus(p, curve.obs_inputs("angular_frequency"))
+        return {"storage_modulus": gstar.real, "loss_modulus": gstar.imag}
+    if r == "flow":
+        rate = curve.obs_inputs("shear_rate")
+        if curve.is_plate and target in ("torque", "apparent_stress"):
+            # steady flow: each radius sees the rate x r/R; torque by Gauss-Legendre on [0, R]
+            xg, wg = np.polynomial.legendre.leggauss(12)
+            u = 0.5 * (xg + 1.0)
+            stress = model.steady_shear_stress(p, (rate[:, None] * u[None, :]).ravel()).reshape(rate.size, u.size)
+            torque = 2.0 * math.pi * curve.radius_m ** 3 * (stress * u[None, :] ** 2) @ (0.5 * wg)
+            if target == "torque":
+                return {"torque": torque}
+            return {"shear_stress": torque / plate_factor(curve.radius_m)}
+        return {"shear_stress": model.steady_shear_stress(p, rate)}
+    if r == "creep":
+        full = model.creep_strain(p, np.asarray(curve.inputs["time"], float), np.asarray(curve.inputs["shear_stress"], float))
+        return {"shear_strain": full if idx is None else full[idx]}
+    if r == "elastic_shear":
+        return {"shear_stress": model.elastic_shear_stress(p, curve.obs_inputs("shear_strain"))}
+    if r == "uniaxial":
+        return {"nominal_stress": model.uniaxial_nominal_stress(p, curve.obs_inputs("stretch"))}
+    raise ValueError(f"unknown response kind {r!r}")
+
+
+# ------------------------------------------------------------------------------------------------
+# noise model and problem
+# ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class NoiseModel:
+    """Floor of the per-point standard deviation: ``floor = sqrt(absolute^2 + (relative |y|)^2)``;
+    the weight of a point is ``1 / max(sample SD, floor)``.
+
+    ``absolute`` maps observable -> absolute floor in its unit; default: 0.03 Pa for stresses (the
+    ~0.05 uN m torque resolution of a 10 mm plate), 0.05 uN m for torque, 1e-5 for strain.
+    ``relative`` is the relative floor (1 % = instrument accuracy).
+    """
+
+    relative: float = 0.01
+    absolute: Mapping[str, float] = field(default_factory=lambda: {
+        "shear_stress": 0.03, "torque": 5e-8, "storage_modulus": 0.03, "loss_modulus": 0.03,
+        "shear_strain": 1e-5, "nominal_stress": 0.03})
+
+    def sigma(self, name: str, y: np.ndarray, sd: np.ndarray | None) -> np.ndarray:
+        y = np.asarray(y, float)
+        floor = np.sqrt(self.absolute.get(name, 0.0) ** 2 + (self.relative * np.abs(y)) ** 2)
+        floor = np.where(floor > 0, floor, np.finfo(float).tiny)
+        if sd is None:
+            return floor
+        sd = np.where(np.isfinite(sd), np.asarray(sd, float), 0.0)
+        return np.maximum(sd, floor)
+
+
+@dataclass
+class FitProblem:
+    """A model and the curves it is fitted to jointly.
+
+    Attributes
+    ----------
+    model : the constitutive model (structure fixed)
+    curves : curves fitted jointly; each must be describable by the model
+    target : plate target (see module docstring); homogeneous curves ignore it
+    model_key : registry key recorded with the fit
+    noise : :class:`NoiseModel`
+    fixed : parameter name -> value held fixed
+    bounds : parameter name -> (lower, upper) overriding the model's bounds
+    scope : label of the data scope (e.g. ``"csr+relaxation"``), recorded with the fit
+    relaxation : strain-history treatment of the relaxation curves (:func:`relaxation_history`), recorded
+    """
+
+    model: ConstitutiveModel
+    curves: list[Curve]
+    target: str = "apparent_stress"
+    model_key: str = ""
+    noise: NoiseModel = field(default_factory=NoiseModel)
+    fixed: Mapping[str, float] = field(default_factory=dict)
+    bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    scope: str = ""
+    relaxation: str = "measured"
+
+    def __post_init__(self):
+        if self.target not in PLATE_TARGETS:
+            raise ValueError(f"unknown plate target {self.target!r}; use one of {PLATE_TARGETS}")
+        if not self.curves:
+            raise ValueError("a fit needs at least one curve")
+        if not self.model_key:
+            self.model_key = self.model.name
+        self.observations = []
+        for c in self.curves:
+            need = c.response
+            if need == "shear_history" and not (self.model.supports("shear_history") or self.model.supports("elastic_shear")):
+                raise ValueError(f"model {self.model_key!r} cannot describe {c.label} (needs shear_history)")
+            if need != "shear_history" and not self.model.supports(need):
+                raise ValueError(f"model {self.model_key!r} ({self.model.family}) cannot describe {c.label} (needs {need})")
+            obs, sd = target_observations(c, self.target)
+            sig = {k: self.noise.sigma(k, v, sd.get(k)) for k, v in obs.items()}
+            self.observations.append((obs, sig))
+
+    # --- parameters -------------------------------------------------------------------------------
+    def spec(self, name: str) -> ParamSpec:
+        return next(s for s in self.model.param_specs if s.name == name)
+
+    def param_bounds(self, s: ParamSpec) -> tuple[float, float]:
+        return tuple(self.bounds.get(s.name, (s.lower, s.upper)))
+
+    def is_log(self, s: ParamSpec) -> bool:
+        lo, _ = self.param_bounds(s)
+        return bool(s.log and lo >= 0 and s.init > 0)
+
+    def internal_name(self, s: ParamSpec) -> str:
+        return f"log10_{s.name}" if self.is_log(s) else s.name
+
+    def make_params(self, start: Mapping[str, float] | None = None) -> lmfit.Parameters:
+        """lmfit parameters in the internal (log10 for moduli/times) space."""
+        start = dict(start or {})
+        pars = lmfit.Parameters()
+        for s in self.model.param_specs:
+            lo, hi = self.param_bounds(s)
+            value = float(self.fixed.get(s.name, start.get(s.name, s.init)))
+            vary = s.name not in self.fixed
+            if self.is_log(s):
+                tiny = 1e-300
+                ilo = math.log10(lo) if lo > 0 else -np.inf
+                ihi = math.log10(hi) if np.isfinite(hi) else np.inf
+                iv = math.log10(max(value, tiny))
+                iv = min(max(iv, ilo), ihi)
+                pars.add(self.internal_name(s), value=iv, min=ilo, max=ihi, vary=vary)
+            else:
+                value = min(max(value, lo), hi)
+                pars.add(s.name, value=value, min=lo, max=hi, vary=vary)
+        return pars
+
+    def natural(self, pars: lmfit.Parameters | Mapping[str, float]) -> dict[str, float]:
+        """Natural-unit parameter values from internal ones."""
+        out = {}
+        for s in self.model.param_specs:
+            v = pars[self.internal_name(s)]
+            v = float(v.value if isinstance(v, lmfit.Parameter) else v)
+            out[s.name] = 10.0 ** v if self.is_log(s) else v
+        return out
+
+    # --- residuals --------------------------------------------------------------------------------
+    def curve_terms(self, p: Mapping[str, float]) -> list[dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]]:
+        """Per curve and observable: (observed, predicted, weighted residual)."""
+        out = []
+        for c, (obs, sig) in zip(self.curves, self.observations):
+            pred = predict(self.model, p, c, self.target)
+            terms = {}
+            for k, y in obs.items():
+                f = np.asarray(pred[k], float)
+                if c.response in LOG_RESPONSES:
+                    # log residual with the relative SD as its scale
+                    tiny = 1e-12 * max(np.max(np.abs(y)), 1e-300)
+                    w = (np.log(np.maximum(f, tiny)) - np.log(np.maximum(y, tiny))) / (sig[k] / np.maximum(np.abs(y), tiny))
+                else:
+                    w = (f - y) / sig[k]
+                terms[k] = (y, f, w)
+            out.append(terms)
+        return out
+
+    def residual(self, pars: lmfit.Parameters) -> np.ndarray:
+        p = self.natural(pars)
+        res = np.concatenate([w for terms in self.curve_terms(p) for (_, _, w) in terms.values()])
+        # a non-finite prediction is a region the optimizer must leave, not a crash
+        return np.where(np.isfinite(res), res, 1e10)
+
+    @property
+    def n_obs(self) -> int:
+        return int(sum(v.size for obs, _ in self.observations for v in obs.values()))
