@@ -30,10 +30,7 @@ LAYERS: tuple[frozenset[str], ...] = tuple(frozenset(names.split()) for names in
 ))
 
 #: import circles still left (as sorted module tuples) -> what is to be done
-KNOWN_CIRCLES: dict[tuple[str, ...], str] = {
-    ("tissuemech.diagnosis.homogeneous", "tissuemech.diagnosis.report"):
-        "diagnosis (other work in progress): homogeneous imports report's writers, report imports homogeneous",
-}
+KNOWN_CIRCLES: dict[tuple[str, ...], str] = {}
 
 #: (importing module, imported module, private name) still left -> what is to be done
 KNOWN_PRIVATE: dict[tuple[str, str, str], str] = {}
@@ -41,8 +38,8 @@ KNOWN_PRIVATE: dict[tuple[str, str, str], str] = {}
 #: modules whose function-local package imports are still left -> what is to be done
 KNOWN_LOCAL_IMPORTS: dict[str, str] = {
     "tissuemech.cards": "make_card imports models.qlv.LinearElasticShear (one linear-elastic law, issue 14)",
-    "tissuemech.diagnosis.homogeneous": "breaks the homogeneous <-> report circle; plots writer",
-    "tissuemech.diagnosis.report": "breaks the homogeneous <-> report circle; plots writer",
+    "tissuemech.diagnosis.homogeneous": "the figure writer: keeps matplotlib (through plots) out of the diagnosis",
+    "tissuemech.diagnosis.report": "the figure writer: keeps matplotlib (through plots) out of the diagnosis",
     "tissuemech.tts": "the optional mastercurve figure: keeps matplotlib out of every import of tts (the diagnosis "
                       "imports tts for run temperatures)",
 }

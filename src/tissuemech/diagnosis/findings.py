@@ -1,14 +1,18 @@
 """What every detector of the catalogue shares: the cause ids and their signatures (which covariate
-structure each cause explains), the diagnosis context, the finding and fix records, curve levels and the
-leave-one-group-out scoring of a correction. The catalogue itself is :mod:`.catalogue`."""
+structure each cause explains), the diagnosis context, the finding and fix records and the diagnosis.json writer, curve levels
+and the leave-one-group-out scoring of a correction. The catalogue itself is :mod:`.catalogue`."""
 from __future__ import annotations
 
+import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import xarray as xr
+
+from ..canonical import to_jsonable, write_text
 
 CATALOGUE_IDS: tuple[str, ...] = (
     "nonseparable_relaxation", "rim_stress_nonlinearity", "wall_slip", "elapsed_time_drift",
@@ -224,3 +228,12 @@ def cv_group_column(frame: pd.DataFrame) -> str:
         if col in frame and frame[col].nunique() >= 3:
             return col
     return "curve"
+
+
+def write_diagnosis_json(result: dict, path: str | Path, dataset: str = "") -> Path:
+    """Atomically write a diagnosis result as ``diagnosis.json`` (structure tests are summarised, not dumped;
+    NaN/inf -> null through :func:`tissuemech.canonical.to_jsonable`)."""
+    out = {k: v for k, v in result.items() if k != "structure_tests"}
+    out["dataset"] = dataset
+    out["n_structure_tests"] = len(result.get("structure_tests", []))
+    return write_text(json.dumps(to_jsonable(out), indent=2) + "\n", path)

@@ -54,7 +54,10 @@ from .. import fitting as F
 from ..models.hyperelastic import stability_flags
 from ..models.registry import get_model
 from .. import stats as st
+from ..canonical import write_netcdf
 from .catalogue import CATALOGUE_IDS, fix_record, untested_finding
+from .evidence import residual_table_to_xarray
+from .findings import write_diagnosis_json
 
 ASYMMETRY_ID = "tension_compression_asymmetry"
 I2_ID = "unidentified_i2_dependence"
@@ -663,10 +666,6 @@ def write_figures(by_mode, table: pd.DataFrame, result: dict, fig_dir) -> list:
 def run_homogeneous_diagnosis(runs: Sequence[xr.Dataset], out_json, out_nc, fig_dir, dataset: str = "",
                               alpha: float = st.ALPHA, seed: int = 0) -> dict:
     """Pipeline entry for multi-mode homogeneous data: ``diagnosis.json``, the residual netCDF, figures."""
-    from ..canonical import write_netcdf
-    from .evidence import residual_table_to_xarray
-    from .report import write_diagnosis_json
-
     result, table = diagnose_homogeneous(runs, alpha=alpha, seed=seed, **SETTINGS)
     write_diagnosis_json(result, out_json, dataset=dataset)
     ds = residual_table_to_xarray(table)

@@ -51,7 +51,6 @@ that would separate them (:func:`tissuemech.diagnosis.generic.confounded_covaria
 """
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -61,7 +60,7 @@ import xarray as xr
 from scipy import stats as sps
 from statsmodels.tools.sm_exceptions import MissingDataError
 
-from ..canonical import read_netcdf, to_jsonable, write_netcdf, write_text
+from ..canonical import read_netcdf, write_netcdf
 from ..models.registry import available_models, get_model
 from .. import stats as st
 from .baseline import (baseline_adequacy, extension_gain, fit_runs, level_normalised, predict_runs,
@@ -69,6 +68,7 @@ from .baseline import (baseline_adequacy, extension_gain, fit_runs, level_normal
                        nnls_relaxation_times, read_fit_record, resolved_window_s, spectrum_model,
                        window_taus)
 from .catalogue import DiagnosisContext, curve_levels, explains
+from .findings import write_diagnosis_json
 from .causes import CAUSE_IDS, DETECTORS
 from .evidence import estimate_noise, nominal_strain, residual_table, residual_table_to_xarray
 from .generic import confounded_covariates, serial_structure, structure_tests
@@ -89,11 +89,6 @@ DECISION_RULE = (
     "except a baseline-free one (baseline_free: its fix is scored without the baseline's predictions, e.g. "
     "temperature_dependence by time-temperature superposition on held-out temperatures, "
     "inertia_dominated_points).")
-
-
-def _clean(obj):
-    """JSON-safe copy: NaN/inf -> None, numpy scalars -> Python (:func:`tissuemech.canonical.to_jsonable`)."""
-    return to_jsonable(obj)
 
 
 def run_detectors(ctx: DiagnosisContext) -> list[dict]:
@@ -279,14 +274,6 @@ def top_finding(result: dict) -> str | None:
     """Id of the strongest detected cause (None when nothing is detected)."""
     det = [f for f in result["findings"] if f["detected"]]
     return det[0]["effect"] if det else None
-
-
-def write_diagnosis_json(result: dict, path: str | Path, dataset: str = "") -> Path:
-    """Atomically write ``diagnosis.json`` (structure tests are summarised, not dumped)."""
-    out = {k: v for k, v in result.items() if k != "structure_tests"}
-    out["dataset"] = dataset
-    out["n_structure_tests"] = len(result.get("structure_tests", []))
-    return write_text(json.dumps(_clean(out), indent=2) + "\n", path)
 
 
 # ------------------------------------------------------------------------------------------------
