@@ -406,7 +406,7 @@ def figure_curves(series: Mapping[str, tuple[np.ndarray, np.ndarray]], *, xlabel
 def figure_mastercurve(tts: xr.Dataset, title: str | None = None) -> Figure:
     """Time-temperature superposition (a ``tts.nc`` dataset): the reduced G', G'' against a_T omega coloured by
     temperature (left), log a_T(T) with its standard errors and the fitted WLF/Arrhenius curves (right)."""
-    fig, axes = _new_figure(ncols=2)
+    fig, axes = new_figure(ncols=2)
     temps = np.asarray(tts["temperature_c"].values, float)
     mt = np.asarray(tts["master_temperature_c"].values, float)
     x = 10.0 ** np.asarray(tts["log_omega_reduced"].values, float)

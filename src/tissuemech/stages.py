@@ -210,7 +210,7 @@ def select_cards(ranking_csv, cards_root, scopes: Sequence[str] = TORSION_SCOPES
         card = json.loads(path.read_text())
         law = card.get("elastic_law") or card.get("model")
         if law in ("linear_elastic_shear", "linear_elastic"):
-            law = "neo_hookean"  # its finite-strain extension in the FEM (_card_for_fem)
+            law = "neo_hookean"  # its finite-strain extension in the FEM (card_for_fem)
         if law not in laws:
             logger.warning("select_cards: %s/%s: the FEM has no law %r", scope, model, law)
             continue
@@ -218,7 +218,7 @@ def select_cards(ranking_csv, cards_root, scopes: Sequence[str] = TORSION_SCOPES
     return chosen
 
 
-def _card_for_fem(path: Path) -> dict:
+def card_for_fem(path: Path) -> dict:
     card = json.loads(Path(path).read_text())
     if card.get("elastic_law") in ("linear_elastic_shear", "linear_elastic"):
         # small-strain linear shear law: its finite-strain extension in the FEM is neo-Hookean with mu = G
@@ -269,7 +269,7 @@ def run_fem_torsion(card_paths: Sequence, averages_path, out_nc, out_csv, figure
         gamma_sim = np.linspace(strain.max() / n_points, strain.max(), n_points)
         reference[f"measured {rate:g} 1/s"] = (gamma_sim, np.interp(gamma_sim, strain, torque_measured))
         for path in card_paths:
-            card = _card_for_fem(Path(path))
+            card = card_for_fem(Path(path))
             label = f"{Path(path).parent.name}/{Path(path).stem} {rate:g} 1/s"
             vtu = None if vtu_dir is None else Path(vtu_dir) / f"{Path(path).parent.name}__{Path(path).stem}__{rate:g}.vtu"
             if vtu is not None:
@@ -314,7 +314,7 @@ def run_fem_indentation(card_paths: Sequence, out_nc, figure_path, punch_diamete
     (``n_threads`` numba threads per solve)."""
     series, parts, status = {}, [], {}
     for path in card_paths:
-        card = _card_for_fem(Path(path))
+        card = card_for_fem(Path(path))
         for d in punch_diameters_m:
             label = f"{Path(path).parent.name}/{Path(path).stem} {d * 1e3:g} mm"
             vtu = None if vtu_dir is None else Path(vtu_dir) / f"{Path(path).parent.name}__{Path(path).stem}__{d * 1e3:g}mm.vtu"

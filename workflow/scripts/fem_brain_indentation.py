@@ -9,7 +9,7 @@ from tissuemech.canonical import write_netcdf
 from tissuemech.fem.experiments import brain_indentation
 from tissuemech.fem.mesh import read_mesh
 from tissuemech.pipeline import job_log
-from tissuemech.stages import _card_for_fem, select_cards
+from tissuemech.stages import card_for_fem, select_cards
 
 with job_log(snakemake.log[0]) as log:
     card_path = Path(select_cards(snakemake.input.ranking, snakemake.params.cards_root)[0])
@@ -18,7 +18,7 @@ with job_log(snakemake.log[0]) as log:
     cases, depth, force, attrs = [], [], [], {}
     for diameter in (8e-3, 15e-3):
         t0 = time.perf_counter()
-        ds = brain_indentation(_card_for_fem(card_path), diameter, 2e-3, mesh=mesh, n_increments=8,
+        ds = brain_indentation(card_for_fem(card_path), diameter, 2e-3, mesh=mesh, n_increments=8,
                                 n_threads=snakemake.threads,
                                vtu_path=Path(snakemake.output.vtu) / f"brain__{diameter * 1e3:g}mm.vtu")
         wall = time.perf_counter() - t0
