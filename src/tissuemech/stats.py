@@ -220,6 +220,14 @@ def bonferroni_min(log10_ps: Sequence[float]) -> float:
     return float(min(0.0, min(lp) + np.log10(len(lp))))
 
 
+def strongest_component(parts: Sequence[dict]) -> dict:
+    """The combined result of k component tests (dicts with ``statistic`` and ``log10_p``): the statistic of
+    the strongest component and the Bonferroni-combined p-value (:func:`bonferroni_min`)."""
+    lp = bonferroni_min([p["log10_p"] for p in parts])
+    best = min(parts, key=lambda p: p["log10_p"])
+    return {"statistic": best["statistic"], "p_value": 10 ** lp, "log10_p": lp}
+
+
 def modified_z_scores(values: np.ndarray) -> np.ndarray:
     """Iglewicz-Hoaglin modified z = 0.6745 (x - median) / MAD (|z| > 3.5 flags an outlier)."""
     x = np.asarray(values, float)

@@ -114,3 +114,11 @@ def test_mixed_model_recovers_between_and_within_spread():
     assert res["mean_log"] == pytest.approx(np.log(200.0), abs=0.15)
     assert res["omega_between"] == pytest.approx(0.3, rel=0.3)
     assert res["omega_within"] == pytest.approx(0.1, rel=0.2)
+
+
+def test_strongest_component_is_bonferroni_over_the_components():
+    parts = [{"statistic": 2.0, "log10_p": -3.0}, {"statistic": 6.5, "log10_p": -8.0}, {"statistic": 1.0, "log10_p": np.nan}]
+    t = st.strongest_component(parts)
+    assert t["statistic"] == 6.5
+    assert t["log10_p"] == pytest.approx(-8.0 + np.log10(2))  # two finite components: p = 2 * 1e-8
+    assert t["p_value"] == pytest.approx(2e-8)

@@ -215,13 +215,12 @@ def detect_nonseparable_relaxation(ctx: DiagnosisContext) -> dict:
                              f"{100 * lv[0]:g} % curve beyond what the shared QLV shape allows")
     if not parts:
         return untested_finding(eff, "needs constant-shear-rate ramps at >= 2 rates or relaxation at >= 2 strain levels")
-    lp = st.bonferroni_min([p["log10_p"] for p in parts])
-    best = min(parts, key=lambda p: p["log10_p"])
-    t = {"statistic": best["statistic"], "p_value": 10 ** lp, "log10_p": lp}
+    t = st.strongest_component(parts)
     effect = ev_size if np.isfinite(ev_size) else shape_change
     fix = ctx.fit_info.get("fixes", {}).get(eff)
     evidence = "Non-separable (strain-dependent) relaxation: " + "; ".join(texts) + "."
-    return make_finding(eff, t, "t" if best is parts[0] and np.isfinite(ev_size) else "F", effect,
+    ramp_strongest = min(parts, key=lambda p: p["log10_p"]) is parts[0]
+    return make_finding(eff, t, "t" if ramp_strongest and np.isfinite(ev_size) else "F", effect,
                     "log residual change across rates at max strain" if np.isfinite(ev_size) else
                     "relative shape change", abs(effect) >= 0.03, evidence, fix)
 
@@ -477,9 +476,7 @@ def detect_finite_rise_time(ctx: DiagnosisContext) -> dict:
                          f"{100 * te['estimate']:+.1f} % from the later hold (t = {te['statistic']:.2f})")
     if not parts:
         return untested_finding(eff, "no frequency sweep to cross-check and no early-hold residuals")
-    lp = st.bonferroni_min([p["log10_p"] for p in parts])
-    best = min(parts, key=lambda p: p["log10_p"])
-    t = {"statistic": best["statistic"], "p_value": 10 ** lp, "log10_p": lp}
+    t = st.strongest_component(parts)
     how = ("that the baseline analysis treated as a step" if step_baseline else
            "(the baseline was fitted through the measured strain history, which is the fix; a step analysis "
            "of these data would be biased)")
