@@ -356,7 +356,7 @@ def nnls_relaxation_times(runs: Sequence[xr.Dataset], target: str, relaxation: s
     design, rhs, row_unit = design[ok], rhs[ok], row_unit[ok]
     norm = np.linalg.norm(design, axis=0)
     norm = np.where(norm > 0, norm, 1.0)
-    names = sorted(set(row_unit))
+    names = sorted({str(u) for u in row_unit})
     level = {u: 1.0 for u in names}
     for _ in range(LEVEL_ITERATIONS):
         c_row = np.array([level[u] for u in row_unit])
