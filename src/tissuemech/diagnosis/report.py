@@ -453,8 +453,9 @@ def diagnose_runs(runs: Sequence[xr.Dataset], baseline: str | Sequence[str] = RU
     if not fitted:
         raise ValueError(f"no run of the fitted tests {list(fitted_tests)} to fit the baseline {baseline!r} to")
     fits, spectra = {}, {}
+    first = _linear_law_spectrum(fitted, target, relaxation, window)
     for k in keys:
-        fits[k], spectra[k] = _fit_on_data_times(k, fitted, target, relaxation, window, n_points)
+        fits[k], spectra[k] = _fit_on_data_times(k, fitted, target, relaxation, window, n_points, first)
     aicc = {k: float(f.aicc) for k, f in fits.items()}
     order = sorted(keys, key=lambda k: (aicc[k] if np.isfinite(aicc[k]) else np.inf, keys.index(k)))
     adequacy = []
@@ -483,21 +484,28 @@ def diagnose_runs(runs: Sequence[xr.Dataset], baseline: str | Sequence[str] = RU
     return (result, table) if return_table else result
 
 
-def _fit_on_data_times(key: str, runs: Sequence[xr.Dataset], target: str, relaxation: str, window: dict,
-                       n_points: int):
-    """One candidate of the runs-only path on the relaxation times the data ask for.
-
-    NNLS on a dense grid over the window (:func:`~tissuemech.diagnosis.baseline.nnls_relaxation_times`, with
-    the linear law) gives first times and the level of every loaded piece; the candidate is fitted on those
-    times to the runs divided by their piece's level (the shape common to every piece; residuals are later
-    taken against the unscaled runs, so level differences between pieces stay in the evidence). A law that is
-    not linear in shear changes the elastic drive, so NNLS is repeated with the fitted law and the candidate
-    refitted when the times change. The window's one-per-decade grid is used only where NNLS selects
-    nothing. Returns ``(FitResult, spectrum dict with the times used as taus_s)``."""
+def _linear_law_spectrum(runs: Sequence[xr.Dataset], target: str, relaxation: str, window: dict) -> dict:
+    """NNLS times and per-piece levels with the linear law (:func:`~tissuemech.diagnosis.baseline.
+    nnls_relaxation_times`), shared by every candidate; the window's one-per-decade grid where NNLS selects
+    nothing."""
     spectrum = nnls_relaxation_times(runs, target, relaxation, window)
     if not spectrum["taus_s"].size:
         spectrum = {**spectrum, "taus_s": window_taus(window),
                     "method": "one time per decade spanning the resolved window (NNLS selected none)"}
+    return spectrum
+
+
+def _fit_on_data_times(key: str, runs: Sequence[xr.Dataset], target: str, relaxation: str, window: dict,
+                       n_points: int, spectrum: dict):
+    """One candidate of the runs-only path on the relaxation times the data ask for.
+
+    ``spectrum`` (:func:`_linear_law_spectrum`) gives first times and the level of every loaded piece; the
+    candidate is fitted on those times to the runs divided by their piece's level (the shape common to every
+    piece; residuals are later taken against the unscaled runs, so level differences between pieces stay in
+    the evidence). A law that is not linear in shear changes the elastic drive, so NNLS is repeated with the
+    fitted law and the candidate refitted when the times change; the levels stay those of ``spectrum``, so
+    that every candidate is fitted to the same data and their AICc compare. Returns ``(FitResult, spectrum
+    dict with the times used as taus_s)``."""
     taus = spectrum["taus_s"]
     fit = fit_runs(key, level_normalised(runs, spectrum["levels"]), target, relaxation, n_points=n_points,
                    taus_s=taus if taus.size else None)
@@ -506,10 +514,10 @@ def _fit_on_data_times(key: str, runs: Sequence[xr.Dataset], target: str, relaxa
     if law is not None and len(law.param_names) > 1 and fit.success:
         again = nnls_relaxation_times(runs, target, relaxation, window, model_key=key, law_params=fit.params)
         if again["taus_s"].size and not np.array_equal(again["taus_s"], taus):
-            refit = fit_runs(key, level_normalised(runs, again["levels"]), target, relaxation, n_points=n_points,
-                             taus_s=again["taus_s"])
-            again["method"] += ", repeated with the fitted instantaneous law"
-            return refit, again
+            refit = fit_runs(key, level_normalised(runs, spectrum["levels"]), target, relaxation,
+                             n_points=n_points, taus_s=again["taus_s"])
+            return refit, {**again, "levels": spectrum["levels"],
+                           "method": again["method"] + ", repeated with the fitted instantaneous law"}
     return fit, spectrum
 
 
