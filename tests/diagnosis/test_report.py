@@ -10,8 +10,9 @@ import pytest
 from constructed import make_design
 from tissuemech import fitting
 from tissuemech.canonical import read_netcdf, write_netcdf
-from tissuemech.diagnosis.baseline import fit_runs, predict_runs
+from tissuemech.diagnosis.baseline import fit_runs, predict_runs, spectrum_model
 from tissuemech.diagnosis.report import run_diagnosis, write_diagnosis_json, write_figures
+from tissuemech.models.qlv import default_taus
 
 FINDING_KEYS = {"effect", "detected", "statistic", "p_value", "effect_size", "evidence", "fix"}
 FIX_KEYS = {"model", "metric", "before", "after", "gain"}
@@ -70,8 +71,13 @@ def test_run_diagnosis_on_fitted_runs(tmp_path):
     assert all(UNEXPLAINED_KEYS <= set(u) for u in out["unexplained"])
     nc = read_netcdf(tmp_path / "out" / "residuals.nc")
     assert set(np.unique(nc["test"].values)) >= {"constant_shear_rate", "stress_relaxation", "frequency_sweep"}
-    # residuals in the netCDF are those of the fitted model's own predictions
-    preds = predict_runs(fitting_model(), fit.params, shear[:1], "torque")
+    # the fit stage's registry times are not the diagnosis's: the baseline is rebuilt on the times NNLS selects
+    # from the data and refitted; the netCDF holds the residuals of that diagnosed baseline
+    info = out["fit_info"]
+    assert "from the data" in info["baseline_order"] and not np.allclose(info["taus_s"][:4], default_taus(4))
+    assert set(np.unique(nc["model"].values)) == {"qlv_linear_prony4"}
+    model = spectrum_model("qlv_linear_prony4", info["taus_s"])
+    preds = predict_runs(model, info["params"], shear[:1], "torque")
     row = nc["curve"].values == shear[0].attrs["run"]
     assert nc["predicted"].values[row] == pytest.approx(preds[0]["shear_stress"][np.isfinite(preds[0]["shear_stress"])])
     assert len(res["figures"]) == 4

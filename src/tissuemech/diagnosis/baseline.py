@@ -264,6 +264,12 @@ def window_taus(window: Mapping, per_decade: float = 1.0) -> np.ndarray:
 #: grid density of :func:`nnls_relaxation_times` (times per decade); dense enough that a mode lies within
 #: 0.125 decade of a grid time, where a one-per-decade grid misses modes between decades (issue #12 item 2)
 NNLS_TIMES_PER_DECADE = 4
+#: decades the grid of :func:`nnls_relaxation_times` reaches below the fastest resolved time. A mode much faster
+#: than a ramp's rise acts on it as a viscosity (stress h tau d(gamma)/dt while the strain rises): the data
+#: resolve its product h tau, not tau, and a time a tenth of the rise carries it within 10 % after the first
+#: tenth of the rise. Without it, a relaxation with modes below the window (a fractional one, a 3 ms mode)
+#: left its loading-phase misfit as structure along strain in the relaxations
+NNLS_GRID_BELOW_DECADES = 1.0
 
 
 def loading_unit(run: xr.Dataset) -> str:
@@ -317,10 +323,11 @@ def nnls_relaxation_times(runs: Sequence[xr.Dataset], target: str, relaxation: s
     "levels": {unit: c_u}, "method"}``
     """
     window = resolved_window_s(runs) if window is None else window
-    grid = window_taus(window, per_decade)
+    grid = window_taus({**window, "t_min_s": window.get("t_min_s", np.nan) / 10.0 ** NNLS_GRID_BELOW_DECADES},
+                       per_decade)
     out = {"taus_s": np.array([]), "grid_s": grid, "weights": np.array([]), "levels": {},
-           "method": f"NNLS on {per_decade:g} relaxation times per decade spanning the resolved window, "
-                     "with one modulus level per loaded piece"}
+           "method": f"NNLS on {per_decade:g} relaxation times per decade from {NNLS_GRID_BELOW_DECADES:g} "
+                     "decade below the resolved window to its end, with one modulus level per loaded piece"}
     curves, units = [], []
     for r in runs:
         for c in _curves([r], relaxation, n_points):

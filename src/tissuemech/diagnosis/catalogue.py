@@ -50,7 +50,7 @@ from .findings import (CATALOGUE_IDS, DISTORTS, DiagnosisContext, EXPLAINS, TIME
 from .levels import (CONFOUND_CORRELATION, FIXED_EFFECT_SETS, SEPARATING_DESIGN, TIME_TEMPERATURE_R2,
                      between_sample_test, detect_elapsed_time_drift, detect_outlier_specimen,
                      detect_preconditioning, level_regression, paired_first_load_test, specimen_levels)
-from .oscillation import (SPECTRUM_SHAPE_DEGREE, detect_amplitude_softening, detect_instrument_inertia,
+from .oscillation import (detect_amplitude_softening, detect_instrument_inertia,
                           raw_phase_inertia, spectrum_shape_basis)
 from .time_domain import (RIM_BIASED_TARGETS, detect_finite_rise_time, detect_nonseparable_relaxation,
                           detect_rim_stress_nonlinearity, detect_torque_offset, detect_unidentified_i2_dependence,
@@ -72,7 +72,7 @@ DETECTORS: dict[str, Callable[[DiagnosisContext], dict]] = {
 assert tuple(DETECTORS) == CATALOGUE_IDS
 
 __all__ = ['CATALOGUE_IDS', 'CONFOUND_CORRELATION', 'DETECTORS', 'DISTORTS', 'DiagnosisContext', 'EXPLAINS',
-           'FIXED_EFFECT_SETS', 'RIM_BIASED_TARGETS', 'SEPARATING_DESIGN', 'SPECTRUM_SHAPE_DEGREE', 'TIME_DOMAIN',
+           'FIXED_EFFECT_SETS', 'RIM_BIASED_TARGETS', 'SEPARATING_DESIGN', 'TIME_DOMAIN',
            'TIME_TEMPERATURE_R2', 'between_sample_test', 'curve_levels', 'cv_group_column', 'demean_by',
            'detect_amplitude_softening', 'detect_elapsed_time_drift', 'detect_finite_rise_time',
            'detect_instrument_inertia', 'detect_nonseparable_relaxation', 'detect_outlier_specimen',

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, nnls
 
 from .. import stats as st
 from .evidence import booij_thoone
@@ -14,14 +14,109 @@ from .findings import DiagnosisContext, cv_group_column, demean_by, fix_record, 
 # ------------------------------------------------------------------------------------------------
 # frequency sweep: inertia
 # ------------------------------------------------------------------------------------------------
+#: relaxation times per decade of the non-negative spectrum fitted to each sweep by the inertia test
+SWEEP_SPECTRUM_PER_DECADE = 4
+#: decades the sweep spectrum's grid reaches beyond the sweep's 1/omega range on each side: a mode at a tenth
+#: of 1/omega_max is already in its omega^2 regime (G' ~ G'' omega tau), one ten times slower than 1/omega_min
+#: is a plateau, so wider grids add columns indistinguishable from these
+SWEEP_SPECTRUM_PAD_DECADES = 1
+#: fewest sweeps for the inertia test: the scatter of the per-sweep estimates is its noise (t with n - 1 df)
+MIN_INERTIA_SWEEPS = 3
+
+
+def sweep_spectrum_design(omega: np.ndarray, inertia_x: np.ndarray) -> np.ndarray:
+    r"""Design of one frequency sweep for :func:`sweep_inertia_fit`: rows ``[G'; G'']``, columns
+    ``[plateau, Maxwell modes..., -x, +x]``.
+
+    A relaxation spectrum :math:`G_e + \sum_k h_k\,e^{-t/\tau_k}` with :math:`G_e, h_k \ge 0` gives
+    :math:`G' = G_e + \sum_k h_k \omega^2\tau_k^2/(1+\omega^2\tau_k^2)` and
+    :math:`G'' = \sum_k h_k \omega\tau_k/(1+\omega^2\tau_k^2)`; the inertial error acts on the storage
+    modulus only, :math:`G'_{app} = G' - \Delta I\,x` with :math:`x = \omega^2 2h/(\pi R^4)` [1/m^3], and
+    enters as two non-negative columns (:math:`\Delta I = c_{+} - c_{-}`, of either sign). Times: 4 per
+    decade from a tenth of :math:`1/\omega_{max}` to ten times :math:`1/\omega_{min}` (:data:`SWEEP_SPECTRUM_PER_DECADE`,
+    :data:`SWEEP_SPECTRUM_PAD_DECADES`).
+    """
+    w = np.asarray(omega, float)
+    lo = np.log10(1.0 / w.max()) - SWEEP_SPECTRUM_PAD_DECADES
+    hi = np.log10(1.0 / w.min()) + SWEEP_SPECTRUM_PAD_DECADES
+    taus = np.logspace(lo, hi, int(np.ceil((hi - lo) * SWEEP_SPECTRUM_PER_DECADE)) + 1)
+    wt = w[:, None] * taus[None, :]
+    storage = np.column_stack([np.ones_like(w), wt ** 2 / (1 + wt ** 2), -inertia_x, inertia_x])
+    loss = np.column_stack([np.zeros_like(w), wt / (1 + wt ** 2), np.zeros_like(w), np.zeros_like(w)])
+    return np.vstack([storage, loss])
+
+
+def sweep_inertia_fit(sweep: pd.DataFrame, delta_i: float | None = None) -> dict:
+    """Non-negative relaxation spectrum of one sweep, with the inertial error fitted (``delta_i`` None) or held
+    at ``delta_i`` [kg m^2] (:func:`sweep_spectrum_design`, weighted NNLS).
+
+    ``sweep``: one row per frequency with ``omega``, ``x_inertia`` [1/m^3], ``storage``, ``loss`` [Pa] and their
+    standard deviations ``sd_storage``, ``sd_loss``. Returns ``{"delta_i", "storage_fit"}`` (the spectrum's G'
+    with the inertial term, Pa)."""
+    design = sweep_spectrum_design(sweep["omega"].to_numpy(float), sweep["x_inertia"].to_numpy(float))
+    y = np.r_[sweep["storage"].to_numpy(float), sweep["loss"].to_numpy(float)]
+    sd = np.r_[sweep["sd_storage"].to_numpy(float), sweep["sd_loss"].to_numpy(float)]
+    n = len(sweep)
+    if delta_i is not None:
+        y = y + np.r_[delta_i * sweep["x_inertia"].to_numpy(float), np.zeros(n)]
+        design = design[:, :-2]
+    a = design / sd[:, None]
+    scale = np.linalg.norm(a, axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    coef, _ = nnls(a / scale, y / sd, maxiter=50 * a.shape[1])
+    coef = coef / scale
+    fitted = design[:n] @ coef
+    if delta_i is None:
+        delta_i = float(coef[-2] - coef[-1])
+    else:
+        fitted = fitted - delta_i * sweep["x_inertia"].to_numpy(float)
+    return {"delta_i": float(delta_i), "storage_fit": fitted}
+
+
+def _sweep_frame(ctx: DiagnosisContext) -> pd.DataFrame:
+    """One row per frequency of every sweep with true gap and radius: observed G', G'' and their standard
+    deviations, the raw phase where logged. The noise of a reported modulus is that of the torque the instrument
+    measured: where the raw phase shows that torque (|G*_raw|, G''/tan(raw phase) as its real part, science.md
+    2.5) larger than the reported |G*|, the standard deviation grows in proportion."""
+    t = ctx.table[ctx.table["test"] == "frequency_sweep"]
+    keys = ["curve", "frequency_sq"]
+    g1 = t[t["quantity"] == "storage_modulus"]
+    g2 = t[t["quantity"] == "loss_modulus"][keys + ["observed", "sigma"]].rename(
+        columns={"observed": "loss", "sigma": "sd_loss"})
+    cols = keys + ["observed", "sigma", "predicted", "inverse_gap", "radius_m", "specimen", "sample", "condition"]
+    cols += [c for c in ("channel_raw_phase",) if c in g1]
+    f = g1[cols].rename(columns={"observed": "storage", "sigma": "sd_storage"}).merge(g2, on=keys)
+    f = f[np.isfinite(f[["storage", "loss", "sd_storage", "sd_loss", "inverse_gap", "radius_m"]]).all(axis=1)
+          & (f["sd_storage"] > 0) & (f["sd_loss"] > 0) & (f["frequency_sq"] > 0)]
+    f = f.assign(omega=np.sqrt(f["frequency_sq"]),
+                 x_inertia=f["frequency_sq"] * 2.0 / (f["inverse_gap"] * np.pi * f["radius_m"] ** 4))
+    if "channel_raw_phase" in f:
+        phi = np.abs(f["channel_raw_phase"].to_numpy(float))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            raw_real = np.abs(f["loss"].to_numpy(float)) / np.tan(phi)
+            ratio = np.hypot(raw_real, f["loss"]) / np.hypot(f["storage"], f["loss"])
+        ratio = np.where(np.isfinite(ratio) & (np.sin(phi) > 1e-3), np.maximum(ratio, 1.0), 1.0)
+        f = f.assign(sd_storage=f["sd_storage"] * ratio, sd_loss=f["sd_loss"] * ratio)
+    return f
+
+
 def detect_instrument_inertia(ctx: DiagnosisContext) -> dict:
-    """G' residual of the frequency sweep regressed on the inertial torque term omega^2 2h/(pi R^4).
+    """An inertial error of the frequency sweeps, read from the sweeps themselves (not from the baseline).
+
+    The instrument corrects G' for the inertial torque omega^2 I 2h/(pi R^4); an error dI of that correction
+    leaves G'_app = G' - dI x (x = omega^2 2h/(pi R^4)) and does not touch G''. Each sweep is fitted with a
+    non-negative relaxation spectrum plus the inertial term (:func:`sweep_inertia_fit`): a non-negative
+    spectrum makes G' non-decreasing in omega and ties every fast mode's G' rise to its G'' (Kramers-Kronig:
+    G'_k = G''_k omega tau_k), so neither a G' fall nor a G' rise without its G'' is a spectrum. This holds
+    whatever the baseline predicts: a spectrum the fitted tests do not resolve (a fast mode, a fractional
+    relaxation) is not an inertial error. The test is a one-sample t over the per-sweep estimates of dI (the
+    instrument's error is shared by its sweeps; their scatter is the noise, so no noise model is assumed).
 
     Where the sweeps log a raw phase, an over-correction (dI < 0) must also be consistent with it (science.md
     2.5): the raw phase with the reported moduli gives the inertia the instrument corrected for, I_cal
     (:func:`raw_phase_inertia`), and an over-correction cannot exceed it (|dI| <= I_cal); otherwise the
-    omega^2 trend is a misfit of the spectrum and the finding is not practical. An under-correction (dI > 0)
-    has no such bound: the true inertia is I_cal + dI."""
+    finding is not practical. The held-out fix: dI from the other specimens (samples, sweeps), each held-out
+    sweep refitted with its own spectrum with and without it; the metric is its rms relative G' residual."""
     eff = "instrument_inertia"
     fs = ctx.table[(ctx.table["test"] == "frequency_sweep") & (ctx.table["quantity"] == "storage_modulus")]
     if fs.empty or fs["frequency_sq"].nunique() < 4:
@@ -31,43 +126,28 @@ def detect_instrument_inertia(ctx: DiagnosisContext) -> dict:
     if fs.empty or fs["frequency_sq"].nunique() < 4:
         return untested_finding(eff, "not testable here: the frequency sweeps record no gap or no plate radius "
                               "(the inertial term omega^2 2h/(pi R^4) needs both)")
-    gap = 1.0 / fs["inverse_gap"]
-    b_inv = 2.0 * gap / (np.pi * fs["radius_m"] ** 4)          # 1/b = 2h/(pi R^4), 1/m^3
-    x_inertia = fs["frequency_sq"] * b_inv                      # Pa per (kg m^2)
-    logw = 0.5 * np.log(fs["frequency_sq"])
-    frame = fs.assign(x_inertia=x_inertia.to_numpy(), logw=logw.to_numpy())
-    # the sample's stiffness scales G' (multiplicative) while the inertial error is additive: rescale each
-    # sweep's prediction to its own low-frequency half (where omega^2 terms are negligible) first
-    low = frame["frequency_sq"] <= frame.groupby("curve")["frequency_sq"].transform("median")
-    scale = (frame["observed"] / frame["predicted"]).where(low).groupby(frame["curve"]).transform("median")
-    frame = frame.assign(residual=frame["observed"] - scale * frame["predicted"],
-                         predicted=scale * frame["predicted"], predicted_abs=np.abs(scale * frame["predicted"]))
-    y = frame["residual"].to_numpy()
-    fitted_tests = set(ctx.fit_info.get("fitted_tests") or ())
-    cross_test = bool(fitted_tests) and "frequency_sweep" not in fitted_tests
-    if cross_test:
-        # the sweeps are predicted from tests the baseline was fitted to: a misfit of the spectrum is a
-        # relative shape along log omega shared by every sweep (generic.shared_shape), so the control is that
-        # shape (predicted x Legendre polynomials in log omega); the additive omega^2/b term must be seen over it
-        shape_cols = _relative_shape_columns(frame)
-        frame = frame.assign(**shape_cols)
-        controls = list(shape_cols)
-    else:
-        # log(omega) control: a smooth misfit of the spectrum is not an omega^2 artefact
-        controls = ["logw"]
-    X = frame[["x_inertia", *controls]]
-    res = st.cluster_regression(y / frame["sigma"], X.div(frame["sigma"], axis=0).assign(
-        inv_sigma=1.0 / frame["sigma"].to_numpy()), groups=frame["curve"].to_numpy())
-    t = st.coefficient_test(res, "x_inertia")
-    delta_i = -t["estimate"]                                    # G'_app = G' - dI omega^2 / b
-    f_max = float(np.sqrt(frame["frequency_sq"].max()) / (2 * np.pi))
-    artefact_at_fmax = float(delta_i * frame["x_inertia"].max())
-    gmax = float(frame.loc[frame["frequency_sq"].idxmax(), "predicted_abs"])
+    frame = _sweep_frame(ctx)
+    counts = frame.groupby("curve")["frequency_sq"].nunique()
+    frame = frame[frame["curve"].isin(counts.index[counts >= 4])]
+    n_sweeps = frame["curve"].nunique()
+    if n_sweeps < MIN_INERTIA_SWEEPS:
+        return untested_finding(eff, f"not testable here: {n_sweeps} frequency sweep(s) with G', G'', gap and "
+                                     f"plate radius at 4 or more frequencies; the test needs "
+                                     f"{MIN_INERTIA_SWEEPS} (the scatter between sweeps is its noise)")
+    per_sweep = {c: sweep_inertia_fit(g)["delta_i"] for c, g in frame.groupby("curve")}
+    estimates = np.array(list(per_sweep.values()))
+    delta_i = float(np.mean(estimates))
+    se = float(np.std(estimates, ddof=1) / np.sqrt(estimates.size))
+    stat = delta_i / se if se > 0 else (np.inf if delta_i else 0.0)
+    t = st.statistic_result(stat, st.log10_p_from_t(stat, estimates.size - 1))
+    x_max = float(frame["x_inertia"].max())
+    f_max = float(frame["omega"].max() / (2 * np.pi))
+    artefact_at_fmax = float(delta_i * x_max)
+    gmax = float(np.median(np.abs(frame.loc[frame["x_inertia"] >= 0.999 * x_max, "storage"])))
     # Booij-Thoone local KK check on the measured sweep, averaged over curves
     kk_txt = ""
-    fs_runs = ctx.runs_of("frequency_sweep")
     ratios = []
-    for r in fs_runs:
+    for r in ctx.runs_of("frequency_sweep"):
         if "storage_modulus" in r and "loss_modulus" in r and "angular_frequency" in r:
             w = r["angular_frequency"].values
             kk = booij_thoone(w, r["storage_modulus"].values)
@@ -79,7 +159,7 @@ def detect_instrument_inertia(ctx: DiagnosisContext) -> dict:
                   f"= {np.nanmedian(ratios):.2g}.")
     raw_txt = ""
     consistent = True
-    i_raw = raw_phase_inertia(ctx.table, frame)
+    i_raw = raw_phase_inertia(ctx.table, frame.rename(columns={"storage": "observed"}))
     if np.isfinite(i_raw["i_raw_kg_m2"]):
         # science.md 2.5: the raw torque carries the whole inertia I, the reported G' is corrected by I_cal,
         # so G'_rep - G''/tan(raw phase) = I_cal omega^2/b: the raw phase shows the corrected part. An
@@ -91,49 +171,32 @@ def detect_instrument_inertia(ctx: DiagnosisContext) -> dict:
                    + ("an under-correction (true inertia I_cal + dI)" if delta_i >= 0 else
                       "an over-correction " + ("within" if consistent else "larger than") + " I_cal") + ".")
 
-    # held-out: leave-one-sample-out fit of dI, applied to the held-out sample's sweep
-    frame = frame.assign(rel=frame["residual"] / frame["predicted_abs"])
-
-    shape = [c for c in controls if c != "logw"]
+    group = cv_group_column(frame)
 
     def fit(train):
-        return np.linalg.lstsq(train[["x_inertia", *shape]].to_numpy(), train["residual"].to_numpy(), rcond=None)[0]
+        return float(np.mean([per_sweep[c] for c in pd.unique(train["curve"])]))
 
     def error(test, par):
-        corr = 0.0 if par is None else test[["x_inertia", *shape]].to_numpy() @ par
-        return (test["residual"].to_numpy() - corr) / test["predicted_abs"].to_numpy()
+        out = []
+        for _, g in test.groupby("curve"):
+            pred = sweep_inertia_fit(g, 0.0 if par is None else par)["storage_fit"]
+            out.append((g["storage"].to_numpy(float) - pred) / np.abs(pred))
+        return np.concatenate(out)
 
-    group = cv_group_column(frame)
-    if shape:
-        # "before" is the baseline with the shared spectrum shape fitted on the training groups (a statement
-        # about the baseline, reported by the generic scan), "after" adds the inertia term
-        def shape_only(train):
-            coef = np.linalg.lstsq(train[shape].to_numpy(), train["residual"].to_numpy(), rcond=None)[0]
-            return np.r_[0.0, coef]
-
-        before = group_cv(frame, group, shape_only, error)[1]
-        after = group_cv(frame, group, fit, error)[1]
-    else:
-        before, after = group_cv(frame, group, fit, error)
-    control_txt = ("the shared relative spectrum shape of the predicted sweeps as control" if shape
-                   else "log-omega control")
-    evidence = (f"Frequency-sweep G' residuals of {ctx.model} follow -dI omega^2/b (b = pi R^4/(2h)) with "
-                f"dI = {delta_i:.3g} kg m^2 (t = {t['statistic']:.2f}, {frame['curve'].nunique()} sweeps, "
-                f"clustered by sweep, {control_txt}): an inertial error of {artefact_at_fmax:+.3g} Pa at "
-                f"{f_max:.3g} Hz where |G'| ~ {gmax:.3g} Pa.{kk_txt}{raw_txt}")
+    before, after = group_cv(frame, group, fit, error)
+    evidence = (f"Each frequency sweep fitted with its own non-negative relaxation spectrum (G' and G'' together) "
+                f"plus an inertial term -dI omega^2/b (b = pi R^4/(2h)): dI = {delta_i:.3g} kg m^2 "
+                f"(mean of {n_sweeps} sweeps, t = {stat:.2f} on {n_sweeps - 1} df; per sweep "
+                f"{np.min(estimates):.2g} .. {np.max(estimates):.2g}): an inertial error of "
+                f"{-artefact_at_fmax:+.3g} Pa at {f_max:.3g} Hz where |G'| ~ {gmax:.3g} Pa.{kk_txt}{raw_txt}")
     fix = fix_record("fitted inertia term G'_app = G' - dI omega^2 2h/(pi R^4)", "rms_rel_residual_storage_modulus",
-               before, after, f"leave-one-{group}-out", delta_inertia_kg_m2=delta_i, n_held_out_points=len(frame))
+                     before, after, f"leave-one-{group}-out", delta_inertia_kg_m2=delta_i,
+                     n_held_out_points=len(frame))
     practical = abs(artefact_at_fmax) >= 0.05 * gmax and consistent
     return make_finding(eff, t, "t", delta_i, "kg m^2", practical, evidence, fix)
 
 
-#: polynomial degree (in log omega) of the misfit shape of the relaxation spectrum shared by every predicted
-#: frequency sweep that the inertia test uses as its control (the generic scan's shared shape,
-#: :func:`tissuemech.diagnosis.generic.shared_shape`, chooses its own degree by BIC)
-SPECTRUM_SHAPE_DEGREE = 3
-
-
-def spectrum_shape_basis(frequency_sq, max_degree: int | None = SPECTRUM_SHAPE_DEGREE) -> np.ndarray:
+def spectrum_shape_basis(frequency_sq, max_degree: int | None = None) -> np.ndarray:
     """Legendre polynomials P_1..P_d of log omega scaled to [-1, 1] over the given points (rows; 0 where omega^2
     is not finite and positive), d = min(``max_degree``, distinct omegas - 2) (no cap when ``max_degree`` is
     None): the basis of a misfit shape of the relaxation spectrum along a frequency sweep. Shape (n, d); d may
@@ -146,14 +209,6 @@ def spectrum_shape_basis(frequency_sq, max_degree: int | None = SPECTRUM_SHAPE_D
     lo, hi = (np.min(logw[ok]), np.max(logw[ok])) if ok.any() else (0.0, 1.0)
     z = np.where(ok, 2.0 * (logw - lo) / max(hi - lo, 1e-12) - 1.0, 0.0)
     return np.polynomial.legendre.legvander(z, degree)[:, 1:]
-
-
-def _relative_shape_columns(frame: pd.DataFrame) -> dict[str, np.ndarray]:
-    """predicted x P_k(log omega) (:func:`spectrum_shape_basis`): a relative misfit shape along log omega shared
-    by every sweep."""
-    basis = spectrum_shape_basis(frame["frequency_sq"])
-    pred = frame["predicted"].to_numpy(float)
-    return {f"shape_P{k + 1}": pred * basis[:, k] for k in range(basis.shape[1])}
 
 
 def raw_phase_inertia(table: pd.DataFrame, frame: pd.DataFrame) -> dict:
