@@ -1,0 +1,68 @@
+"""Posteriors of fit records (tissuemech.uq): on a near-Gaussian synthetic fit with known truth the 5-95 % credible
+interval agrees with the lmfit standard error within 15 %, the InferenceData file reads back, and a scope without a
+recommended model says so."""
+from __future__ import annotations
+
+import emcee  # noqa: F401  (test extra: a missing emcee is an error, not a skip)
+import numpy as np
+import pandas as pd
+import pytest
+
+from tissuemech import fitting as F
+from tissuemech import uq
+from tissuemech.models.registry import get_model
+
+TRUTH = {"C10": 150.0, "C20": 100.0}
+
+
+@pytest.fixture(scope="module")
+def synthetic_fit():
+    """Reduced-polynomial-2 simple shear with 2 % Gaussian noise (known truth), fitted by lmfit: near-Gaussian posterior."""
+    model = get_model("reduced_polynomial2")
+    g = np.linspace(0.01, 0.8, 60)
+    clean = model.elastic_shear_stress(TRUTH, g)
+    rng = np.random.default_rng(11)
+    y = clean * (1.0 + 0.02 * rng.standard_normal(g.size))
+    curve = F.Curve(test="simple_shear", condition="shear", response="elastic_shear", inputs={"shear_strain": g},
+                    observed={"shear_stress": y})
+    problem = F.FitProblem(model, [curve], target="none", model_key="reduced_polynomial2", scope="simple_shear")
+    result = F.fit(problem, starts=[TRUTH], n_random=0)
+    return problem, F.FitRecord.from_result(result)
+
+
+def test_credible_intervals_match_lmfit_standard_errors(synthetic_fit):
+    problem, record = synthetic_fit
+    post, info = uq.sample_record_posterior(problem, record, walkers=8, steps=1500, burn=200, seed=3)
+    table = uq.posterior_table(record, post, scope="simple_shear").set_index("parameter")
+    assert info["laplace_start"] and set(table.index) == set(record.varying)
+    for name in record.varying:
+        row = table.loc[name]
+        # near-Gaussian posterior: 90 % credible width = 2 x 1.645 lmfit standard errors within 15 %
+        assert row["ci90_over_lmfit"] == pytest.approx(1.0, abs=0.15), row
+        assert abs(row["post_mean"] - TRUTH[name]) < 3 * row["stderr"]  # the truth is where the posterior is
+        assert row["ci05"] < row["value"] < row["ci95"]
+        assert row["rhat"] < 1.01 and row["ess"] > 400
+    assert post.warnings == []
+
+
+def test_inference_data_round_trip(synthetic_fit, tmp_path):
+    problem, record = synthetic_fit
+    post, info = uq.sample_record_posterior(problem, record, walkers=4, steps=100, burn=40, seed=1)
+    path = uq.write_inference_data(uq.inference_data(record, post, info, dataset="d", scope="s"), tmp_path / "p.nc")
+    g = uq.read_inference_group(path, "posterior")
+    assert g.sizes == {"chain": 4, "draw": 100} and set(g.data_vars) == set(record.varying)
+    np.testing.assert_allclose(g["C10"].values, 10.0 ** post.chain[:, :, post.names.index("log10_C10")])
+    assert g.attrs["model"] == "reduced_polynomial2" and "uniform on" in g["C10"].attrs["prior"]
+    assert set(eval(g.attrs["rhat"])) == set(record.varying)  # JSON of plain floats
+    assert uq.read_inference_group(path, "sample_stats")["lp"].shape == (4, 100)
+
+
+def test_scope_without_recommendation_writes_status(tmp_path):
+    ranking = tmp_path / "ranking.csv"
+    pd.DataFrame([{"scope": "simple_shear", "model": "neo_hookean", "recommended": False}]).to_csv(ranking, index=False)
+    table = uq.run_posterior(ranking, tmp_path / "none.nc", tmp_path, "simple_shear", ["simple_shear"],
+                             tmp_path / "p.nc", tmp_path / "p.csv")
+    assert table.empty and pd.read_csv(tmp_path / "p.csv").empty
+    import xarray as xr
+    with xr.open_dataset(tmp_path / "p.nc", engine="h5netcdf") as ds:
+        assert "no recommended model" in ds.attrs["status"]
