@@ -17,13 +17,14 @@ Moves (all leave the posterior invariant; emcee's ensemble framework):
   (5 degrees of freedom) centred on the optimum with scale matrix ``1.5^2 cov`` (weight 0.6) and a Gaussian
   random walk with covariance ``2.38^2 / d cov`` (0.4); without ``cov``, differential evolution (``DEMove`` 0.8,
   ``DESnookerMove`` 0.2; ter Braak & Vrugt 2008, needs ``n_walkers >= 2 d``);
-* kept steps: the independence move with a Student-t proposal fitted to the second half of the burn-in (mean and
-  covariance of the walkers, scale ``1.3^2``; frozen before the kept steps, so each walker is a plain Metropolis-
-  Hastings chain) with weight 0.7, and the Gaussian random walk with the burn-in covariance (0.3, robust where
+* kept steps: the independence move with a Student-t proposal (10 degrees of freedom) fitted to the second half of
+  the burn-in (mean and covariance of the walkers; frozen before the kept steps, so each walker is a plain
+  Metropolis-Hastings chain) with weight 0.7, and the Gaussian random walk with the burn-in covariance (0.3, robust where
   the posterior is far from the proposal, e.g. truncated at a bound). Both are single-walker moves, so a few
   long chains (e.g. 8) can be run: split R-hat needs many effective draws *per chain*, the ESS only in total.
   On the bundled brain's QLV fit this gives integrated autocorrelation times of ~6 steps, against ~30 for
-  emcee's default stretch move. With ``burn < 20`` the burn-in moves are used throughout (no adaptation).
+  emcee's default stretch move; on its beyond-QLV (Pipkin-Rogers) fit, whose posterior is truncated at a Prony
+  weight's bound, ~20 steps. With ``burn < 20`` the burn-in moves are used throughout (no adaptation).
 
 Diagnostics (Gelman et al., *Bayesian Data Analysis*, 3rd ed., section 11.4, split R-hat; emcee's integrated
 autocorrelation time, Foreman-Mackey et al. 2013 PASP 125:306):
@@ -55,6 +56,9 @@ RHAT_MAX = 1.01
 ESS_MIN = 400.0
 #: lowest acceptance fraction not flagged (lower end of Foreman-Mackey et al. 2013's 0.2-0.5)
 ACCEPTANCE_MIN = 0.2
+#: scale factor and degrees of freedom of the kept steps' Student-t independence proposal (module docstring)
+KEPT_PROPOSAL_SCALE = 1.0
+KEPT_PROPOSAL_DF = 10.0
 
 
 @dataclass
@@ -202,7 +206,8 @@ def sample_posterior(residual: Callable[[np.ndarray], np.ndarray], optimum: Mapp
         state = pre.run_mcmc(start, burn, progress=False, skip_initial_state_check=True)
         tail = pre.get_chain(discard=burn // 2, flat=True)
         mean, tail_cov = tail.mean(axis=0), np.atleast_2d(np.cov(tail.T))
-        moves = ([(_student_t_move(mean, 1.3 ** 2 * tail_cov), 0.7), (emcee.moves.GaussianMove(rw * tail_cov), 0.3)]
+        kept = _student_t_move(mean, KEPT_PROPOSAL_SCALE ** 2 * tail_cov, df=KEPT_PROPOSAL_DF)
+        moves = ([(kept, 0.7), (emcee.moves.GaussianMove(rw * tail_cov), 0.3)]
                  if _positive_definite(tail_cov) else burn_moves)
     else:
         moves = burn_moves

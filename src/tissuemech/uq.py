@@ -17,6 +17,19 @@ per parameter in natural units, dims ``chain``/``draw``, and ``sample_stats`` wi
 and h5netcdf, readable by ``arviz.from_netcdf``) whose ``posterior`` attributes carry R-hat, ESS, acceptance,
 the warnings, priors and likelihood; ``posterior/<scope>.csv``: per parameter the lmfit value and standard error
 next to the 5/50/95 % posterior quantiles and the ratio of the 90 % credible width to the lmfit interval.
+
+Specimen variability (``run_population``, rule ``population``): every run of the scope's tests is one loaded piece
+(a sample cut from a specimen). Its *level* is the factor ``s`` that scales the recommended fit's prediction onto
+the run (``log s`` = weighted mean of ``log(observed / predicted)`` over the run's unflagged points, the run's own
+strain history and plate geometry); for the QLV and hyperelastic laws a common factor on the moduli scales the
+stress exactly, so ``log G0_piece = log G0_fit + log s`` is the piece's log initial shear modulus. A linear
+mixed-effects model (statsmodels ``MixedLM``, REML) ``log G0 = mu + b_specimen + e`` with a specimen random
+intercept (``b ~ N(0, sd_specimen^2)``) and, when a piece has several runs, a sample variance component nested in
+the specimen, gives the population mean ``mu`` and the SDs with standard errors (``MixedLM``'s
+covariance of the variance parameters, times the residual scale; ``sqrt(2/df)`` for the residual variance; the
+delta method for the SDs). With one run per piece the residual SD *is* the sample-to-sample SD
+(it also holds the within-run misfit; stated in the output). The JSON written next to the card carries that
+population distribution.
 """
 from __future__ import annotations
 
@@ -34,8 +47,11 @@ import xarray as xr
 from . import fitting as F
 from . import posterior as P
 from . import ranking as R
-from .canonical import atomic_write, read_netcdf, write_text
+from .canonical import atomic_write, read_netcdf, write_json, write_text
+from .curves import drop_flagged
+from .models.base import initial_shear_modulus
 from .models.registry import get_model
+from .pipeline import load_runs
 from .stages import scope_curves
 
 #: standard normal quantile of the 95 % point (a 5-95 % interval is +- this many SD for a Gaussian)
@@ -216,5 +232,141 @@ def run_posterior(ranking_csv, averages_path, fits_dir, scope: str, tests, out_n
     return table
 
 
+# ------------------------------------------------------------------------------------------------------
+# specimen variability: per-piece levels and the mixed-effects model
+# ------------------------------------------------------------------------------------------------------
+def reference_shear_modulus(model_key: str, params: Mapping[str, float]) -> float:
+    """Initial shear modulus of a fitted model (Pa): the elastic law's small-strain tangent, or for a Prony
+    series ``G_inf + sum G_i``; NaN where neither is defined."""
+    model = get_model(model_key)
+    if model.supports("elastic_shear"):
+        return float(initial_shear_modulus(model, params))
+    prony = [v for k, v in params.items() if k == "G_inf" or (k.startswith("G_") and k[2:].isdigit())]
+    return float(sum(prony)) if prony else float("nan")
+
+
+def piece_levels(runs, record: F.FitRecord, tests, exclude_flagged: bool = True) -> pd.DataFrame:
+    """One row per run of ``tests``: specimen, sample, test, condition, ``log_level`` (natural log of the factor
+    that scales the fit's prediction onto the run; module docstring), ``log_g0`` and the points used."""
+    model = get_model(record.model_key)
+    g0 = reference_shear_modulus(record.model_key, record.params)
+    noise = F.NoiseModel()
+    rows = []
+    for run in runs:
+        test = str(run.attrs.get("test", ""))
+        if test not in tests:
+            continue
+        run = drop_flagged(run) if exclude_flagged else run
+        try:
+            curve = F.thin(F.curve_from_run(run, relaxation=record.relaxation or "measured"), 40)
+            obs, sd = F.target_observations(curve, record.target)
+            pred = F.predict(model, record.params, curve, record.target)
+        except (ValueError, KeyError) as exc:
+            rows.append({"run": run.attrs.get("run", ""), "test": test, "status": f"skipped: {exc}"})
+            continue
+        logs, weights = [], []
+        for k, y in obs.items():
+            y, f = np.asarray(y, float), np.asarray(pred[k], float)
+            sig = noise.sigma(k, y, sd.get(k))
+            ok = np.isfinite(y) & np.isfinite(f) & (y > 0) & (f > 0) & (np.abs(y) > 3 * sig)
+            logs.append(np.log(y[ok] / f[ok]))
+            weights.append((np.abs(y[ok]) / sig[ok]) ** 2)  # 1 / var(log y)
+        lr, w = np.concatenate(logs), np.concatenate(weights)
+        level = float(np.sum(w * lr) / np.sum(w)) if lr.size else float("nan")
+        rows.append({"run": str(run.attrs.get("run", "")), "specimen": str(run.attrs.get("specimen", "")),
+                     "sample": str(run.attrs.get("sample", "")), "test": test, "condition": curve.condition,
+                     "n_points": int(lr.size), "log_level": level, "log_g0": math.log(g0) + level if g0 > 0 else
+                     float("nan"), "status": "ok" if lr.size else "no usable point"})
+    return pd.DataFrame(rows)
+
+
+def mixed_effects(levels: pd.DataFrame, value: str = "log_g0") -> dict:
+    """Population mean and specimen / sample SDs of ``value`` (REML ``MixedLM``; module docstring) with SEs.
+
+    ``levels`` needs columns ``specimen``, ``sample`` and ``value``. Returns a JSON-ready dict: ``mean``,
+    ``mean_se``, ``sd_specimen``, ``sd_specimen_se``, ``sd_sample``, ``sd_sample_se``, ``sd_residual`` (within a
+    piece, only when pieces have several runs, else NaN), counts, ``converged`` and the method statement.
+    """
+    import statsmodels.formula.api as smf  # statsmodels is a dependency; its import is slow, so only here
+
+    d = levels[np.isfinite(levels[value])].copy()
+    d["piece"] = d["specimen"].astype(str) + "/" + d["sample"].astype(str)
+    n, n_spec, n_piece = len(d), d["specimen"].nunique(), d["piece"].nunique()
+    repeated = n_piece < n
+    out = {"value": value, "n_runs": n, "n_specimens": int(n_spec), "n_pieces": int(n_piece)}
+    if n_spec < 2 or n < 3:
+        out.update({"mean": float(d[value].mean()) if n else float("nan"), "status": "fewer than 2 specimens"})
+        return out
+    import warnings as _w
+    with _w.catch_warnings():
+        _w.simplefilter("ignore")  # boundary / convergence warnings: reported through `converged` and the SDs
+        vc = {"sample": "0 + C(piece)"} if repeated else None
+        model = smf.mixedlm(f"{value} ~ 1", d, groups=d["specimen"], re_formula="1", vc_formula=vc)
+        fit = model.fit(reml=True, method=["lbfgs", "powell"])
+    # statsmodels parameterises the variances relative to the residual scale; cov_params holds the covariance of
+    # those relative parameters, so SE(variance) = scale x SE(relative) (the scale's own uncertainty left out)
+    scale = float(fit.scale)
+    k_fe = len(fit.fe_params)
+    cp = np.diag(np.asarray(fit.cov_params(), float))
+    rel_se = np.sqrt(np.where(cp[k_fe:] >= 0, cp[k_fe:], np.nan))
+    var_spec = float(fit.cov_re.iloc[0, 0])
+    var_spec_se = float(scale * rel_se[0])
+    if repeated:
+        var_samp, var_samp_se = float(fit.vcomp[0]), float(scale * rel_se[1])
+        var_resid, var_resid_se = scale, scale * math.sqrt(2.0 / max(n - n_piece, 1))
+    else:  # one run per piece: the residual is the sample-to-sample variance
+        var_samp, var_samp_se = scale, scale * math.sqrt(2.0 / max(n - n_spec, 1))
+        var_resid, var_resid_se = float("nan"), float("nan")
+
+    def sd(v, se):
+        v = max(v, 0.0)
+        return math.sqrt(v), (se / (2.0 * math.sqrt(v)) if v > 0 else float("nan"))
+
+    out["mean"] = float(fit.fe_params.iloc[0])
+    out["mean_se"] = float(fit.bse_fe.iloc[0])
+    out["sd_specimen"], out["sd_specimen_se"] = sd(var_spec, var_spec_se)
+    out["sd_sample"], out["sd_sample_se"] = sd(var_samp, var_samp_se)
+    out["sd_residual"], out["sd_residual_se"] = sd(var_resid, var_resid_se) if repeated else (float("nan"),) * 2
+    out["converged"] = bool(getattr(fit, "converged", True))
+    out["method"] = ("statsmodels MixedLM (REML): value ~ 1 + specimen random intercept"
+                     + (" + sample variance component nested in specimen" if repeated else
+                        "; one run per piece, so the residual SD is the sample-to-sample SD (it includes the "
+                        "within-run misfit)") + "; SEs: MixedLM covariance of the variance parameters x scale, sqrt(2/df) for the residual variance, delta method for SDs")
+    return out
+
+
+def run_population(ranking_csv, runs_dir, fits_dir, cards_dir, scope: str, tests, out_json, out_csv,
+                   dataset: str = "", exclude_flagged: bool = True) -> dict:
+    """Specimen variability of the recommended fit of one scope: per-run levels (``out_csv``) and the mixed
+    model, written with the recommended card into ``out_json`` (the card with ``uncertainty.population``)."""
+    model = R.recommended_models(ranking_csv).get(scope)
+    if model is None:
+        write_text("run,specimen,sample,test,log_level,log_g0,status\n", out_csv)
+        write_json({"status": f"no recommended model in scope {scope}"}, out_json)
+        return {}
+    record = F.FitRecord.from_netcdf(Path(fits_dir) / f"{model}.nc")
+    levels = piece_levels(load_runs(runs_dir), record, list(tests), exclude_flagged=exclude_flagged)
+    write_text(levels.to_csv(index=False), out_csv)
+    ok = levels[levels.get("status", pd.Series(dtype=str)) == "ok"] if not levels.empty else levels
+    g0 = reference_shear_modulus(model, record.params)
+    value = "log_g0" if g0 > 0 else "log_level"
+    pop = mixed_effects(ok, value=value) if not ok.empty else {"status": "no run of the scope's tests"}
+    pop.update({"model": model, "scope": scope, "dataset": dataset, "reference_shear_modulus_pa": g0,
+                "quantity": ("natural log of the initial shear modulus (Pa) per loaded piece" if value == "log_g0"
+                             else "natural log of the level factor on the fit's stress per loaded piece"),
+                "by_test_mean": {str(t): float(v) for t, v in ok.groupby("test")[value].mean().items()}
+                if not ok.empty else {}})
+    card_path = Path(cards_dir) / f"{model}.json"
+    card = json.loads(card_path.read_text()) if card_path.is_file() else {"model": model}
+    unc = card.get("uncertainty")
+    unc = dict(unc) if isinstance(unc, Mapping) else {"lmfit": unc}
+    unc["population"] = pop
+    card["uncertainty"] = unc
+    card["card_source"] = str(card_path)
+    write_json(card, out_json)
+    return pop
+
+
 __all__ = ["problem_for_record", "internal_covariance", "sample_record_posterior", "posterior_table",
-           "inference_data", "write_inference_data", "read_inference_group", "run_posterior", "Z95", "IDATA_GROUPS"]
+           "inference_data", "write_inference_data", "read_inference_group", "run_posterior", "Z95", "IDATA_GROUPS",
+           "reference_shear_modulus", "piece_levels", "mixed_effects", "run_population"]

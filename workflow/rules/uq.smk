@@ -12,12 +12,15 @@ def posterior_scopes_of(name):
 
 
 def uq_targets():
-    """Posterior files of every enabled dataset and scope (added to the default target in the Snakefile)."""
-    return [
-        f"results/{name}/posterior/{scope}.nc"
-        for name in DATASETS
-        for scope in posterior_scopes_of(name)
-    ]
+    """Posterior (and, with posterior.population, specimen-variability) files of every enabled dataset and scope
+    (added to the default target in the Snakefile)."""
+    targets = []
+    for name in DATASETS:
+        for scope in posterior_scopes_of(name):
+            targets.append(f"results/{name}/posterior/{scope}.nc")
+            if POSTERIOR.get("population", True):
+                targets.append(f"results/{name}/population/{scope}.card.json")
+    return targets
 
 
 rule posterior:
@@ -41,9 +44,36 @@ rule posterior:
     params:
         tests=lambda wildcards: scope_spec(wildcards)["tests"],
         walkers=POSTERIOR.get("walkers"),
-        steps=POSTERIOR.get("steps", 1600),
-        burn=POSTERIOR.get("burn", 200),
+        steps=POSTERIOR.get("steps", 1400),
+        burn=POSTERIOR.get("burn", 400),
         seed=POSTERIOR.get("seed", 0),
         pkg=script_hash("workflow/scripts/posterior.py"),
     script:
         "../scripts/posterior.py"
+
+
+rule population:
+    input:
+        ranking="results/{dataset}/ranking.csv",
+        runs="results/{dataset}/runs",
+        fits="results/{dataset}/fits/{scope}",
+        cards="results/{dataset}/cards/{scope}",
+    output:
+        card="results/{dataset}/population/{scope}.card.json",
+        levels=report(
+            "results/{dataset}/population/{scope}.levels.csv",
+            caption="../report/population_levels.rst",
+            category="{dataset}",
+            subcategory="3 fits: {scope}",
+            labels={"scope": "{scope}", "model": "specimen variability (per-piece levels)"},
+        ),
+    log:
+        "logs/{dataset}/population_{scope}.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/population_{scope}.tsv"
+    params:
+        tests=lambda wildcards: scope_spec(wildcards)["tests"],
+        exclude_flagged=config["fit"].get("exclude_flagged", True),
+        pkg=script_hash("workflow/scripts/population.py"),
+    script:
+        "../scripts/population.py"
