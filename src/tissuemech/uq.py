@@ -30,11 +30,23 @@ covariance of the variance parameters, times the residual scale; ``sqrt(2/df)`` 
 delta method for the SDs). With one run per piece the residual SD *is* the sample-to-sample SD
 (it also holds the within-run misfit; stated in the output). The JSON written next to the card carries that
 population distribution.
+
+Propagation to the FEM (``run_uq_indentation``, rule ``uq_indentation``): the flat-punch indentation of
+``fem.experiments.flat_punch_indentation`` (small mesh, few increments) is run for the elastic law of the
+recommended fit at the optimum and at ``n_draws`` posterior draws (*measurement* uncertainty: the fit's parameters
+given the averaged curves); *specimen* variability is the population distribution of the modulus level,
+``log s ~ N(mu - log G0_fit, sd_specimen^2 + sd_sample^2)``, and because the bulk modulus follows the shear
+modulus through the card's Poisson ratio, a factor ``s`` on every modulus scales the quasi-static force exactly by
+``s`` (same displacement field), so the population band needs no further solve. The *total* band multiplies
+independent posterior and population draws. The elastic law is the card's, or, for a fit whose card has none
+(the beyond-QLV laws), the instantaneous law of its structure, with the Prony series of the draw's small-strain step
+response (for a beyond-QLV law the QLV linearisation: its strain-dependent weights are not in the FEM).
 """
 from __future__ import annotations
 
 import datetime as _dt
 import json
+import logging
 import math
 import time
 from collections.abc import Mapping
@@ -47,12 +59,18 @@ import xarray as xr
 from . import fitting as F
 from . import posterior as P
 from . import ranking as R
-from .canonical import atomic_write, read_netcdf, write_json, write_text
+from .cards import prony_from_step_response
+from .canonical import atomic_write, read_netcdf, write_json, write_netcdf, write_text
 from .curves import drop_flagged
-from .models.base import initial_shear_modulus
+from .models.base import bulk_modulus, initial_shear_modulus
+from .fem.experiments import flat_punch_indentation
+from .fem.tled import DynamicRelaxationError, ElementInversionError
 from .models.registry import get_model
 from .pipeline import load_runs
+from .plots import new_figure, save_figure
 from .stages import scope_curves
+
+logger = logging.getLogger(__name__)
 
 #: standard normal quantile of the 95 % point (a 5-95 % interval is +- this many SD for a Gaussian)
 Z95 = 1.6448536269514722
@@ -367,6 +385,131 @@ def run_population(ranking_csv, runs_dir, fits_dir, cards_dir, scope: str, tests
     return pop
 
 
+# ------------------------------------------------------------------------------------------------------
+# propagation to the FEM: indentation bands from posterior and population draws
+# ------------------------------------------------------------------------------------------------------
+def elastic_card(card: Mapping, record: F.FitRecord, params: Mapping[str, float]) -> dict | None:
+    """A FEM card of the fit's elastic law at ``params``: the card's ``elastic_law`` or, without one, the
+    instantaneous law of the record's structure; bulk modulus from the card's Poisson ratio and the law's initial
+    shear modulus; for QLV and beyond-QLV fits the Prony series of the small-strain step response at ``params``
+    (exact for QLV; for a beyond-QLV law its small-strain linearisation). None where the law has no parameters
+    among ``params``."""
+    law = card.get("elastic_law") or (record.structure or {}).get("instantaneous")
+    if not law:
+        return None
+    names = [sp.name for sp in get_model(law).param_specs]
+    if not all(n in params for n in names):
+        return None
+    lp = {n: float(params[n]) for n in names}
+    nu = float(card["poisson_ratio"])
+    out = {k: v for k, v in card.items() if k not in ("elastic_law", "elastic_parameters", "bulk_modulus", "prony")}
+    out.update({"elastic_law": law, "elastic_parameters": lp, "poisson_ratio": nu,
+                "bulk_modulus": bulk_modulus(initial_shear_modulus(get_model(law), lp), nu), "prony": None})
+    taus = (record.structure or {}).get("taus_s")
+    if record.family in ("qlv", "beyond_qlv") and taus:
+        # the small-strain Prony series of the draw (exact for QLV; the small-strain linearisation of a
+        # beyond-QLV law, whose strain-dependent weights the FEM does not have)
+        taus = np.asarray(taus, float)
+        pr = prony_from_step_response(get_model(record.model_key), params, taus, taus.min() / 10, taus.max() * 10)
+        out["prony"] = {"g": pr["g"], "tau": pr["tau"], "g_inf": pr["g_inf"],
+                        "source": "small-strain step response of the fit (tissuemech.uq)"}
+    return out
+
+
+def band(values: np.ndarray) -> dict[str, np.ndarray]:
+    """5/50/95 % quantiles over axis 0 (draws), NaN-aware."""
+    q = np.nanquantile(np.asarray(values, float), [0.05, 0.5, 0.95], axis=0)
+    return {"q05": q[0], "q50": q[1], "q95": q[2]}
+
+
+def run_uq_indentation(posterior_nc, population_json, fits_dir, out_nc, figure_path, n_draws: int = 32,
+                       punch_diameter_m: float = 8e-3, max_depth_m: float = 1.5e-3, speed_m_s: float = 1e-4,
+                       element_size_m: float = 2e-3, n_increments: int = 6, seed: int = 0,
+                       n_threads: int = 1) -> xr.Dataset:
+    """Force-depth bands of the flat-punch indentation (module docstring): netCDF with the draws and the 5/50/95 %
+    bands per source (``measurement``, ``specimen``, ``total``) and a figure."""
+    card = json.loads(Path(population_json).read_text())
+    pop = (card.get("uncertainty") or {}).get("population", {}) if isinstance(card.get("uncertainty"), Mapping) else {}
+    post = read_inference_group(posterior_nc, "posterior")
+    record = F.FitRecord.from_netcdf(Path(fits_dir) / f"{post.attrs['model']}.nc")
+    optimum = elastic_card(card, record, record.params)
+    if optimum is None:
+        raise ValueError(f"{record.model_key}: no elastic law the FEM can run")
+
+    def solve(c):
+        ds = flat_punch_indentation(c, punch_diameter_m, max_depth_m, speed_m_s, element_size_m=element_size_m,
+                                    n_increments=n_increments, n_threads=n_threads)
+        return np.asarray(ds["displacement"].values, float), np.asarray(ds["force"].values, float)
+
+    t0 = time.perf_counter()
+    depth, f_opt = solve(optimum)
+    rng = np.random.default_rng(seed)
+    flat = {n: np.asarray(post[n].values, float).ravel() for n in post.data_vars}
+    picks = rng.choice(next(iter(flat.values())).size, size=n_draws, replace=False)
+    f_meas = np.full((n_draws, depth.size), np.nan)
+    failed = []
+    for j, k in enumerate(picks):
+        params = dict(record.params)
+        params.update({n: float(v[k]) for n, v in flat.items()})
+        c = elastic_card(card, record, params)
+        try:
+            f_meas[j] = solve(c)[1]
+        except (ElementInversionError, DynamicRelaxationError) as exc:  # a NaN row, reported
+            failed.append(f"draw {k}: {exc}")
+            logger.warning("uq indentation: draw %d failed: %s", k, exc)
+    g0_fit = reference_shear_modulus(record.model_key, record.params)
+    sd_pop = math.hypot(float(pop.get("sd_specimen", 0.0)), float(pop.get("sd_sample", 0.0)))
+    offset = float(pop.get("mean", math.log(g0_fit))) - math.log(g0_fit) if pop.get("value") == "log_g0" else 0.0
+    log_s = offset + sd_pop * rng.standard_normal(n_draws)
+    f_spec = np.exp(log_s)[:, None] * f_opt[None, :]
+    f_total = np.exp(log_s)[:, None] * f_meas
+    seconds = time.perf_counter() - t0
+
+    def share(fm, fs):  # variance of log force at the deepest point, per source
+        vm, vs = np.nanvar(np.log(fm[:, -1])), np.nanvar(np.log(fs[:, -1]))
+        return vm, vs
+
+    vm, vs = share(f_meas, f_spec)
+    data = {"force_optimum": ("point", f_opt, {"units": "N"}),
+            "force_measurement": (("draw", "point"), f_meas, {"units": "N"}),
+            "force_specimen": (("draw", "point"), f_spec, {"units": "N"}),
+            "force_total": (("draw", "point"), f_total, {"units": "N"})}
+    for src, arr in (("measurement", f_meas), ("specimen", f_spec), ("total", f_total)):
+        for q, v in band(arr).items():
+            data[f"{src}_{q}"] = ("point", v, {"units": "N"})
+    ds = xr.Dataset(data, coords={"depth": ("point", depth, {"units": "m"}), "draw": np.arange(n_draws)},
+                    attrs={"model": record.model_key, "elastic_law": optimum["elastic_law"],
+                           "punch_diameter_m": punch_diameter_m, "max_depth_m": max_depth_m,
+                           "element_size_m": element_size_m, "n_draws": n_draws, "seed": seed,
+                           "population_log_sd": sd_pop, "population_log_offset": offset,
+                           "var_log_force_measurement": vm, "var_log_force_specimen": vs,
+                           "measurement_share_of_variance": vm / (vm + vs) if vm + vs > 0 else float("nan"),
+                           "seconds": seconds, "failed_draws": json.dumps(failed),
+                           "method": "posterior draws solved one by one; specimen band = population factor x optimum "
+                                     "force (exact for a quasi-static hyperelastic law with K proportional to mu)"})
+    write_netcdf(ds, out_nc)
+    plot_uq_indentation(ds, figure_path)
+    return ds
+
+
+def plot_uq_indentation(ds: xr.Dataset, path) -> list[Path]:
+    """Force-depth 5-95 % bands: measurement (posterior), specimen (population) and total, with the optimum."""
+    fig, (ax,) = new_figure()
+    d = 1e3 * np.asarray(ds["depth"].values)
+    for src, colour in (("total", "0.8"), ("specimen", "tab:orange"), ("measurement", "tab:blue")):
+        ax.fill_between(d, 1e3 * ds[f"{src}_q05"].values, 1e3 * ds[f"{src}_q95"].values, color=colour,
+                        alpha=0.45 if src != "total" else 0.6, lw=0, label=f"{src} 5-95 %")
+    ax.plot(d, 1e3 * ds["force_optimum"].values, "k-", lw=1.2, label="fit optimum")
+    share = ds.attrs.get("measurement_share_of_variance", float("nan"))
+    ax.set_xlabel("indentation depth [mm]")
+    ax.set_ylabel("force [mN]")
+    ax.set_title(f"{ds.attrs.get('model')}: {1e3 * ds.attrs.get('punch_diameter_m', 0):g} mm punch, "
+                 f"measurement share {100 * share:.0f} %", fontsize=9)
+    ax.legend(fontsize=8, loc="upper left")
+    return save_figure(fig, path)
+
+
 __all__ = ["problem_for_record", "internal_covariance", "sample_record_posterior", "posterior_table",
            "inference_data", "write_inference_data", "read_inference_group", "run_posterior", "Z95", "IDATA_GROUPS",
-           "reference_shear_modulus", "piece_levels", "mixed_effects", "run_population"]
+           "reference_shear_modulus", "piece_levels", "mixed_effects", "run_population", "elastic_card", "band",
+           "run_uq_indentation", "plot_uq_indentation"]

@@ -110,3 +110,34 @@ def test_mixed_effects_with_repeated_runs_separates_sample_from_within_piece():
     assert abs(est["sd_sample"] - 0.12) < 3 * est["sd_sample_se"]
     assert abs(est["sd_residual"] - 0.05) < 3 * est["sd_residual_se"]
     assert "nested" in est["method"]
+
+
+# ------------------------------------------------------------------------------------------------------
+# propagation to the FEM: the cards of posterior draws
+# ------------------------------------------------------------------------------------------------------
+def test_elastic_card_of_a_qlv_fit_reproduces_its_card():
+    """At the optimum, the draw card of a QLV fit is the fit's own card (law, parameters, bulk modulus, Prony
+    series from the step response = the QLV weights), so the posterior draws are solved with the same material."""
+    from tissuemech import cards as C
+    from tissuemech.models.qlv import qlv_params
+
+    key = "qlv_rp3_prony4"
+    model = get_model(key)
+    truth = qlv_params(model, {"C10": 150.0, "C20": 50.0, "C30": 200.0}, [0.3, 0.2, 0.15, 0.05])
+    t = np.linspace(0.0, 50.0, 41)
+    g = 0.01 * t
+    curve = F.Curve(test="constant_shear_rate", condition="rate=0.01/s", response="shear_history",
+                    inputs={"time": t, "shear_strain": g}, observed={"shear_stress": model.shear_stress_history(truth, t, g)[1:]},
+                    obs_index=np.arange(1, 41), nominal={"shear_rate_1_per_s": 0.01})
+    result = F.fit(F.FitProblem(model, [curve], target="none", model_key=key), starts=[truth], n_random=0)
+    card = C.make_card(result, model, poisson_ratio=0.49)
+    record = F.FitRecord.from_result(result)
+    draw = uq.elastic_card(card, record, record.params)
+    assert draw["elastic_law"] == card["elastic_law"] == "reduced_polynomial3"
+    for k, v in card["elastic_parameters"].items():
+        assert draw["elastic_parameters"][k] == pytest.approx(v, rel=1e-12)
+    assert draw["bulk_modulus"] == pytest.approx(card["bulk_modulus"], rel=1e-9)
+    np.testing.assert_allclose(draw["prony"]["g"], card["prony"]["g"], atol=1e-9)
+    assert draw["prony"]["g_inf"] == pytest.approx(card["prony"]["g_inf"], abs=1e-9)
+    bands = uq.band(np.array([[1.0, 2.0], [3.0, 4.0], [np.nan, 6.0]]))
+    assert bands["q50"][0] == pytest.approx(2.0) and bands["q50"][1] == pytest.approx(4.0)

@@ -20,6 +20,8 @@ def uq_targets():
             targets.append(f"results/{name}/posterior/{scope}.nc")
             if POSTERIOR.get("population", True):
                 targets.append(f"results/{name}/population/{scope}.card.json")
+                if POSTERIOR.get("fem_draws", 0):
+                    targets.append(f"results/{name}/uq/indentation_{scope}.nc")
     return targets
 
 
@@ -77,3 +79,31 @@ rule population:
         pkg=script_hash("workflow/scripts/population.py"),
     script:
         "../scripts/population.py"
+
+
+rule uq_indentation:
+    input:
+        posterior="results/{dataset}/posterior/{scope}.nc",
+        population="results/{dataset}/population/{scope}.card.json",
+        fits="results/{dataset}/fits/{scope}",
+    output:
+        data="results/{dataset}/uq/indentation_{scope}.nc",
+        figure=report(
+            "results/{dataset}/figures/uq_indentation_{scope}.png",
+            caption="../report/uq_indentation.rst",
+            category="{dataset}",
+            subcategory="7 FEM experiments",
+            labels={"experiment": "indentation bands", "item": "{scope}"},
+        ),
+    log:
+        "logs/{dataset}/uq_indentation_{scope}.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/uq_indentation_{scope}.tsv"
+    threads: FEM_THREADS
+    params:
+        n_draws=POSTERIOR.get("fem_draws", 32),
+        element_size_m=config["fem"]["block_element_size_m"],
+        seed=POSTERIOR.get("seed", 0),
+        pkg=script_hash("workflow/scripts/uq_fem.py"),
+    script:
+        "../scripts/uq_fem.py"
