@@ -75,7 +75,7 @@ logger = logging.getLogger(__name__)
 #: standard normal quantile of the 95 % point (a 5-95 % interval is +- this many SD for a Gaussian)
 Z95 = 1.6448536269514722
 #: groups of the InferenceData file, in the order written
-IDATA_GROUPS = ("posterior", "sample_stats")
+IDATA_GROUPS = ("posterior", "posterior_predictive", "sample_stats", "observed_data")
 
 
 def problem_for_record(averages: xr.Dataset, record: F.FitRecord, tests) -> F.FitProblem:
@@ -228,21 +228,91 @@ def read_inference_group(path, group: str = "posterior") -> xr.Dataset:
         return ds.load()
 
 
+#: posterior draws whose predictions make the posterior-predictive band
+N_PREDICTIVE = 64
+
+
+def predictive_draws(problem: F.FitProblem, record: F.FitRecord, post: P.PosteriorResult,
+                     n_draws: int = N_PREDICTIVE, seed: int = 0) -> list[dict[str, np.ndarray]]:
+    """Model predictions of ``n_draws`` posterior draws per curve and observable: a list (one per curve) of
+    ``{observable: array (n_draws, n_points)}`` (the posterior-predictive mean response; the noise model's spread
+    is not added)."""
+    rng = np.random.default_rng(seed)
+    picks = rng.choice(post.samples.shape[0], size=min(n_draws, post.samples.shape[0]), replace=False)
+    out: list[dict[str, list]] = [{} for _ in problem.curves]
+    for k in picks:
+        p = dict(record.params)
+        p.update({n.removeprefix("log10_"): float(_natural(n, post.samples[k, i])) for i, n in enumerate(post.names)})
+        for ci, terms in enumerate(problem.curve_terms(p)):
+            for name, (_, f, _) in terms.items():
+                out[ci].setdefault(name, []).append(np.asarray(f, float))
+    return [{name: np.array(v) for name, v in d.items()} for d in out]
+
+
+def plot_posterior_predictive(problem: F.FitProblem, predictions, path, title: str = "") -> list[Path]:
+    """Observed curves (markers) with the 5-95 % band of the posterior draws' predictions, one panel per curve."""
+    n = len(problem.curves)
+    ncols = min(3, n)
+    fig, axes = new_figure(ncols=ncols, nrows=math.ceil(n / ncols), width=3.4, height=2.6)
+    for ax, c, (obs, _), pred in zip(axes, problem.curves, problem.observations, predictions):
+        x_key = "shear_strain" if c.test == "constant_shear_rate" else {"oscillation": "angular_frequency",
+                                                                        "flow": "shear_rate",
+                                                                        "elastic_shear": "shear_strain",
+                                                                        "uniaxial": "stretch"}.get(c.response, "time")
+        x = np.asarray(c.obs_inputs(x_key), float)
+        for name, y in obs.items():
+            b = band(pred[name])
+            ax.fill_between(x, b["q05"], b["q95"], color="tab:blue", alpha=0.35, lw=0)
+            ax.plot(x, b["q50"], color="tab:blue", lw=1)
+            ax.plot(x, y, "k.", ms=3)
+            ax.set_ylabel(name, fontsize=7)
+        if x_key in ("time", "angular_frequency", "shear_rate") and np.all(x > 0):
+            ax.set_xscale("log")
+        ax.set_xlabel(x_key, fontsize=7)
+        ax.set_title(c.label, fontsize=7)
+        ax.tick_params(labelsize=6)
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    if title:
+        fig.suptitle(title, fontsize=8)
+    return save_figure(fig, path)
+
+
 def run_posterior(ranking_csv, averages_path, fits_dir, scope: str, tests, out_nc, out_csv, walkers=None,
-                  steps: int = 800, burn: int = 150, seed: int = 0, dataset: str = "") -> pd.DataFrame:
+                  steps: int = 800, burn: int = 150, seed: int = 0, dataset: str = "",
+                  figure_path=None) -> pd.DataFrame:
     """Posterior of the recommended model of one scope (``ranking.csv`` column ``recommended``): the
     InferenceData netCDF and the credible-interval table (module docstring). A scope without a recommendation
-    writes a file whose root attribute ``status`` says so, and an empty table."""
+    writes a file whose root attribute ``status`` says so, and an empty table. ``figure_path``: the observed curves
+    with the 5-95 % posterior-predictive band (:func:`plot_posterior_predictive`); without a recommendation, a
+    figure that says so."""
     model = R.recommended_models(ranking_csv).get(scope)
     if model is None:
         write_inference_data({"": xr.Dataset(attrs={"status": f"no recommended model in scope {scope}"})}, out_nc)
         table = pd.DataFrame(columns=["dataset", "scope", "model", "parameter"])
         write_text(table.to_csv(index=False), out_csv)
+        if figure_path is not None:
+            fig, (ax,) = new_figure()
+            ax.text(0.5, 0.5, f"no recommended model in scope {scope}", ha="center", va="center")
+            ax.set_axis_off()
+            save_figure(fig, figure_path)
         return table
     record = F.FitRecord.from_netcdf(Path(fits_dir) / f"{model}.nc")
     problem = problem_for_record(read_netcdf(averages_path), record, tests)
     post, info = sample_record_posterior(problem, record, walkers=walkers, steps=steps, burn=burn, seed=seed)
-    write_inference_data(inference_data(record, post, info, dataset=dataset, scope=scope), out_nc)
+    groups = inference_data(record, post, info, dataset=dataset, scope=scope)
+    predictions = predictive_draws(problem, record, post, seed=seed)
+    flat = np.concatenate([np.concatenate([v for v in d.values()], axis=1) for d in predictions], axis=1)
+    observed = np.concatenate([np.asarray(y, float) for obs, _ in problem.observations for y in obs.values()])
+    groups["posterior_predictive"] = xr.Dataset(
+        {"response": (("chain", "draw", "point"), flat[None], {"meaning": "model response of posterior draws "
+                                                                         "(plate target), noise not added"})},
+        coords={"chain": [0], "draw": np.arange(flat.shape[0])})
+    groups["observed_data"] = xr.Dataset({"response": ("point", observed)})
+    write_inference_data(groups, out_nc)
+    if figure_path is not None:
+        plot_posterior_predictive(problem, predictions, figure_path,
+                                  title=f"{dataset} {scope}: {record.model_key}, 5-95 % posterior-predictive band")
     table = posterior_table(record, post, dataset=dataset, scope=scope)
     table["acceptance"] = post.acceptance
     table["warnings"] = "; ".join(post.warnings)
@@ -512,4 +582,5 @@ def plot_uq_indentation(ds: xr.Dataset, path) -> list[Path]:
 __all__ = ["problem_for_record", "internal_covariance", "sample_record_posterior", "posterior_table",
            "inference_data", "write_inference_data", "read_inference_group", "run_posterior", "Z95", "IDATA_GROUPS",
            "reference_shear_modulus", "piece_levels", "mixed_effects", "run_population", "elastic_card", "band",
-           "run_uq_indentation", "plot_uq_indentation"]
+           "run_uq_indentation", "plot_uq_indentation", "predictive_draws", "plot_posterior_predictive",
+           "N_PREDICTIVE"]

@@ -55,6 +55,12 @@ def test_inference_data_round_trip(synthetic_fit, tmp_path):
     assert g.attrs["model"] == "reduced_polynomial2" and "uniform on" in g["C10"].attrs["prior"]
     assert set(eval(g.attrs["rhat"])) == set(record.varying)  # JSON of plain floats
     assert uq.read_inference_group(path, "sample_stats")["lp"].shape == (4, 100)
+    pred = uq.predictive_draws(problem, record, post, n_draws=10)
+    assert len(pred) == 1 and pred[0]["shear_stress"].shape == (10, 60)
+    # the draws scatter around the fitted curve
+    np.testing.assert_allclose(np.median(pred[0]["shear_stress"], axis=0), record.predicted, rtol=0.05)
+    written = uq.plot_posterior_predictive(problem, pred, tmp_path / "pp.png")
+    assert all(p.stat().st_size > 0 for p in written)
 
 
 def test_scope_without_recommendation_writes_status(tmp_path):

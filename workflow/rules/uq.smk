@@ -39,6 +39,13 @@ rule posterior:
             subcategory="3 fits: {scope}",
             labels={"scope": "{scope}", "model": "posterior (credible intervals)"},
         ),
+        figure=report(
+            "results/{dataset}/figures/posterior_{scope}.png",
+            caption="../report/posterior_predictive.rst",
+            category="{dataset}",
+            subcategory="3 fits: {scope}",
+            labels={"scope": "{scope}", "model": "posterior-predictive band"},
+        ),
     log:
         "logs/{dataset}/posterior_{scope}.log",
     benchmark:
