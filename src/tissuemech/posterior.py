@@ -19,8 +19,8 @@ Moves (all leave the posterior invariant; emcee's ensemble framework):
   ``DESnookerMove`` 0.2; ter Braak & Vrugt 2008, needs ``n_walkers >= 2 d``);
 * kept steps: the independence move with a Student-t proposal (10 degrees of freedom) fitted to the second half of
   the burn-in (mean and covariance of the walkers; frozen before the kept steps, so each walker is a plain
-  Metropolis-Hastings chain) with weight 0.7, and the Gaussian random walk with the burn-in covariance (0.3, robust where
-  the posterior is far from the proposal, e.g. truncated at a bound). Both are single-walker moves, so a few
+  Metropolis-Hastings chain) with weight 0.7, and the Gaussian random walk with the burn-in covariance (0.3,
+  robust where the posterior is far from the proposal, e.g. truncated at a bound). Both are single-walker moves, so a few
   long chains (e.g. 8) can be run: split R-hat needs many effective draws *per chain*, the ESS only in total.
   On the bundled brain's QLV fit this gives integrated autocorrelation times of ~6 steps, against ~30 for
   emcee's default stretch move; on its beyond-QLV (Pipkin-Rogers) fit, whose posterior is truncated at a Prony

@@ -31,8 +31,9 @@ delta method for the SDs). With one run per piece the residual SD *is* the sampl
 (it also holds the within-run misfit; stated in the output). The JSON written next to the card carries that
 population distribution.
 
-Propagation to the FEM (``run_uq_indentation``, rule ``uq_indentation``): the flat-punch indentation of
-``fem.experiments.flat_punch_indentation`` (small mesh, few increments) is run for the elastic law of the
+Propagation to the FEM (``run_uq_indentation`` / ``run_uq_torsion``, rules ``uq_indentation`` / ``uq_torsion``,
+both through ``propagate``): the flat-punch indentation of ``fem.experiments.flat_punch_indentation`` (small mesh,
+few increments), or the rheometer torsion of ``fem.experiments.rheometer_torsion``, is run for the elastic law of the
 recommended fit at the optimum and at ``n_draws`` posterior draws (*measurement* uncertainty: the fit's parameters
 given the averaged curves); *specimen* variability is the population distribution of the modulus level,
 ``log s ~ N(mu - log G0_fit, sd_specimen^2 + sd_sample^2)``, and because the bulk modulus follows the shear
@@ -61,9 +62,9 @@ from . import posterior as P
 from . import ranking as R
 from .cards import prony_from_step_response
 from .canonical import atomic_write, read_netcdf, write_json, write_netcdf, write_text
-from .curves import drop_flagged
+from .curves import drop_flagged, select_average
 from .models.base import bulk_modulus, initial_shear_modulus
-from .fem.experiments import flat_punch_indentation
+from .fem.experiments import flat_punch_indentation, rheometer_torsion
 from .fem.tled import DynamicRelaxationError, ElementInversionError
 from .models.registry import get_model
 from .pipeline import load_runs
@@ -419,7 +420,9 @@ def mixed_effects(levels: pd.DataFrame, value: str = "log_g0") -> dict:
     out["method"] = ("statsmodels MixedLM (REML): value ~ 1 + specimen random intercept"
                      + (" + sample variance component nested in specimen" if repeated else
                         "; one run per piece, so the residual SD is the sample-to-sample SD (it includes the "
-                        "within-run misfit)") + "; SEs: MixedLM covariance of the variance parameters x scale, sqrt(2/df) for the residual variance, delta method for SDs")
+                        "within-run misfit)")
+                     + "; SEs: MixedLM covariance of the variance parameters x scale, sqrt(2/df) for the residual "
+                       "variance, delta method for SDs")
     return out
 
 
@@ -492,95 +495,180 @@ def band(values: np.ndarray) -> dict[str, np.ndarray]:
     return {"q05": q[0], "q50": q[1], "q95": q[2]}
 
 
+def _load_uq_inputs(posterior_nc, population_json, fits_dir):
+    """The population card, its population dict, the posterior group and the fit record."""
+    card = json.loads(Path(population_json).read_text())
+    unc = card.get("uncertainty")
+    pop = unc.get("population", {}) if isinstance(unc, Mapping) else {}
+    post = read_inference_group(posterior_nc, "posterior")
+    record = F.FitRecord.from_netcdf(Path(fits_dir) / f"{post.attrs['model']}.nc")
+    if elastic_card(card, record, record.params) is None:
+        raise ValueError(f"{record.model_key}: no elastic law the FEM can run")
+    return card, pop, post, record
+
+
+def propagate(solve, card: Mapping, pop: Mapping, post: xr.Dataset, record: F.FitRecord, n_draws: int,
+              seed: int = 0, solve_draw=None) -> dict:
+    """Run ``solve(card) -> (x, y)`` at the optimum and at ``n_draws`` posterior draws; population draws scale the
+    optimum response (module docstring). ``solve_draw`` (optional, e.g. a coarser mesh) solves the draws instead:
+    each draw's response is multiplied by ``solve(optimum) / solve_draw(optimum)`` point by point, so the
+    discretisation error of the cheap solve cancels to first order. Returns ``x``, ``optimum``, ``measurement``,
+    ``specimen``, ``total`` (draws x points), ``failed`` (messages), ``population_log_sd``/``offset``, ``measurement_share`` (of the variance of
+    log y at the last point) and ``seconds``."""
+    t0 = time.perf_counter()
+    x, y_opt = solve(elastic_card(card, record, record.params))
+    ratio = 1.0
+    if solve_draw is not None:
+        ratio = y_opt / solve_draw(elastic_card(card, record, record.params))[1]
+    else:
+        solve_draw = solve
+    rng = np.random.default_rng(seed)
+    flat = {n: np.asarray(post[n].values, float).ravel() for n in post.data_vars}
+    picks = rng.choice(next(iter(flat.values())).size, size=n_draws, replace=False)
+    meas = np.full((n_draws, np.size(x)), np.nan)
+    failed = []
+    for row, k in enumerate(picks):
+        params = dict(record.params)
+        params.update({n: float(v[k]) for n, v in flat.items()})
+        try:
+            meas[row] = ratio * solve_draw(elastic_card(card, record, params))[1]
+        except (ElementInversionError, DynamicRelaxationError) as exc:  # a NaN row, reported
+            failed.append(f"draw {k}: {exc}")
+            logger.warning("uq FEM: draw %d failed: %s", k, exc)
+    g0_fit = reference_shear_modulus(record.model_key, record.params)
+    sd_pop = math.hypot(float(pop.get("sd_specimen", 0.0)), float(pop.get("sd_sample", 0.0)))
+    offset = float(pop["mean"]) - math.log(g0_fit) if pop.get("value") == "log_g0" and "mean" in pop else 0.0
+    factor = np.exp(offset + sd_pop * rng.standard_normal(n_draws))
+    spec, total = factor[:, None] * y_opt[None, :], factor[:, None] * meas
+    vm, vs = np.nanvar(np.log(np.abs(meas[:, -1]))), np.nanvar(np.log(np.abs(spec[:, -1])))
+    return {"x": np.asarray(x, float), "optimum": np.asarray(y_opt, float), "measurement": meas, "specimen": spec,
+            "total": total, "failed": failed, "population_log_sd": sd_pop, "population_log_offset": offset,
+            "var_log_measurement": float(vm), "var_log_specimen": float(vs),
+            "measurement_share": float(vm / (vm + vs)) if vm + vs > 0 else float("nan"),
+            "seconds": time.perf_counter() - t0}
+
+
+SOURCES = ("measurement", "specimen", "total")
+
+
+def bands_dataset(res: Mapping, x_name: str, x_units: str, y_name: str, y_units: str, attrs: Mapping) -> xr.Dataset:
+    """The draws and 5/50/95 % bands per source of :func:`propagate` as a Dataset (dims ``draw``, ``point``)."""
+    data = {f"{y_name}_optimum": ("point", res["optimum"], {"units": y_units})}
+    for src in SOURCES:
+        data[f"{y_name}_{src}"] = (("draw", "point"), res[src], {"units": y_units})
+        for q, v in band(res[src]).items():
+            data[f"{src}_{q}"] = ("point", v, {"units": y_units})
+    return xr.Dataset(data, coords={x_name: ("point", res["x"], {"units": x_units}),
+                                    "draw": np.arange(res["measurement"].shape[0])},
+                      attrs={**attrs, "population_log_sd": res["population_log_sd"],
+                             "population_log_offset": res["population_log_offset"],
+                             "var_log_measurement": res["var_log_measurement"],
+                             "var_log_specimen": res["var_log_specimen"],
+                             "measurement_share_of_variance": res["measurement_share"],
+                             "seconds": res["seconds"], "failed_draws": json.dumps(res["failed"]),
+                             "method": "posterior draws solved one by one; specimen band = population factor x "
+                                       "optimum response (exact: the bulk modulus follows mu through the Poisson "
+                                       "ratio and the relative Prony weights are unchanged, so every stress scales "
+                                       "with the factor)"})
+
+
+def plot_bands(ds: xr.Dataset, path, x_name: str, y_name: str, x_scale: float, y_scale: float, xlabel: str,
+               ylabel: str, title: str, reference: tuple[np.ndarray, np.ndarray] | None = None,
+               reference_label: str = "") -> list[Path]:
+    """5-95 % bands of the three sources with the optimum (and an optional measured reference curve)."""
+    fig, (ax,) = new_figure()
+    x = x_scale * np.asarray(ds[x_name].values)
+    styles = (("total", "0.75", 0.6), ("specimen", "tab:orange", 0.45), ("measurement", "tab:blue", 0.7))
+    for src, colour, alpha in styles:
+        ax.fill_between(x, y_scale * ds[f"{src}_q05"].values, y_scale * ds[f"{src}_q95"].values, color=colour,
+                        alpha=alpha, lw=0, label=f"{src} 5-95 %")
+    ax.plot(x, y_scale * ds[f"{y_name}_optimum"].values, "k-", lw=1.2, label="fit optimum")
+    if reference is not None:
+        ax.plot(x_scale * reference[0], y_scale * reference[1], "ko", ms=3, mfc="none", label=reference_label)
+    share = ds.attrs.get("measurement_share_of_variance", float("nan"))
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(f"{title}, measurement share {100 * share:.0f} %", fontsize=9)
+    ax.legend(fontsize=8, loc="upper left")
+    return save_figure(fig, path)
+
+
 def run_uq_indentation(posterior_nc, population_json, fits_dir, out_nc, figure_path, n_draws: int = 32,
                        punch_diameter_m: float = 8e-3, max_depth_m: float = 1.5e-3, speed_m_s: float = 1e-4,
                        element_size_m: float = 2e-3, n_increments: int = 6, seed: int = 0,
                        n_threads: int = 1) -> xr.Dataset:
     """Force-depth bands of the flat-punch indentation (module docstring): netCDF with the draws and the 5/50/95 %
     bands per source (``measurement``, ``specimen``, ``total``) and a figure."""
-    card = json.loads(Path(population_json).read_text())
-    pop = (card.get("uncertainty") or {}).get("population", {}) if isinstance(card.get("uncertainty"), Mapping) else {}
-    post = read_inference_group(posterior_nc, "posterior")
-    record = F.FitRecord.from_netcdf(Path(fits_dir) / f"{post.attrs['model']}.nc")
-    optimum = elastic_card(card, record, record.params)
-    if optimum is None:
-        raise ValueError(f"{record.model_key}: no elastic law the FEM can run")
+    card, pop, post, record = _load_uq_inputs(posterior_nc, population_json, fits_dir)
 
     def solve(c):
         ds = flat_punch_indentation(c, punch_diameter_m, max_depth_m, speed_m_s, element_size_m=element_size_m,
                                     n_increments=n_increments, n_threads=n_threads)
         return np.asarray(ds["displacement"].values, float), np.asarray(ds["force"].values, float)
 
-    t0 = time.perf_counter()
-    depth, f_opt = solve(optimum)
-    rng = np.random.default_rng(seed)
-    flat = {n: np.asarray(post[n].values, float).ravel() for n in post.data_vars}
-    picks = rng.choice(next(iter(flat.values())).size, size=n_draws, replace=False)
-    f_meas = np.full((n_draws, depth.size), np.nan)
-    failed = []
-    for j, k in enumerate(picks):
-        params = dict(record.params)
-        params.update({n: float(v[k]) for n, v in flat.items()})
-        c = elastic_card(card, record, params)
-        try:
-            f_meas[j] = solve(c)[1]
-        except (ElementInversionError, DynamicRelaxationError) as exc:  # a NaN row, reported
-            failed.append(f"draw {k}: {exc}")
-            logger.warning("uq indentation: draw %d failed: %s", k, exc)
-    g0_fit = reference_shear_modulus(record.model_key, record.params)
-    sd_pop = math.hypot(float(pop.get("sd_specimen", 0.0)), float(pop.get("sd_sample", 0.0)))
-    offset = float(pop.get("mean", math.log(g0_fit))) - math.log(g0_fit) if pop.get("value") == "log_g0" else 0.0
-    log_s = offset + sd_pop * rng.standard_normal(n_draws)
-    f_spec = np.exp(log_s)[:, None] * f_opt[None, :]
-    f_total = np.exp(log_s)[:, None] * f_meas
-    seconds = time.perf_counter() - t0
-
-    def share(fm, fs):  # variance of log force at the deepest point, per source
-        vm, vs = np.nanvar(np.log(fm[:, -1])), np.nanvar(np.log(fs[:, -1]))
-        return vm, vs
-
-    vm, vs = share(f_meas, f_spec)
-    data = {"force_optimum": ("point", f_opt, {"units": "N"}),
-            "force_measurement": (("draw", "point"), f_meas, {"units": "N"}),
-            "force_specimen": (("draw", "point"), f_spec, {"units": "N"}),
-            "force_total": (("draw", "point"), f_total, {"units": "N"})}
-    for src, arr in (("measurement", f_meas), ("specimen", f_spec), ("total", f_total)):
-        for q, v in band(arr).items():
-            data[f"{src}_{q}"] = ("point", v, {"units": "N"})
-    ds = xr.Dataset(data, coords={"depth": ("point", depth, {"units": "m"}), "draw": np.arange(n_draws)},
-                    attrs={"model": record.model_key, "elastic_law": optimum["elastic_law"],
-                           "punch_diameter_m": punch_diameter_m, "max_depth_m": max_depth_m,
-                           "element_size_m": element_size_m, "n_draws": n_draws, "seed": seed,
-                           "population_log_sd": sd_pop, "population_log_offset": offset,
-                           "var_log_force_measurement": vm, "var_log_force_specimen": vs,
-                           "measurement_share_of_variance": vm / (vm + vs) if vm + vs > 0 else float("nan"),
-                           "seconds": seconds, "failed_draws": json.dumps(failed),
-                           "method": "posterior draws solved one by one; specimen band = population factor x optimum "
-                                     "force (exact for a quasi-static hyperelastic law with K proportional to mu)"})
+    res = propagate(solve, card, pop, post, record, n_draws, seed)
+    ds = bands_dataset(res, "depth", "m", "force", "N",
+                       {"experiment": "flat-punch indentation", "model": record.model_key,
+                        "elastic_law": elastic_card(card, record, record.params)["elastic_law"],
+                        "punch_diameter_m": punch_diameter_m, "max_depth_m": max_depth_m, "speed_m_s": speed_m_s,
+                        "element_size_m": element_size_m, "n_draws": n_draws, "seed": seed})
     write_netcdf(ds, out_nc)
-    plot_uq_indentation(ds, figure_path)
+    plot_bands(ds, figure_path, "depth", "force", 1e3, 1e3, "indentation depth [mm]", "force [mN]",
+               f"{record.model_key}: {punch_diameter_m * 1e3:g} mm punch")
     return ds
 
 
-def plot_uq_indentation(ds: xr.Dataset, path) -> list[Path]:
-    """Force-depth 5-95 % bands: measurement (posterior), specimen (population) and total, with the optimum."""
-    fig, (ax,) = new_figure()
-    d = 1e3 * np.asarray(ds["depth"].values)
-    for src, colour in (("total", "0.8"), ("specimen", "tab:orange"), ("measurement", "tab:blue")):
-        ax.fill_between(d, 1e3 * ds[f"{src}_q05"].values, 1e3 * ds[f"{src}_q95"].values, color=colour,
-                        alpha=0.45 if src != "total" else 0.6, lw=0, label=f"{src} 5-95 %")
-    ax.plot(d, 1e3 * ds["force_optimum"].values, "k-", lw=1.2, label="fit optimum")
-    share = ds.attrs.get("measurement_share_of_variance", float("nan"))
-    ax.set_xlabel("indentation depth [mm]")
-    ax.set_ylabel("force [mN]")
-    ax.set_title(f"{ds.attrs.get('model')}: {1e3 * ds.attrs.get('punch_diameter_m', 0):g} mm punch, "
-                 f"measurement share {100 * share:.0f} %", fontsize=9)
-    ax.legend(fontsize=8, loc="upper left")
-    return save_figure(fig, path)
+def run_uq_torsion(posterior_nc, population_json, fits_dir, averages_path, out_nc, figure_path, n_draws: int = 32,
+                   n_points: int = 8, element_size_m: float = 1.5e-3, draw_element_size_m: float = 2.5e-3,
+                   seed: int = 0, n_threads: int = 1) -> xr.Dataset:
+    """Torque-rim strain bands of the rheometer torsion at the dataset's fastest constant shear rate (the plate
+    geometry and the measured mean torque of that rate from ``averages.nc``), as :func:`run_uq_indentation`. The
+    optimum is solved on the ``element_size_m`` mesh (the pipeline's torsion mesh), the draws on the coarser
+    ``draw_element_size_m`` mesh corrected point by point by the optimum's fine/coarse ratio (:func:`propagate`;
+    on the bundled brain the coarse mesh alone is 3 % stiffer and 3.5 times cheaper)."""
+    card, pop, post, record = _load_uq_inputs(posterior_nc, population_json, fits_dir)
+    avg = read_netcdf(averages_path)
+    idx = [i for i, t in enumerate(avg["test"].values) if str(t) == "constant_shear_rate"]
+    if not idx:
+        raise ValueError("no constant_shear_rate curve: no torsion to compare with")
+    rates = np.array([float(avg["shear_rate_1_per_s"].values[i]) for i in idx])
+    i = idx[int(np.argmax(rates))]
+    rate = float(rates.max())
+    radius = float(np.nanmedian(np.asarray(avg["radius_m"].values, float)[idx]))
+    gap = float(np.nanmedian(np.asarray(avg["gap_m"].values, float)[idx]))
+    one = select_average(avg, "constant_shear_rate", str(avg["condition"].values[i]))
+    strain = np.asarray(one[next(iter(one.coords))].values, float)
+    stress = np.asarray(one["shear_stress_mean"].values, float)
+    ok = np.isfinite(strain) & np.isfinite(stress) & (strain > 0)
+    strain, torque = strain[ok], stress[ok] * math.pi * radius ** 3 / 2.0
+    gamma = np.linspace(strain.max() / n_points, strain.max(), n_points)
+
+    def solver(h):
+        def solve(c):
+            ds = rheometer_torsion(c, gamma / rate, gamma, radius_m=radius, gap_m=gap, element_size_m=h,
+                                   n_threads=n_threads)
+            return gamma, np.asarray(ds["torque"].values, float)
+        return solve
+
+    coarse = solver(draw_element_size_m) if draw_element_size_m > element_size_m else None
+    res = propagate(solver(element_size_m), card, pop, post, record, n_draws, seed, solve_draw=coarse)
+    ds = bands_dataset(res, "rim_strain", "1", "torque", "N m",
+                       {"experiment": "rheometer torsion", "model": record.model_key, "rate_1_per_s": rate,
+                        "radius_m": radius, "gap_m": gap, "element_size_m": element_size_m,
+                        "draw_element_size_m": max(draw_element_size_m, element_size_m), "n_draws": n_draws,
+                        "seed": seed})
+    ds["torque_measured"] = ("point", np.interp(gamma, strain, torque), {"units": "N m",
+                                                                         "meaning": "mean measured torque"})
+    write_netcdf(ds, out_nc)
+    plot_bands(ds, figure_path, "rim_strain", "torque", 1.0, 1e6, "rim strain [-]", "torque [µN m]",
+               f"{record.model_key}: torsion {rate:g} 1/s", reference=(gamma, ds["torque_measured"].values),
+               reference_label="measured mean")
+    return ds
 
 
 __all__ = ["problem_for_record", "internal_covariance", "sample_record_posterior", "posterior_table",
            "inference_data", "write_inference_data", "read_inference_group", "run_posterior", "Z95", "IDATA_GROUPS",
            "reference_shear_modulus", "piece_levels", "mixed_effects", "run_population", "elastic_card", "band",
-           "run_uq_indentation", "plot_uq_indentation", "predictive_draws", "plot_posterior_predictive",
+           "run_uq_indentation", "run_uq_torsion", "propagate",
+           "bands_dataset", "plot_bands", "SOURCES", "predictive_draws", "plot_posterior_predictive",
            "N_PREDICTIVE"]

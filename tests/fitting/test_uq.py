@@ -17,7 +17,8 @@ TRUTH = {"C10": 150.0, "C20": 100.0}
 
 @pytest.fixture(scope="module")
 def synthetic_fit():
-    """Reduced-polynomial-2 simple shear with 2 % Gaussian noise (known truth), fitted by lmfit: near-Gaussian posterior."""
+    """Reduced-polynomial-2 simple shear with 2 % Gaussian noise (known truth), fitted by lmfit: a near-Gaussian
+    posterior."""
     model = get_model("reduced_polynomial2")
     g = np.linspace(0.01, 0.8, 60)
     clean = model.elastic_shear_stress(TRUTH, g)
@@ -121,9 +122,9 @@ def test_mixed_effects_with_repeated_runs_separates_sample_from_within_piece():
 # ------------------------------------------------------------------------------------------------------
 # propagation to the FEM: the cards of posterior draws
 # ------------------------------------------------------------------------------------------------------
-def test_elastic_card_of_a_qlv_fit_reproduces_its_card():
-    """At the optimum, the draw card of a QLV fit is the fit's own card (law, parameters, bulk modulus, Prony
-    series from the step response = the QLV weights), so the posterior draws are solved with the same material."""
+@pytest.fixture(scope="module")
+def qlv_fit():
+    """A QLV (RP3 x Prony 4) fit to its own constant-rate ramp, its card and record."""
     from tissuemech import cards as C
     from tissuemech.models.qlv import qlv_params
 
@@ -133,11 +134,17 @@ def test_elastic_card_of_a_qlv_fit_reproduces_its_card():
     t = np.linspace(0.0, 50.0, 41)
     g = 0.01 * t
     curve = F.Curve(test="constant_shear_rate", condition="rate=0.01/s", response="shear_history",
-                    inputs={"time": t, "shear_strain": g}, observed={"shear_stress": model.shear_stress_history(truth, t, g)[1:]},
+                    inputs={"time": t, "shear_strain": g},
+                    observed={"shear_stress": model.shear_stress_history(truth, t, g)[1:]},
                     obs_index=np.arange(1, 41), nominal={"shear_rate_1_per_s": 0.01})
     result = F.fit(F.FitProblem(model, [curve], target="none", model_key=key), starts=[truth], n_random=0)
-    card = C.make_card(result, model, poisson_ratio=0.49)
-    record = F.FitRecord.from_result(result)
+    return C.make_card(result, model, poisson_ratio=0.49), F.FitRecord.from_result(result)
+
+
+def test_elastic_card_of_a_qlv_fit_reproduces_its_card(qlv_fit):
+    """At the optimum, the draw card of a QLV fit is the fit's own card (law, parameters, bulk modulus, Prony
+    series from the step response = the QLV weights), so the posterior draws are solved with the same material."""
+    card, record = qlv_fit
     draw = uq.elastic_card(card, record, record.params)
     assert draw["elastic_law"] == card["elastic_law"] == "reduced_polynomial3"
     for k, v in card["elastic_parameters"].items():
@@ -147,3 +154,32 @@ def test_elastic_card_of_a_qlv_fit_reproduces_its_card():
     assert draw["prony"]["g_inf"] == pytest.approx(card["prony"]["g_inf"], abs=1e-9)
     bands = uq.band(np.array([[1.0, 2.0], [3.0, 4.0], [np.nan, 6.0]]))
     assert bands["q50"][0] == pytest.approx(2.0) and bands["q50"][1] == pytest.approx(4.0)
+
+
+def test_propagate_splits_sources_and_corrects_cheap_draw_solves(qlv_fit):
+    """With a stand-in solver linear in C10: the specimen band is the population factor times the optimum, and
+    draws solved by a 10 % stiffer 'coarse' solver are corrected back to the fine solver exactly."""
+    import xarray as xr
+
+    card, record = qlv_fit
+    x = np.linspace(0.1, 1.0, 5)
+    c10 = np.random.default_rng(0).normal(record.params["C10"], 2.0, size=(2, 50))
+    post = xr.Dataset({"C10": (("chain", "draw"), c10)})
+    pop = {"value": "log_g0", "mean": np.log(uq.reference_shear_modulus(record.model_key, record.params)),
+           "sd_specimen": 0.1, "sd_sample": 0.05}
+
+    def fine(c):
+        return x, c["elastic_parameters"]["C10"] * x
+
+    def coarse(c):
+        return x, 1.1 * c["elastic_parameters"]["C10"] * x
+
+    res = uq.propagate(fine, card, pop, post, record, n_draws=20, seed=1, solve_draw=coarse)
+    ref = uq.propagate(fine, card, pop, post, record, n_draws=20, seed=1)
+    np.testing.assert_allclose(res["measurement"], ref["measurement"], rtol=1e-12)
+    factor = res["specimen"] / res["optimum"][None, :]
+    assert np.allclose(factor, factor[:, :1]) and np.std(np.log(factor[:, 0])) == pytest.approx(0.112, rel=0.5)
+    assert res["population_log_offset"] == pytest.approx(0.0, abs=1e-12)
+    assert 0.0 < res["measurement_share"] < 0.5 and res["failed"] == []
+    ds = uq.bands_dataset(res, "x", "1", "y", "N", {"experiment": "stand-in"})
+    assert set(uq.SOURCES) <= {k.split("_")[0] for k in ds.data_vars} and ds.sizes["draw"] == 20

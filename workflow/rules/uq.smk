@@ -22,6 +22,8 @@ def uq_targets():
                 targets.append(f"results/{name}/population/{scope}.card.json")
                 if POSTERIOR.get("fem_draws", 0):
                     targets.append(f"results/{name}/uq/indentation_{scope}.nc")
+                    if has_shear_ramps(name):
+                        targets.append(f"results/{name}/uq/torsion_{scope}.nc")
     return targets
 
 
@@ -110,6 +112,35 @@ rule uq_indentation:
     params:
         n_draws=POSTERIOR.get("fem_draws", 32),
         element_size_m=config["fem"]["block_element_size_m"],
+        seed=POSTERIOR.get("seed", 0),
+        pkg=script_hash("workflow/scripts/uq_fem.py"),
+    script:
+        "../scripts/uq_fem.py"
+
+
+rule uq_torsion:
+    input:
+        posterior="results/{dataset}/posterior/{scope}.nc",
+        population="results/{dataset}/population/{scope}.card.json",
+        fits="results/{dataset}/fits/{scope}",
+        averages="results/{dataset}/averages.nc",
+    output:
+        data="results/{dataset}/uq/torsion_{scope}.nc",
+        figure=report(
+            "results/{dataset}/figures/uq_torsion_{scope}.png",
+            caption="../report/uq_torsion.rst",
+            category="{dataset}",
+            subcategory="7 FEM experiments",
+            labels={"experiment": "torsion bands", "item": "{scope}"},
+        ),
+    log:
+        "logs/{dataset}/uq_torsion_{scope}.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/uq_torsion_{scope}.tsv"
+    threads: FEM_THREADS
+    params:
+        n_draws=POSTERIOR.get("fem_draws", 32),
+        element_size_m=config["fem"]["cylinder_element_size_m"],
         seed=POSTERIOR.get("seed", 0),
         pkg=script_hash("workflow/scripts/uq_fem.py"),
     script:
