@@ -76,7 +76,10 @@ rule population:
             caption="../report/population_levels.rst",
             category="{dataset}",
             subcategory="3 fits: {scope}",
-            labels={"scope": "{scope}", "model": "specimen variability (per-piece levels)"},
+            labels={
+                "scope": "{scope}",
+                "model": "specimen variability (per-piece levels)",
+            },
         ),
     log:
         "logs/{dataset}/population_{scope}.log",
