@@ -9,24 +9,13 @@ import numpy as np
 from test_verification import L, _shear_cube
 
 from tissuemech import cards as C
-from tissuemech import fitting as F
 from tissuemech.fem.experiments import card_material
 from tissuemech.fem.tled import solve_quasistatic
-from tissuemech.models.qlv import qlv_params
-from tissuemech.models.registry import get_model
 
 
-def test_qlv_card_file_round_trip_through_the_solver(tmp_path):
-    key = "qlv_rp3_prony4"
-    model = get_model(key)
-    truth = qlv_params(model, {"C10": 150.0, "C20": 50.0, "C30": 200.0}, [0.3, 0.2, 0.15, 0.05])
-    t_fit = np.linspace(0.0, 50.0, 41)
-    g_fit = 0.01 * t_fit
-    curve = F.Curve(test="constant_shear_rate", condition="rate=0.01/s", response="shear_history",
-                    inputs={"time": t_fit, "shear_strain": g_fit},
-                    observed={"shear_stress": model.shear_stress_history(truth, t_fit, g_fit)[1:]},
-                    obs_index=np.arange(1, 41), nominal={"shear_rate_1_per_s": 0.01})
-    result = F.fit(F.FitProblem(model, [curve], target="none", model_key=key), starts=[truth], n_random=0)
+def test_qlv_card_file_round_trip_through_the_solver(tmp_path, qlv_rp3_fit):
+    model, result = qlv_rp3_fit
+    key = result.model_key
     paths = C.write_card_files(C.make_card(result, model, poisson_ratio=0.49), tmp_path, stem=key)
     card = json.loads(paths["json"].read_text())  # what an FE user (or the TLED engine) gets
     assert card["elastic_law"] == "reduced_polynomial3" and len(card["prony"]["g"]) == 4

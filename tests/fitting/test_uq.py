@@ -123,21 +123,11 @@ def test_mixed_effects_with_repeated_runs_separates_sample_from_within_piece():
 # propagation to the FEM: the cards of posterior draws
 # ------------------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def qlv_fit():
-    """A QLV (RP3 x Prony 4) fit to its own constant-rate ramp, its card and record."""
+def qlv_fit(qlv_rp3_fit):
+    """The card and record of the QLV fit of ``tests/conftest.py``."""
     from tissuemech import cards as C
-    from tissuemech.models.qlv import qlv_params
 
-    key = "qlv_rp3_prony4"
-    model = get_model(key)
-    truth = qlv_params(model, {"C10": 150.0, "C20": 50.0, "C30": 200.0}, [0.3, 0.2, 0.15, 0.05])
-    t = np.linspace(0.0, 50.0, 41)
-    g = 0.01 * t
-    curve = F.Curve(test="constant_shear_rate", condition="rate=0.01/s", response="shear_history",
-                    inputs={"time": t, "shear_strain": g},
-                    observed={"shear_stress": model.shear_stress_history(truth, t, g)[1:]},
-                    obs_index=np.arange(1, 41), nominal={"shear_rate_1_per_s": 0.01})
-    result = F.fit(F.FitProblem(model, [curve], target="none", model_key=key), starts=[truth], n_random=0)
+    model, result = qlv_rp3_fit
     return C.make_card(result, model, poisson_ratio=0.49), F.FitRecord.from_result(result)
 
 
