@@ -20,9 +20,10 @@ include: "workflow/rules/fit.smk"
 include: "workflow/rules/diagnose.smk"
 include: "workflow/rules/fem.smk"
 include: "workflow/rules/report.smk"
+include: "workflow/rules/uq.smk"
 
 
 rule all:
     default_target: True
     input:
-        all_targets(),
+        all_targets() + uq_targets(),

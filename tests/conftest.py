@@ -23,6 +23,28 @@ def repo_root() -> Path:
     return ROOT
 
 
+@pytest.fixture(scope="module")
+def qlv_rp3_fit():
+    """A QLV (RP3 x Prony 4) fit to its own noise-free 0.01 1/s ramp: ``(model, FitResult)`` (the uncertainty and
+    the card-file tests start from it)."""
+    import numpy as np
+
+    from tissuemech import fitting as F
+    from tissuemech.models.qlv import qlv_params
+    from tissuemech.models.registry import get_model
+
+    key = "qlv_rp3_prony4"
+    model = get_model(key)
+    truth = qlv_params(model, {"C10": 150.0, "C20": 50.0, "C30": 200.0}, [0.3, 0.2, 0.15, 0.05])
+    t = np.linspace(0.0, 50.0, 41)
+    g = 0.01 * t
+    curve = F.Curve(test="constant_shear_rate", condition="rate=0.01/s", response="shear_history",
+                    inputs={"time": t, "shear_strain": g},
+                    observed={"shear_stress": model.shear_stress_history(truth, t, g)[1:]},
+                    obs_index=np.arange(1, 41), nominal={"shear_rate_1_per_s": 0.01})
+    return model, F.fit(F.FitProblem(model, [curve], target="none", model_key=key), starts=[truth], n_random=0)
+
+
 @pytest.hookimpl(trylast=True)
 def pytest_collection_modifyitems(config, items):
     """Make ``--dist loadgroup`` honour ``xdist_group`` under pytest >= 9.

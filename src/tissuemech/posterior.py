@@ -7,7 +7,24 @@ Model (stated in every result's ``priors`` and ``likelihood``):
   standard deviation; ``s2 = chi2_min / (n - k)`` (lmfit's ``redchi``) reproduces lmfit's default covariance
   scaling (``scale_covar=True``), so a near-Gaussian posterior then has the lmfit standard errors as its spread.
 * priors: independent uniform priors on the given bounds (each parameter's fit bounds); nothing else.
-* start: ``n_walkers`` points in a small Gaussian ball around the optimum (``1e-3`` of each parameter's scale).
+* start: ``n_walkers`` points around the optimum: drawn from the fit's Laplace approximation ``N(optimum, cov)``
+  (lmfit's covariance) when ``cov`` is given, else a small Gaussian ball (``1e-3`` of each parameter's scale);
+  points outside the bounds are clipped into them.
+
+Moves (all leave the posterior invariant; emcee's ensemble framework):
+
+* burn-in (``burn`` steps): with ``cov``, an independence Metropolis-Hastings move whose proposal is a Student-t
+  (5 degrees of freedom) centred on the optimum with scale matrix ``1.5^2 cov`` (weight 0.6) and a Gaussian
+  random walk with covariance ``2.38^2 / d cov`` (0.4); without ``cov``, differential evolution (``DEMove`` 0.8,
+  ``DESnookerMove`` 0.2; ter Braak & Vrugt 2008, needs ``n_walkers >= 2 d``);
+* kept steps: the independence move with a Student-t proposal (10 degrees of freedom) fitted to the second half of
+  the burn-in (mean and covariance of the walkers; frozen before the kept steps, so each walker is a plain
+  Metropolis-Hastings chain) with weight 0.7, and the Gaussian random walk with the burn-in covariance (0.3,
+  robust where the posterior is far from the proposal, e.g. truncated at a bound). Both are single-walker moves, so a few
+  long chains (e.g. 8) can be run: split R-hat needs many effective draws *per chain*, the ESS only in total.
+  On the bundled brain's QLV fit this gives integrated autocorrelation times of ~6 steps, against ~30 for
+  emcee's default stretch move; on its beyond-QLV (Pipkin-Rogers) fit, whose posterior is truncated at a Prony
+  weight's bound, ~20 steps. With ``burn < 20`` the burn-in moves are used throughout (no adaptation).
 
 Diagnostics (Gelman et al., *Bayesian Data Analysis*, 3rd ed., section 11.4, split R-hat; emcee's integrated
 autocorrelation time, Foreman-Mackey et al. 2013 PASP 125:306):
@@ -39,6 +56,9 @@ RHAT_MAX = 1.01
 ESS_MIN = 400.0
 #: lowest acceptance fraction not flagged (lower end of Foreman-Mackey et al. 2013's 0.2-0.5)
 ACCEPTANCE_MIN = 0.2
+#: scale factor and degrees of freedom of the kept steps' Student-t independence proposal (module docstring)
+KEPT_PROPOSAL_SCALE = 1.0
+KEPT_PROPOSAL_DF = 10.0
 
 
 @dataclass
@@ -47,6 +67,10 @@ class PosteriorResult:
 
     names: list[str]
     samples: np.ndarray
+    #: kept chain, shape ``(n_walkers, n_kept, n_params)`` (ArviZ's chain/draw order)
+    chain: np.ndarray
+    #: log posterior of the kept chain, shape ``(n_walkers, n_kept)``
+    log_prob: np.ndarray
     rhat: dict[str, float]
     ess: dict[str, float]
     tau: dict[str, float]
@@ -86,9 +110,39 @@ def split_rhat(chains: np.ndarray) -> float:
     return float(np.sqrt(var_plus / w)) if w > 0 else float("nan")
 
 
+def _student_t_move(mean: np.ndarray, scale_cov: np.ndarray, df: float = 5.0):
+    """Independence Metropolis-Hastings move: proposals from a multivariate Student-t (``mean``, ``scale_cov``)."""
+    chol = np.linalg.cholesky(scale_cov)
+    inv = np.linalg.inv(chol)
+    d = mean.size
+
+    def log_q(x):
+        z = (x - mean) @ inv.T
+        return -0.5 * (df + d) * np.log1p(np.sum(z * z, axis=1) / df)
+
+    def propose(coords, random):
+        k = coords.shape[0]
+        z = random.standard_normal((k, d)) * np.sqrt(df / random.chisquare(df, k))[:, None]
+        q = mean + z @ chol.T
+        return q, log_q(coords) - log_q(q)
+
+    return emcee.moves.MHMove(propose)
+
+
+def _positive_definite(cov: np.ndarray, max_condition: float = 1e12) -> bool:
+    """Finite, positive definite and not near-singular (correlation condition number below ``max_condition``)."""
+    cov = np.atleast_2d(np.asarray(cov, float))
+    if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) <= 0):
+        return False
+    sd = np.sqrt(np.diag(cov))
+    evals = np.linalg.eigvalsh(cov / np.outer(sd, sd))
+    return bool(evals[0] > 0 and evals[-1] / evals[0] < max_condition)
+
+
 def sample_posterior(residual: Callable[[np.ndarray], np.ndarray], optimum: Mapping[str, float],
                      bounds: Mapping[str, tuple[float, float]], noise_variance: float = 1.0, n_walkers: int = 32,
-                     n_steps: int = 3000, burn: int = 1000, seed: int = 0) -> PosteriorResult:
+                     n_steps: int = 3000, burn: int = 1000, seed: int = 0,
+                     cov: np.ndarray | None = None) -> PosteriorResult:
     """Sample the posterior of parameters whose residual vector a fit minimised.
 
     Parameters
@@ -102,7 +156,10 @@ def sample_posterior(residual: Callable[[np.ndarray], np.ndarray], optimum: Mapp
     noise_variance : float
         ``s2`` of the likelihood (see the module docstring); 1 for residuals in units of a known noise SD.
     n_walkers, n_steps, burn, seed : int
-        Ensemble size, steps per walker, discarded steps, random seed.
+        Ensemble size, kept steps per walker (after the burn-in), burn-in steps, random seed.
+    cov : array, optional
+        Covariance of the Laplace approximation at the optimum (lmfit's), in the order of ``optimum``: the start
+        and the burn-in proposal (see the module docstring). Ignored when not finite and positive definite.
 
     Returns
     -------
@@ -114,6 +171,7 @@ def sample_posterior(residual: Callable[[np.ndarray], np.ndarray], optimum: Mapp
     x0 = np.array([float(optimum[n]) for n in names])
     lo = np.array([float(bounds[n][0]) for n in names])
     hi = np.array([float(bounds[n][1]) for n in names])
+    d = x0.size
 
     def log_prob(theta):
         if np.any(theta < lo) or np.any(theta > hi):
@@ -123,14 +181,43 @@ def sample_posterior(residual: Callable[[np.ndarray], np.ndarray], optimum: Mapp
         return -0.5 * chi2 / noise_variance if np.isfinite(chi2) else -np.inf
 
     rng = np.random.default_rng(seed)
-    scale = np.where(x0 != 0, 1e-3 * np.abs(x0), 1e-6)
-    start = x0 + scale * rng.standard_normal((n_walkers, x0.size))
-    start = np.clip(start, lo + 1e-12 * np.abs(lo), hi - 1e-12 * np.abs(hi))
-    sampler = emcee.EnsembleSampler(n_walkers, x0.size, log_prob)
-    sampler.random_state = np.random.RandomState(seed).get_state()
-    sampler.run_mcmc(start, n_steps, progress=False)
-    chain = sampler.get_chain(discard=burn)  # (steps, walkers, params)
-    tau = np.atleast_1d(sampler.get_autocorr_time(discard=burn, quiet=True))
+    laplace = cov is not None and _positive_definite(np.asarray(cov, float))
+    if laplace:
+        start = rng.multivariate_normal(x0, np.asarray(cov, float), size=n_walkers)
+    else:
+        scale = np.where(x0 != 0, 1e-3 * np.abs(x0), 1e-6)
+        start = x0 + scale * rng.standard_normal((n_walkers, d))
+    width = np.where(np.isfinite(hi - lo), hi - lo, np.abs(x0) + 1.0)
+    start = np.clip(start, lo + 1e-9 * width, hi - 1e-9 * width)
+    rw = 2.38 ** 2 / d  # optimal random-walk scale for a Gaussian target (Gelman, Roberts & Gilks 1996)
+    burn_moves = [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
+    if laplace:
+        burn_moves = [(_student_t_move(x0, 1.5 ** 2 * np.asarray(cov, float)), 0.6),
+                      (emcee.moves.GaussianMove(rw * np.asarray(cov, float)), 0.4)]
+
+    def sampler_with(moves):
+        s = emcee.EnsembleSampler(n_walkers, d, log_prob, moves=moves)
+        s.random_state = np.random.RandomState(int(rng.integers(2 ** 31))).get_state()
+        return s
+
+    state = start
+    if burn >= 20:
+        pre = sampler_with(burn_moves)
+        state = pre.run_mcmc(start, burn, progress=False, skip_initial_state_check=True)
+        tail = pre.get_chain(discard=burn // 2, flat=True)
+        mean, tail_cov = tail.mean(axis=0), np.atleast_2d(np.cov(tail.T))
+        kept = _student_t_move(mean, KEPT_PROPOSAL_SCALE ** 2 * tail_cov, df=KEPT_PROPOSAL_DF)
+        moves = ([(kept, 0.7), (emcee.moves.GaussianMove(rw * tail_cov), 0.3)]
+                 if _positive_definite(tail_cov) else burn_moves)
+    else:
+        moves = burn_moves
+        if burn > 0:
+            pre = sampler_with(burn_moves)
+            state = pre.run_mcmc(start, burn, progress=False, skip_initial_state_check=True)
+    sampler = sampler_with(moves)
+    sampler.run_mcmc(state, n_steps, progress=False, skip_initial_state_check=True)
+    chain = sampler.get_chain()  # (steps, walkers, params)
+    tau = np.atleast_1d(sampler.get_autocorr_time(quiet=True))
     n_kept = chain.shape[0]
     rhat = {n: split_rhat(chain[:, :, i].T) for i, n in enumerate(names)}
     ess = {n: float(n_walkers * n_kept / tau[i]) for i, n in enumerate(names)}
@@ -141,7 +228,8 @@ def sample_posterior(residual: Callable[[np.ndarray], np.ndarray], optimum: Mapp
         warnings.append(f"acceptance fraction {acceptance:.2f} < {ACCEPTANCE_MIN}")
     priors = {n: f"uniform on [{lo[i]:.6g}, {hi[i]:.6g}]" for i, n in enumerate(names)}
     likelihood = f"Gaussian in the fit residuals, log L = -chi2 / (2 s2), s2 = {noise_variance:.6g}"
-    return PosteriorResult(names=names, samples=chain.reshape(-1, x0.size), rhat=rhat, ess=ess,
+    return PosteriorResult(names=names, samples=chain.reshape(-1, d), chain=np.swapaxes(chain, 0, 1),
+                           log_prob=sampler.get_log_prob().T, rhat=rhat, ess=ess,
                            tau={n: float(tau[i]) for i, n in enumerate(names)}, acceptance=acceptance,
                            priors=priors, likelihood=likelihood, warnings=warnings)
 

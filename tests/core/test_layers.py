@@ -25,7 +25,7 @@ LAYERS: tuple[frozenset[str], ...] = tuple(frozenset(names.split()) for names in
     "models spectra curves lve",
     "fitting io synth plots posterior cards_febio pipeline",
     "ranking cards tts",
-    "diagnosis stages fem",
+    "diagnosis stages fem uq",
     "summary cli regression",
 ))
 

@@ -1,0 +1,175 @@
+"""Posteriors of fit records (tissuemech.uq): on a near-Gaussian synthetic fit with known truth the 5-95 % credible
+interval agrees with the lmfit standard error within 15 %, the InferenceData file reads back, and a scope without a
+recommended model says so."""
+from __future__ import annotations
+
+import emcee  # noqa: F401  (test extra: a missing emcee is an error, not a skip)
+import numpy as np
+import pandas as pd
+import pytest
+
+from tissuemech import fitting as F
+from tissuemech import uq
+from tissuemech.models.registry import get_model
+
+TRUTH = {"C10": 150.0, "C20": 100.0}
+
+
+@pytest.fixture(scope="module")
+def synthetic_fit():
+    """Reduced-polynomial-2 simple shear with 2 % Gaussian noise (known truth), fitted by lmfit: a near-Gaussian
+    posterior."""
+    model = get_model("reduced_polynomial2")
+    g = np.linspace(0.01, 0.8, 60)
+    clean = model.elastic_shear_stress(TRUTH, g)
+    rng = np.random.default_rng(11)
+    y = clean * (1.0 + 0.02 * rng.standard_normal(g.size))
+    curve = F.Curve(test="simple_shear", condition="shear", response="elastic_shear", inputs={"shear_strain": g},
+                    observed={"shear_stress": y})
+    problem = F.FitProblem(model, [curve], target="none", model_key="reduced_polynomial2", scope="simple_shear")
+    result = F.fit(problem, starts=[TRUTH], n_random=0)
+    return problem, F.FitRecord.from_result(result)
+
+
+def test_credible_intervals_match_lmfit_standard_errors(synthetic_fit):
+    problem, record = synthetic_fit
+    post, info = uq.sample_record_posterior(problem, record, walkers=8, steps=1500, burn=200, seed=3)
+    table = uq.posterior_table(record, post, scope="simple_shear").set_index("parameter")
+    assert info["laplace_start"] and set(table.index) == set(record.varying)
+    for name in record.varying:
+        row = table.loc[name]
+        # near-Gaussian posterior: 90 % credible width = 2 x 1.645 lmfit standard errors within 15 %
+        assert row["ci90_over_lmfit"] == pytest.approx(1.0, abs=0.15), row
+        assert abs(row["post_mean"] - TRUTH[name]) < 3 * row["stderr"]  # the truth is where the posterior is
+        assert row["ci05"] < row["value"] < row["ci95"]
+        assert row["rhat"] < 1.01 and row["ess"] > 400
+    assert post.warnings == []
+
+
+def test_inference_data_round_trip(synthetic_fit, tmp_path):
+    problem, record = synthetic_fit
+    post, info = uq.sample_record_posterior(problem, record, walkers=4, steps=100, burn=40, seed=1)
+    path = uq.write_inference_data(uq.inference_data(record, post, info, dataset="d", scope="s"), tmp_path / "p.nc")
+    g = uq.read_inference_group(path, "posterior")
+    assert g.sizes == {"chain": 4, "draw": 100} and set(g.data_vars) == set(record.varying)
+    np.testing.assert_allclose(g["C10"].values, 10.0 ** post.chain[:, :, post.names.index("log10_C10")])
+    assert g.attrs["model"] == "reduced_polynomial2" and "uniform on" in g["C10"].attrs["prior"]
+    assert set(eval(g.attrs["rhat"])) == set(record.varying)  # JSON of plain floats
+    assert uq.read_inference_group(path, "sample_stats")["lp"].shape == (4, 100)
+    pred = uq.predictive_draws(problem, record, post, n_draws=10)
+    assert len(pred) == 1 and pred[0]["shear_stress"].shape == (10, 60)
+    # the draws scatter around the fitted curve
+    np.testing.assert_allclose(np.median(pred[0]["shear_stress"], axis=0), record.predicted, rtol=0.05)
+    written = uq.plot_posterior_predictive(problem, pred, tmp_path / "pp.png")
+    assert all(p.stat().st_size > 0 for p in written)
+
+
+def test_scope_without_recommendation_writes_status(tmp_path):
+    ranking = tmp_path / "ranking.csv"
+    pd.DataFrame([{"scope": "simple_shear", "model": "neo_hookean", "recommended": False}]).to_csv(ranking, index=False)
+    table = uq.run_posterior(ranking, tmp_path / "none.nc", tmp_path, "simple_shear", ["simple_shear"],
+                             tmp_path / "p.nc", tmp_path / "p.csv")
+    assert table.empty and pd.read_csv(tmp_path / "p.csv").empty
+    import xarray as xr
+    with xr.open_dataset(tmp_path / "p.nc", engine="h5netcdf") as ds:
+        assert "no recommended model" in ds.attrs["status"]
+
+
+# ------------------------------------------------------------------------------------------------------
+# specimen variability
+# ------------------------------------------------------------------------------------------------------
+def _hierarchical(rng, n_spec=8, n_samp=6, n_rep=1, mu=np.log(300.0), sd_spec=0.25, sd_samp=0.12, sd_rep=0.05):
+    rows = []
+    for i in range(n_spec):
+        b = rng.normal(0.0, sd_spec)
+        for j in range(n_samp):
+            c = rng.normal(0.0, sd_samp)
+            for _ in range(n_rep):
+                rows.append({"specimen": f"sp{i}", "sample": f"s{j}",
+                             "log_g0": mu + b + c + (rng.normal(0.0, sd_rep) if n_rep > 1 else 0.0)})
+    return pd.DataFrame(rows)
+
+
+def test_mixed_effects_recovers_known_variance_components():
+    """Simulated specimens x samples with known mean and SDs: the estimates are within 3 SE of the truth, and over
+    40 replicate datasets the +-1.645 SE intervals of the mean and of the sample SD cover the truth about 90 % of
+    the time (the SEs are calibrated, not just the estimates)."""
+    rng = np.random.default_rng(2026)
+    mu, sd_spec, sd_samp = np.log(300.0), 0.25, 0.12
+    est = uq.mixed_effects(_hierarchical(rng))
+    assert est["n_specimens"] == 8 and est["n_pieces"] == 48 and np.isnan(est["sd_residual"])
+    assert abs(est["mean"] - mu) < 3 * est["mean_se"]
+    assert abs(est["sd_specimen"] - sd_spec) < 3 * est["sd_specimen_se"]
+    assert abs(est["sd_sample"] - sd_samp) < 3 * est["sd_sample_se"]
+    cover_mean, cover_samp = [], []
+    for _ in range(40):
+        e = uq.mixed_effects(_hierarchical(rng))
+        cover_mean.append(abs(e["mean"] - mu) < 1.645 * e["mean_se"])
+        cover_samp.append(abs(e["sd_sample"] - sd_samp) < 1.645 * e["sd_sample_se"])
+    assert 0.75 <= np.mean(cover_mean) <= 1.0 and 0.75 <= np.mean(cover_samp) <= 1.0
+
+
+def test_mixed_effects_with_repeated_runs_separates_sample_from_within_piece():
+    rng = np.random.default_rng(5)
+    est = uq.mixed_effects(_hierarchical(rng, n_spec=6, n_samp=5, n_rep=3))
+    assert est["n_pieces"] == 30 and est["n_runs"] == 90
+    assert abs(est["sd_specimen"] - 0.25) < 3 * est["sd_specimen_se"]
+    assert abs(est["sd_sample"] - 0.12) < 3 * est["sd_sample_se"]
+    assert abs(est["sd_residual"] - 0.05) < 3 * est["sd_residual_se"]
+    assert "nested" in est["method"]
+
+
+# ------------------------------------------------------------------------------------------------------
+# propagation to the FEM: the cards of posterior draws
+# ------------------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def qlv_fit(qlv_rp3_fit):
+    """The card and record of the QLV fit of ``tests/conftest.py``."""
+    from tissuemech import cards as C
+
+    model, result = qlv_rp3_fit
+    return C.make_card(result, model, poisson_ratio=0.49), F.FitRecord.from_result(result)
+
+
+def test_elastic_card_of_a_qlv_fit_reproduces_its_card(qlv_fit):
+    """At the optimum, the draw card of a QLV fit is the fit's own card (law, parameters, bulk modulus, Prony
+    series from the step response = the QLV weights), so the posterior draws are solved with the same material."""
+    card, record = qlv_fit
+    draw = uq.elastic_card(card, record, record.params)
+    assert draw["elastic_law"] == card["elastic_law"] == "reduced_polynomial3"
+    for k, v in card["elastic_parameters"].items():
+        assert draw["elastic_parameters"][k] == pytest.approx(v, rel=1e-12)
+    assert draw["bulk_modulus"] == pytest.approx(card["bulk_modulus"], rel=1e-9)
+    np.testing.assert_allclose(draw["prony"]["g"], card["prony"]["g"], atol=1e-9)
+    assert draw["prony"]["g_inf"] == pytest.approx(card["prony"]["g_inf"], abs=1e-9)
+    bands = uq.band(np.array([[1.0, 2.0], [3.0, 4.0], [np.nan, 6.0]]))
+    assert bands["q50"][0] == pytest.approx(2.0) and bands["q50"][1] == pytest.approx(4.0)
+
+
+def test_propagate_splits_sources_and_corrects_cheap_draw_solves(qlv_fit):
+    """With a stand-in solver linear in C10: the specimen band is the population factor times the optimum, and
+    draws solved by a 10 % stiffer 'coarse' solver are corrected back to the fine solver exactly."""
+    import xarray as xr
+
+    card, record = qlv_fit
+    x = np.linspace(0.1, 1.0, 5)
+    c10 = np.random.default_rng(0).normal(record.params["C10"], 2.0, size=(2, 50))
+    post = xr.Dataset({"C10": (("chain", "draw"), c10)})
+    pop = {"value": "log_g0", "mean": np.log(uq.reference_shear_modulus(record.model_key, record.params)),
+           "sd_specimen": 0.1, "sd_sample": 0.05}
+
+    def fine(c):
+        return x, c["elastic_parameters"]["C10"] * x
+
+    def coarse(c):
+        return x, 1.1 * c["elastic_parameters"]["C10"] * x
+
+    res = uq.propagate(fine, card, pop, post, record, n_draws=20, seed=1, solve_draw=coarse)
+    ref = uq.propagate(fine, card, pop, post, record, n_draws=20, seed=1)
+    np.testing.assert_allclose(res["measurement"], ref["measurement"], rtol=1e-12)
+    factor = res["specimen"] / res["optimum"][None, :]
+    assert np.allclose(factor, factor[:, :1]) and np.std(np.log(factor[:, 0])) == pytest.approx(0.112, rel=0.5)
+    assert res["population_log_offset"] == pytest.approx(0.0, abs=1e-12)
+    assert 0.0 < res["measurement_share"] < 0.5 and res["failed"] == []
+    ds = uq.bands_dataset(res, "x", "1", "y", "N", {"experiment": "stand-in"})
+    assert set(uq.SOURCES) <= {k.split("_")[0] for k in ds.data_vars} and ds.sizes["draw"] == 20

@@ -1,0 +1,150 @@
+# Uncertainty (issue 16): posteriors of the recommended fit of each scope (config `posterior`).
+
+POSTERIOR = config.get("posterior", {})
+
+
+def posterior_scopes_of(name):
+    """Scopes of a dataset whose recommended fit gets a posterior (config posterior.datasets / .scopes)."""
+    if name not in POSTERIOR.get("datasets", []):
+        return []
+    wanted = POSTERIOR.get("scopes") or []
+    return [s for s in dataset_scopes_of(name) if not wanted or s in wanted]
+
+
+def uq_targets():
+    """Posterior (and, with posterior.population, specimen-variability) files of every enabled dataset and scope
+    (added to the default target in the Snakefile)."""
+    targets = []
+    for name in DATASETS:
+        for scope in posterior_scopes_of(name):
+            targets.append(f"results/{name}/posterior/{scope}.nc")
+            if POSTERIOR.get("population", True):
+                targets.append(f"results/{name}/population/{scope}.card.json")
+                if POSTERIOR.get("fem_draws", 0):
+                    targets.append(f"results/{name}/uq/indentation_{scope}.nc")
+                    if has_shear_ramps(name):
+                        targets.append(f"results/{name}/uq/torsion_{scope}.nc")
+    return targets
+
+
+rule posterior:
+    input:
+        ranking="results/{dataset}/ranking.csv",
+        averages="results/{dataset}/averages.nc",
+        fits="results/{dataset}/fits/{scope}",
+    output:
+        idata="results/{dataset}/posterior/{scope}.nc",
+        table=report(
+            "results/{dataset}/posterior/{scope}.csv",
+            caption="../report/posterior_table.rst",
+            category="{dataset}",
+            subcategory="3 fits: {scope}",
+            labels={"scope": "{scope}", "model": "posterior (credible intervals)"},
+        ),
+        figure=report(
+            "results/{dataset}/figures/posterior_{scope}.png",
+            caption="../report/posterior_predictive.rst",
+            category="{dataset}",
+            subcategory="3 fits: {scope}",
+            labels={"scope": "{scope}", "model": "posterior-predictive band"},
+        ),
+    log:
+        "logs/{dataset}/posterior_{scope}.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/posterior_{scope}.tsv"
+    params:
+        tests=lambda wildcards: scope_spec(wildcards)["tests"],
+        walkers=POSTERIOR.get("walkers"),
+        steps=POSTERIOR.get("steps", 1400),
+        burn=POSTERIOR.get("burn", 400),
+        seed=POSTERIOR.get("seed", 0),
+        pkg=script_hash("workflow/scripts/posterior.py"),
+    script:
+        "../scripts/posterior.py"
+
+
+rule population:
+    input:
+        ranking="results/{dataset}/ranking.csv",
+        runs="results/{dataset}/runs",
+        fits="results/{dataset}/fits/{scope}",
+        cards="results/{dataset}/cards/{scope}",
+    output:
+        card="results/{dataset}/population/{scope}.card.json",
+        levels=report(
+            "results/{dataset}/population/{scope}.levels.csv",
+            caption="../report/population_levels.rst",
+            category="{dataset}",
+            subcategory="3 fits: {scope}",
+            labels={
+                "scope": "{scope}",
+                "model": "specimen variability (per-piece levels)",
+            },
+        ),
+    log:
+        "logs/{dataset}/population_{scope}.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/population_{scope}.tsv"
+    params:
+        tests=lambda wildcards: scope_spec(wildcards)["tests"],
+        exclude_flagged=config["fit"].get("exclude_flagged", True),
+        pkg=script_hash("workflow/scripts/population.py"),
+    script:
+        "../scripts/population.py"
+
+
+rule uq_indentation:
+    input:
+        posterior="results/{dataset}/posterior/{scope}.nc",
+        population="results/{dataset}/population/{scope}.card.json",
+        fits="results/{dataset}/fits/{scope}",
+    output:
+        data="results/{dataset}/uq/indentation_{scope}.nc",
+        figure=report(
+            "results/{dataset}/figures/uq_indentation_{scope}.png",
+            caption="../report/uq_indentation.rst",
+            category="{dataset}",
+            subcategory="7 FEM experiments",
+            labels={"experiment": "indentation bands", "item": "{scope}"},
+        ),
+    log:
+        "logs/{dataset}/uq_indentation_{scope}.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/uq_indentation_{scope}.tsv"
+    threads: FEM_THREADS
+    params:
+        n_draws=POSTERIOR.get("fem_draws", 32),
+        element_size_m=config["fem"]["block_element_size_m"],
+        seed=POSTERIOR.get("seed", 0),
+        pkg=script_hash("workflow/scripts/uq_fem.py"),
+    script:
+        "../scripts/uq_fem.py"
+
+
+rule uq_torsion:
+    input:
+        posterior="results/{dataset}/posterior/{scope}.nc",
+        population="results/{dataset}/population/{scope}.card.json",
+        fits="results/{dataset}/fits/{scope}",
+        averages="results/{dataset}/averages.nc",
+    output:
+        data="results/{dataset}/uq/torsion_{scope}.nc",
+        figure=report(
+            "results/{dataset}/figures/uq_torsion_{scope}.png",
+            caption="../report/uq_torsion.rst",
+            category="{dataset}",
+            subcategory="7 FEM experiments",
+            labels={"experiment": "torsion bands", "item": "{scope}"},
+        ),
+    log:
+        "logs/{dataset}/uq_torsion_{scope}.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/uq_torsion_{scope}.tsv"
+    threads: FEM_THREADS
+    params:
+        n_draws=POSTERIOR.get("fem_draws", 32),
+        element_size_m=config["fem"]["cylinder_element_size_m"],
+        seed=POSTERIOR.get("seed", 0),
+        pkg=script_hash("workflow/scripts/uq_fem.py"),
+    script:
+        "../scripts/uq_fem.py"
