@@ -318,8 +318,8 @@ def nnls_relaxation_times(runs: Sequence[xr.Dataset], target: str, relaxation: s
 
     Returns
     -------
-    ``{"taus_s": active times [s] (empty when there is no window, no shear-history curve or no active
-    mode), "grid_s", "weights" (relative to the instantaneous modulus; first entry the equilibrium share),
+    ``{"taus_s": active times [s], neighbouring active grid times merged (:func:`merged_times`; empty
+    when there is no window, no shear-history curve or no active mode), "grid_s", "weights" (relative to the instantaneous modulus; first entry the equilibrium share),
     "levels": {unit: c_u}, "method"}``
     """
     window = resolved_window_s(runs) if window is None else window
@@ -385,8 +385,24 @@ def nnls_relaxation_times(runs: Sequence[xr.Dataset], target: str, relaxation: s
     total = coef.sum()
     if not total > 0:
         return out
-    out.update(taus_s=grid[coef[1:] > 0], weights=coef / total, levels=level)
+    out.update(taus_s=merged_times(grid, coef[1:]), weights=coef / total, levels=level)
     return out
+
+
+def merged_times(grid: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Active relaxation times of an NNLS solution on ``grid``, one per run of neighbouring active grid times.
+
+    A mode between two grid times shows in NNLS as weight on both neighbours; the data do not resolve two
+    modes a grid step apart, so each run of consecutive active times is one time, at the weight-averaged
+    log time (a 0.25-decade pair of exponentials and one exponential at its weighted geometric mean differ by
+    well under the noise of a relaxation). Fewer times make every later fit (candidates, folds, the
+    Pipkin-Rogers extension) smaller. Returns the merged times [s], ascending."""
+    active = np.flatnonzero(np.asarray(weights, float) > 0)
+    if active.size == 0:
+        return np.array([])
+    runs = np.split(active, np.flatnonzero(np.diff(active) > 1) + 1)
+    logs = np.log(np.asarray(grid, float))
+    return np.array([float(np.exp(np.average(logs[r], weights=weights[r]))) for r in runs])
 
 
 def level_normalised(runs: Sequence[xr.Dataset], levels: Mapping[str, float]) -> list[xr.Dataset]:

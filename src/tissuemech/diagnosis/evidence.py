@@ -125,16 +125,20 @@ def robust_noise_sd(values: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(d2)) / np.sqrt(6.0))
 
 
-def _second_differences(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(|y| at the centre points, relative k-th differences scaled to the noise SD) of one curve.
+def _second_differences(y: np.ndarray, scale: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(|y| x ``scale`` at the centre points, relative k-th differences scaled to the noise SD) of one curve.
 
     Six detrendings are computed: k-th differences (k = 2, 3, 4) of ln|y| (exact for exponential and
     power-law trends) and of y over |y| (exact for polynomial trends, e.g. a ramp from zero), each divided
     by sqrt(C(2k, k)) so that white noise of relative SD s gives differences of SD s. A smooth trend can only
-    add to them, so the detrending with the smallest median magnitude is kept for the curve.
+    add to them, so the detrending with the smallest median magnitude is kept for the curve. ``scale``
+    (per point, e.g. the strain amplitude of a modulus) converts the magnitudes to the units the absolute
+    noise is constant in.
     """
     y = np.asarray(y, float)
-    y = y[np.isfinite(y) & (y != 0)]
+    s = np.ones_like(y) if scale is None else np.abs(np.asarray(scale, float))
+    keep = np.isfinite(y) & (y != 0) & np.isfinite(s) & (s > 0)
+    y, s = y[keep], s[keep]
     if y.size < 5:
         return np.empty(0), np.empty(0)
     z = np.log(np.abs(y))
@@ -142,12 +146,29 @@ def _second_differences(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     for k in (2, 3, 4):
         norm = np.sqrt(float(comb(2 * k, k)))
         lo = k // 2
-        mag = np.abs(y[lo:y.size - (k - lo)])
+        mag = np.abs(y[lo:y.size - (k - lo)]) * s[lo:y.size - (k - lo)]
         for d in (np.diff(z, k) / norm, np.diff(y, k) / norm / mag):
             scale = float(np.median(np.abs(d)))
             if scale < best_scale:
                 best, best_scale, centre = d, scale, mag
     return centre, best
+
+
+#: oscillation quantities that are a torque divided by the strain amplitude (their absolute noise is not constant)
+MODULI = ("storage_modulus", "loss_modulus")
+
+
+def _stress_per_modulus(run: xr.Dataset, test: str, quantity: str) -> np.ndarray | None:
+    """The strain amplitude of every point of a sweep's modulus (stress amplitude = modulus x amplitude);
+    None for other quantities and where the sweep records no strain amplitude."""
+    if quantity not in MODULI or test not in OSCILLATORY_TESTS:
+        return None
+    n = run[quantity].size
+    if "shear_strain" in run and run["shear_strain"].size == n and np.isfinite(run["shear_strain"].values).any():
+        return np.asarray(run["shear_strain"].values, float)
+    if "strain_pct" in run.attrs:
+        return np.full(n, float(run.attrs["strain_pct"]) / 100.0)
+    return None
 
 
 def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
@@ -159,7 +180,12 @@ def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
     Per (test, quantity) block the points are pooled over curves, binned by |y| (quantiles), and the
     robust variance per bin, s_b^2 = (1.4826 MAD)^2 (relative units), is fitted by NNLS as
     ``relative^2 + absolute^2 / |y|^2`` -- i.e. SD(y) = sqrt(absolute^2 + (relative |y|)^2). With too few
-    points for bins only ``relative`` is estimated. A torque resolution declared for the instrument
+    points for bins only ``relative`` is estimated. The storage and loss moduli of sweeps are a torque over
+    the strain amplitude, so their absolute part is not constant: where every sweep of the block records its
+    strain amplitude, |y| is the stress amplitude |modulus| x amplitude, ``absolute`` is in stress units
+    (``absolute_units``) and a point's floor is ``absolute`` / amplitude (:func:`noise_sd`); points of an
+    amplitude sweep at amplitudes where the torque is noise are then recognised as such (``above_noise``).
+    A torque resolution declared for the instrument
     (run attribute ``torque_resolution_nm``, from ``dataset.yaml``) replaces the absolute part of stress
     quantities when the run also records its plate radius (rim stress 2 M / (pi R^3)).
 
@@ -175,11 +201,15 @@ def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
         for q in COMPARED_QUANTITIES:
             if q not in run or run[q].ndim != 1:
                 continue
-            mag, d2 = _second_differences(run[q].values)
-            if mag.size:
-                pooled.setdefault(f"{test}|{q}", []).append((mag, d2))
+            pooled.setdefault(f"{test}|{q}", []).append((run[q].values, _stress_per_modulus(run, test, q)))
     blocks = {}
-    for key, parts in pooled.items():
+    for key, curves in pooled.items():
+        # a modulus block is pooled in stress amplitude only when every sweep records its strain amplitude
+        per_strain = all(a is not None for _, a in curves)
+        parts = [_second_differences(y, a if per_strain else None) for y, a in curves]
+        parts = [(m, d) for m, d in parts if m.size]
+        if not parts:
+            continue
         mag = np.concatenate([m for m, _ in parts])
         d2 = np.concatenate([d for _, d in parts])
         rel_all = 1.4826 * np.median(np.abs(d2))
@@ -202,6 +232,11 @@ def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
                 entry.update(relative=float(np.sqrt(coef[0])), absolute=float(np.sqrt(coef[1])),
                              source="within-curve scatter (relative differences of order 2-4), binned by |y|: "
                                     "SD = sqrt(absolute^2 + (relative |y|)^2)")
+        if per_strain and key.split("|")[1] in MODULI and key.split("|")[0] in OSCILLATORY_TESTS:
+            # the instrument's absolute noise is a torque: a modulus carries it divided by the strain amplitude
+            entry["absolute_units"] = "Pa of stress amplitude (the modulus floor is absolute / strain amplitude)"
+            if entry["absolute"] > 0:
+                entry["source"] += "; |y| and absolute as stress amplitude |modulus| x strain amplitude"
         blocks[key] = entry
     declared = {float(r.attrs["torque_resolution_nm"]) for r in runs if "torque_resolution_nm" in r.attrs}
     method = "within-curve residual scale (differences of order 2-4, per curve the smallest), per test and quantity"
@@ -223,6 +258,11 @@ def noise_sd(noise: Mapping, test: str, quantity: str, observed: np.ndarray, str
     if b is None:
         return np.full(obs.shape, np.nan)
     floor = np.full(obs.shape, float(b["absolute"]))
+    if "absolute_units" in b:
+        # estimated in stress amplitude (estimate_noise): a modulus's floor is that over the strain amplitude
+        amp = np.abs(np.asarray(strain, float)) if strain is not None else np.full(obs.shape, np.nan)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            floor = np.where(np.isfinite(amp) & (amp > 0), floor / amp, np.nan) * np.ones(obs.shape)
     if np.isfinite(torque_resolution_nm) and np.isfinite(radius_m) and radius_m > 0:
         declared = 2.0 * torque_resolution_nm / (np.pi * radius_m ** 3)
         if quantity in ("storage_modulus", "loss_modulus", "relaxation_modulus") and strain is not None:
