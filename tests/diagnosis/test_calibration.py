@@ -247,13 +247,15 @@ def test_nnls_levels_recover_the_generators_specimen_stiffness(seed):
         assert abs((est[k] - e_mean) - (true[k] - t_mean)) < 0.1, (k, est, true)
 
 
-def test_neighbouring_active_grid_times_merge_into_one_time():
-    """A mode between two grid times shows in NNLS as weight on both neighbours: one time at the
-    weight-averaged log time (hand-computed geometric means), isolated active times unchanged."""
+def test_a_pair_of_neighbouring_active_grid_times_merges_into_one_time():
+    """One mode between two grid times shows in NNLS as weight on both neighbours: one time at the
+    weight-averaged log time (hand-computed geometric mean); a band of three or more active times (a broad,
+    e.g. fractional, spectrum) and isolated times are kept."""
     from tissuemech.diagnosis.baseline import merged_times
 
-    grid = np.array([0.1, 0.2, 0.4, 1.0, 10.0, 20.0])
-    weights = np.array([0.0, 1.0, 3.0, 0.0, 2.0, 2.0])
+    grid = np.array([0.1, 0.2, 0.4, 1.0, 10.0, 20.0, 40.0, 80.0])
+    weights = np.array([0.0, 1.0, 3.0, 0.0, 2.0, 2.0, 1.0, 0.0])
     merged = merged_times(grid, weights)
-    assert merged == pytest.approx([(0.2 * 0.4 ** 3) ** 0.25, (10.0 * 20.0) ** 0.5])
-    assert merged_times(grid, np.zeros(6)).size == 0
+    assert merged == pytest.approx([(0.2 * 0.4 ** 3) ** 0.25, 10.0, 20.0, 40.0])
+    assert merged_times(grid, np.r_[1.0, np.zeros(7)]) == pytest.approx([0.1])
+    assert merged_times(grid, np.zeros(8)).size == 0

@@ -318,7 +318,7 @@ def nnls_relaxation_times(runs: Sequence[xr.Dataset], target: str, relaxation: s
 
     Returns
     -------
-    ``{"taus_s": active times [s], neighbouring active grid times merged (:func:`merged_times`; empty
+    ``{"taus_s": active times [s], a pair of neighbouring active grid times merged (:func:`merged_times`; empty
     when there is no window, no shear-history curve or no active mode), "grid_s", "weights" (relative to the instantaneous modulus; first entry the equilibrium share),
     "levels": {unit: c_u}, "method"}``
     """
@@ -390,19 +390,28 @@ def nnls_relaxation_times(runs: Sequence[xr.Dataset], target: str, relaxation: s
 
 
 def merged_times(grid: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """Active relaxation times of an NNLS solution on ``grid``, one per run of neighbouring active grid times.
+    """Active relaxation times of an NNLS solution on ``grid``, a pair of neighbouring active times merged.
 
-    A mode between two grid times shows in NNLS as weight on both neighbours; the data do not resolve two
-    modes a grid step apart, so each run of consecutive active times is one time, at the weight-averaged
-    log time (a 0.25-decade pair of exponentials and one exponential at its weighted geometric mean differ by
-    well under the noise of a relaxation). Fewer times make every later fit (candidates, folds, the
-    Pipkin-Rogers extension) smaller. Returns the merged times [s], ascending."""
-    active = np.flatnonzero(np.asarray(weights, float) > 0)
+    One mode between two grid times shows in NNLS as weight on both neighbours and nowhere else; the data do
+    not resolve two modes a grid step apart, so such a pair is one time, at the weight-averaged log time (a
+    0.25-decade pair of exponentials and one exponential at its weighted geometric mean differ by well under
+    the noise of a relaxation). Three or more consecutive active times are a broad spectrum (a fractional
+    relaxation activates a whole band of the grid): they are kept, since one exponential cannot stand for a
+    band (merging them left structure along the predicted level in fractional null datasets). Fewer times make
+    every later fit (candidates, folds, the Pipkin-Rogers extension) smaller. Returns the times [s], ascending.
+    """
+    weights = np.asarray(weights, float)
+    active = np.flatnonzero(weights > 0)
     if active.size == 0:
         return np.array([])
-    runs = np.split(active, np.flatnonzero(np.diff(active) > 1) + 1)
     logs = np.log(np.asarray(grid, float))
-    return np.array([float(np.exp(np.average(logs[r], weights=weights[r]))) for r in runs])
+    out = []
+    for run in np.split(active, np.flatnonzero(np.diff(active) > 1) + 1):
+        if run.size == 2:
+            out.append(float(np.exp(np.average(logs[run], weights=weights[run]))))
+        else:
+            out.extend(float(np.exp(logs[i])) for i in run)
+    return np.array(out)
 
 
 def level_normalised(runs: Sequence[xr.Dataset], levels: Mapping[str, float]) -> list[xr.Dataset]:
