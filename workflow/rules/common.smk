@@ -105,6 +105,13 @@ def scope_fit_dirs(wildcards):
     ]
 
 
+def scope_card_dirs(wildcards):
+    return [
+        f"results/{wildcards.dataset}/cards/{scope}"
+        for scope in dataset_scopes_of(wildcards.dataset)
+    ]
+
+
 #: scope whose fits the diagnosis examines, best first (the joint viscoelastic fit carries most evidence)
 DIAGNOSIS_SCOPES = (
     "viscoelastic_joint",
