@@ -131,5 +131,5 @@ rule fem_timing:
         pkg=script_hash("benchmarks/fem_timing.py"),
         brain=f"--brain-mesh {BRAIN_FILES['brain_mesh']}" if BRAIN_MESH else "",
     shell:
-        "{params.python} benchmarks/fem_timing.py --threads 1 --max-elements 20000 --kernels auto,generic --precisions float64 --updates 1e7 {params.brain}"
+        "{params.python} benchmarks/fem_timing.py --threads 1 --max-elements 20000 --kernels auto,generic --precisions float64 --updates 2e6 {params.brain}"
         " --out {output.table} > {log} 2>&1"
