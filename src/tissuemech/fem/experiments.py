@@ -14,6 +14,7 @@ Outputs are canonical run datasets (:func:`tissuemech.canonical.make_run_dataset
 """
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -21,10 +22,11 @@ import numpy as np
 import xarray as xr
 
 from ..canonical import make_run_dataset
-from .materials import Material, material_from_card
-from .mesh import (TetMesh, boundary_nodes, brain_mesh, cylinder_mesh, graded_layers, graded_ring_radii, mesh_quality,
-                   write_mesh)
-from .tled import RigidContact, build_model, fixed_group, rotation_group, solve_quasistatic, translation_group
+from .materials import Material, make_material, material_from_card
+from .mesh import (TetMesh, block_mesh, boundary_nodes, brain_mesh, cylinder_mesh, graded_layers, graded_ring_radii,
+                   mesh_quality, write_mesh)
+from .tled import (RigidContact, build_model, fixed_group, rotation_group, run_explicit, solve_quasistatic,
+                   translation_group)
 
 RHEOMETER_RADIUS_M = 12.5e-3
 RHEOMETER_GAP_M = 2.0e-3
@@ -227,12 +229,6 @@ def precompile_kernels(n_threads: int | None = 1) -> dict[str, float]:
     one-cell block (neo-Hookean, ANP, float64, the types every experiment passes), once, before the jobs
     that need them. Returns the CPU seconds of each case.
     """
-    import time
-
-    from .materials import make_material
-    from .mesh import block_mesh
-    from .tled import run_explicit
-
     mesh = block_mesh((1e-2, 1e-2, 5e-3), (2, 2, 1))
     x = mesh.nodes
     top = np.flatnonzero(np.isclose(x[:, 2], x[:, 2].max()))
