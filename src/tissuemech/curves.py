@@ -169,6 +169,13 @@ def rounded_setting(value, key: str = "temperature_c") -> float | None:
     return float(round(value / step) * step) if math.isfinite(value) else None
 
 
+def distinct_temperatures(temperatures_c) -> list[float]:
+    """Sorted distinct finite temperatures [degC], rounded as the averaging rounds them
+    (:func:`rounded_setting`: multiples of 0.5 degC), so that the DAG's "sweeps at >= 2
+    temperatures" and the per-temperature averages agree."""
+    return sorted({t for t in (rounded_setting(v) for v in temperatures_c) if t is not None})
+
+
 def _setting(run: xr.Dataset, key: str) -> float | None:
     return rounded_setting(run.attrs.get(key), key)
 

@@ -37,40 +37,14 @@ from .curves import as_str, select_average
 from .fem.experiments import flat_punch_indentation, rheometer_torsion
 from .fem.materials import available_laws
 from .fem.tled import DynamicRelaxationError, ElementInversionError
-from .models.registry import available_models, get_model
+from .models.registry import get_model
 from .plots import plot_force_depth, plot_torque
+from .scopes import ALL_MODES_SCOPE, JOINT_SCOPE, SPECTRUM_TESTS, dataset_scopes  # noqa: F401 (re-exported)
 
 logger = logging.getLogger(__name__)
 
-JOINT_SCOPE = "viscoelastic_joint"
-ALL_MODES_SCOPE = "all_modes"
 #: points per curve kept for fitting (dense rheometer curves have autocorrelated residuals, science.md 4.2)
 POINTS_PER_CURVE = 40
-
-
-def dataset_scopes(tests: Sequence[str], fit_config: Mapping) -> dict[str, dict]:
-    """Scopes of a dataset from its test kinds (see module docstring). Unknown model keys raise ``KeyError``."""
-    known = set(available_models())
-    tests = set(tests)
-    scopes: dict[str, dict] = {}
-
-    def check(keys):
-        missing = sorted(set(keys) - known)
-        if missing:
-            raise KeyError(f"config names unknown models {missing}")
-        return list(keys)
-
-    for test, models in fit_config.get("models", {}).items():
-        if test in tests and models:
-            scopes[test] = {"tests": [test], "models": check(models)}
-    joint = fit_config.get("joint_models", [])
-    if joint and {"constant_shear_rate", "stress_relaxation"} <= tests:
-        scopes[JOINT_SCOPE] = {"tests": ["constant_shear_rate", "stress_relaxation"], "models": check(joint)}
-    if {"simple_shear", "uniaxial"} <= tests:
-        models = [m for m in fit_config.get("models", {}).get("uniaxial", []) if m != "linear_elastic"]
-        if models:
-            scopes[ALL_MODES_SCOPE] = {"tests": ["simple_shear", "uniaxial"], "models": check(models)}
-    return scopes
 
 
 def _geometry_by_test(avg: xr.Dataset, name: str) -> dict[str, float]:
@@ -350,7 +324,6 @@ def run_fem_indentation(card_paths: Sequence, out_nc, figure_path, punch_diamete
 # ------------------------------------------------------------------------------------------------
 # relaxation spectra of the averaged curves (issue 15 item 3): results/<ds>/spectrum.nc
 # ------------------------------------------------------------------------------------------------
-SPECTRUM_TESTS = ("frequency_sweep", "stress_relaxation", "creep_recovery")
 
 
 def _finite_sd(curve: xr.Dataset, name: str) -> np.ndarray | None:

@@ -19,14 +19,17 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
-import statsmodels.api as sm
 from scipy import stats as sps
-from statsmodels.sandbox.stats.runs import runstest_1samp
-from statsmodels.stats.multitest import multipletests
-from statsmodels.stats.stattools import durbin_watson as _durbin_watson
+
+if TYPE_CHECKING:  # annotations only
+    import statsmodels.api as sm
+
+# statsmodels (with patsy and formulaic, ~1 CPU s) is imported by the functions that use it: the fit, figure and
+# FEM jobs of the workflow import this module for the information criteria only
 
 #: family-wise false-alarm level of the diagnosis (Holm across every test run on one dataset); the default of
 #: :func:`holm`
@@ -83,6 +86,8 @@ def runs_test(residuals: np.ndarray) -> dict:
         # every residual of one sign: maximal structure; the exact probability under H0 is 2 * 0.5**n
         n = e.size
         return statistic_result(-np.inf if n else 0.0, (1 - n) * np.log10(2.0) if n else 0.0, n_runs=1 if n else 0)
+    from statsmodels.sandbox.stats.runs import runstest_1samp
+
     z, _ = runstest_1samp(e, cutoff=0.0, correction=e.size < 50)
     n_runs = int(1 + np.count_nonzero(np.diff(np.sign(e))))
     return statistic_result(z, log10_p_from_z(z), n_runs=n_runs)
@@ -90,8 +95,10 @@ def runs_test(residuals: np.ndarray) -> dict:
 
 def durbin_watson(residuals: np.ndarray) -> float:
     """Durbin-Watson d = sum (e_t - e_{t-1})^2 / sum e_t^2 (about 2 for white noise, < 1.5 structured)."""
+    from statsmodels.stats.stattools import durbin_watson as sm_durbin_watson
+
     e = np.asarray(residuals, float)
-    return float(_durbin_watson(e[np.isfinite(e)]))
+    return float(sm_durbin_watson(e[np.isfinite(e)]))
 
 
 def lag1_autocorrelation(residuals: np.ndarray) -> float:
@@ -126,6 +133,8 @@ def cluster_regression(y: np.ndarray, X: pd.DataFrame, groups: np.ndarray | None
     of the false alarms on null data, docs/calibration.md). Without groups, or with one group, the HC3
     covariance is used (the caller has no curve structure to respect).
     """
+    import statsmodels.api as sm
+
     y = np.asarray(y, float)
     Xc = sm.add_constant(X.astype(float), has_constant="add")
     model = sm.WLS(y, Xc, weights=weights) if weights is not None else sm.OLS(y, Xc)
@@ -207,6 +216,8 @@ def holm(p_values: Sequence[float], alpha: float = ALPHA) -> tuple[np.ndarray, n
     adjusted = np.full(p.size, np.nan)
     ok = np.isfinite(p)
     if ok.any():
+        from statsmodels.stats.multitest import multipletests
+
         r, a, _, _ = multipletests(p[ok], alpha=alpha, method="holm")
         reject[ok], adjusted[ok] = r, a
     return reject, adjusted

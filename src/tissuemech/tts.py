@@ -52,7 +52,7 @@ import xarray as xr
 from scipy.optimize import least_squares, minimize_scalar
 
 from .canonical import read_netcdf, write_netcdf, write_text
-from .curves import drop_flagged, rounded_setting
+from .curves import distinct_temperatures, drop_flagged  # noqa: F401 (distinct_temperatures re-exported)
 from .stats import information_criteria
 
 #: gas constant, J/(mol K)
@@ -438,13 +438,6 @@ def predict_from_mastercurve(master_x: np.ndarray, master_y: np.ndarray, log_w: 
 # ------------------------------------------------------------------------------------------------
 # the pipeline's TTS scope: tts.nc, the shift-function card, the Abaqus *TRS block
 # ------------------------------------------------------------------------------------------------
-def distinct_temperatures(temperatures_c) -> list[float]:
-    """Sorted distinct finite temperatures [degC], rounded as the averaging rounds them
-    (:func:`tissuemech.curves.rounded_setting`: multiples of 0.5 degC), so that the DAG's "sweeps at >= 2
-    temperatures" and the per-temperature averages agree."""
-    return sorted({t for t in (rounded_setting(v) for v in temperatures_c) if t is not None})
-
-
 def tts_dataset(sweeps: Sequence[Sweep], t_ref_c: float | None = None, vertical: bool = False) -> xr.Dataset:
     """Shift factors, WLF and Arrhenius fits and the mastercurve of ``sweeps`` as one dataset (``tts.nc``).
 

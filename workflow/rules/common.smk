@@ -82,7 +82,7 @@ def dataset_tests(name):
 
 
 def dataset_scopes_of(name):
-    from tissuemech.stages import dataset_scopes
+    from tissuemech.scopes import dataset_scopes
 
     return dataset_scopes(dataset_tests(name), config["fit"])
 
@@ -101,6 +101,13 @@ def scope_rankings(wildcards):
 def scope_fit_dirs(wildcards):
     return [
         f"results/{wildcards.dataset}/fits/{scope}"
+        for scope in dataset_scopes_of(wildcards.dataset)
+    ]
+
+
+def scope_card_dirs(wildcards):
+    return [
+        f"results/{wildcards.dataset}/cards/{scope}"
         for scope in dataset_scopes_of(wildcards.dataset)
     ]
 
@@ -147,14 +154,14 @@ def has_shear_ramps(name):
 
 def has_spectrum_tests(name):
     """Sweeps, relaxations or creep: tests whose averaged curves get a spectrum (rule spectrum)."""
-    from tissuemech.stages import SPECTRUM_TESTS
+    from tissuemech.scopes import SPECTRUM_TESTS
 
     return bool(set(dataset_tests(name)) & set(SPECTRUM_TESTS))
 
 
 def tts_temperatures(name):
     """Distinct nominal temperatures (sample sheet ``temperature_c``) of a dataset's frequency sweeps."""
-    from tissuemech.tts import distinct_temperatures
+    from tissuemech.curves import distinct_temperatures
 
     sheet = pd.read_csv(Path(DATASETS[name]) / "samples.csv", dtype=str)
     if "test" not in sheet or "temperature_c" not in sheet:

@@ -1,4 +1,5 @@
-# Model fits per dataset and scope (joint test kinds), cross-validated ranking, material cards.
+# Model fits per dataset and scope (joint test kinds), cross-validated ranking, material cards, and their figures
+# (drawn in the same jobs: a separate figure job per scope paid the Python and package start-up again).
 
 
 rule fit_scope:
@@ -8,6 +9,14 @@ rule fit_scope:
         fits=directory("results/{dataset}/fits/{scope}"),
         cards=directory("results/{dataset}/cards/{scope}"),
         ranking="results/{dataset}/ranking/{scope}.csv",
+        figures=report(
+            directory("results/{dataset}/figures/fits/{scope}"),
+            patterns=["{model}.png"],
+            caption="../report/fits.rst",
+            category="{dataset}",
+            subcategory="3 fits: {scope}",
+            labels={"scope": "{scope}", "model": "{model}"},
+        ),
     log:
         "logs/{dataset}/fit_{scope}.log",
     benchmark:
@@ -29,6 +38,7 @@ rule rank:
     input:
         rankings=scope_rankings,
         fits=scope_fit_dirs,
+        cards=scope_card_dirs,
     output:
         ranking=report(
             "results/{dataset}/ranking.csv",
@@ -45,11 +55,27 @@ rule rank:
             subcategory="4 ranking",
             labels={"item": "ranking figure"},
         ),
+        cards_table=report(
+            "results/{dataset}/cards.csv",
+            caption="../report/cards_table.rst",
+            category="{dataset}",
+            subcategory="6 material cards",
+            labels={"table": "all cards"},
+        ),
+        card_figures=report(
+            directory("results/{dataset}/figures/cards"),
+            patterns=["{scope}.png"],
+            caption="../report/cards.rst",
+            category="{dataset}",
+            subcategory="6 material cards",
+            labels={"table": "{scope}"},
+        ),
     log:
         "logs/{dataset}/rank.log",
     benchmark:
         "benchmarks/runs/{dataset}/rank.tsv"
     params:
+        cards_root="results/{dataset}/cards",
         pkg=script_hash("workflow/scripts/rank.py"),
     script:
         "../scripts/rank.py"

@@ -1,4 +1,5 @@
-# Report figures the stages do not draw (fits over data, cards, meshes, timing) and the self-contained summary page.
+# Report figures the stages do not draw (meshes, timing; fit_scope draws the fit figures, rank the card figures)
+# and the self-contained summary page.
 # `snakemake --report results/report.html` collects every output marked report(...) with its caption
 # (workflow/report/*.rst); the summary page is the same content without Snakemake, built by the default target.
 
@@ -24,68 +25,6 @@ def fem_vtu_dirs_of(name):
     if name in config["fem"].get("indentation_datasets", []):
         dirs["indentation"] = f"results/{name}/fem/indentation_vtu"
     return dirs
-
-
-def scope_card_dirs(wildcards):
-    return [
-        f"results/{wildcards.dataset}/cards/{scope}"
-        for scope in dataset_scopes_of(wildcards.dataset)
-    ]
-
-
-rule fit_figures:
-    input:
-        averages="results/{dataset}/averages.nc",
-        fits="results/{dataset}/fits/{scope}",
-    output:
-        figures=report(
-            directory("results/{dataset}/figures/fits/{scope}"),
-            patterns=["{model}.png"],
-            caption="../report/fits.rst",
-            category="{dataset}",
-            subcategory="3 fits: {scope}",
-            labels={"scope": "{scope}", "model": "{model}"},
-        ),
-    log:
-        "logs/{dataset}/fit_figures_{scope}.log",
-    benchmark:
-        "benchmarks/runs/{dataset}/fit_figures_{scope}.tsv"
-    params:
-        tests=lambda wildcards: scope_spec(wildcards)["tests"],
-        pkg=script_hash("workflow/scripts/fit_figures.py"),
-    script:
-        "../scripts/fit_figures.py"
-
-
-rule card_figures:
-    input:
-        ranking="results/{dataset}/ranking.csv",
-        cards=scope_card_dirs,
-    output:
-        table=report(
-            "results/{dataset}/cards.csv",
-            caption="../report/cards_table.rst",
-            category="{dataset}",
-            subcategory="6 material cards",
-            labels={"table": "all cards"},
-        ),
-        figures=report(
-            directory("results/{dataset}/figures/cards"),
-            patterns=["{scope}.png"],
-            caption="../report/cards.rst",
-            category="{dataset}",
-            subcategory="6 material cards",
-            labels={"table": "{scope}"},
-        ),
-    log:
-        "logs/{dataset}/card_figures.log",
-    benchmark:
-        "benchmarks/runs/{dataset}/card_figures.tsv"
-    params:
-        cards_root="results/{dataset}/cards",
-        pkg=script_hash("workflow/scripts/card_figures.py"),
-    script:
-        "../scripts/card_figures.py"
 
 
 rule mesh_figures:

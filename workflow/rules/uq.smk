@@ -98,6 +98,7 @@ rule uq_indentation:
         posterior="results/{dataset}/posterior/{scope}.nc",
         population="results/{dataset}/population/{scope}.card.json",
         fits="results/{dataset}/fits/{scope}",
+        compiled=NUMBA_COMPILED,
     output:
         data="results/{dataset}/uq/indentation_{scope}.nc",
         figure=report(
@@ -126,6 +127,7 @@ rule uq_torsion:
         posterior="results/{dataset}/posterior/{scope}.nc",
         population="results/{dataset}/population/{scope}.card.json",
         fits="results/{dataset}/fits/{scope}",
+        compiled=NUMBA_COMPILED,
         averages="results/{dataset}/averages.nc",
     output:
         data="results/{dataset}/uq/torsion_{scope}.nc",

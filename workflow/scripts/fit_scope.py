@@ -1,6 +1,7 @@
-"""Snakemake adapter: averaged curves -> fits, cards and ranking of one scope."""
+"""Snakemake adapter: averaged curves -> fits, cards and ranking of one scope, and one figure per fitted model."""
 from tissuemech.pipeline import job_log
 from tissuemech.stages import run_fit_scope
+from tissuemech.summary import plot_scope_fits
 
 with job_log(snakemake.log[0]) as log:
     table = run_fit_scope(
@@ -10,3 +11,6 @@ with job_log(snakemake.log[0]) as log:
         dataset=snakemake.wildcards.dataset, poisson_ratio=snakemake.params.poisson_ratio,
     )
     log.info("scope %s: ranked %d models", snakemake.wildcards.scope, len(table))
+    written = plot_scope_fits(snakemake.input.averages, snakemake.output.fits, snakemake.params.spec["tests"],
+                              snakemake.output.figures)
+    log.info("%s/%s: %d fit figures", snakemake.wildcards.dataset, snakemake.wildcards.scope, len(written))

@@ -45,6 +45,7 @@ records with noisy holds are slow to fit; use the ``ramp``/``step`` relaxation t
 """
 from __future__ import annotations
 
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -62,18 +63,37 @@ Kernel = Callable[[np.ndarray], np.ndarray]
 # ------------------------------------------------------------------------------------------------------
 # Mittag-Leffler function and the closed-form kernels
 # ------------------------------------------------------------------------------------------------------
+#: the last few evaluations of :func:`mittag_leffler` on large arrays, keyed by (alpha, beta, the bytes of z) and
+#: checked element for element on a hit, so a hit returns exactly what a new evaluation would. A least-squares
+#: fit of a fractional Zener perturbs G_e and G_m for its finite-difference Jacobian without changing
+#: z = -(t/tau)^alpha, so those columns reuse the evaluation of the point they are taken at.
+_ML_CACHE: OrderedDict[tuple, tuple[np.ndarray, np.ndarray]] = OrderedDict()
+_ML_CACHE_ENTRIES = 8
+_ML_CACHE_MIN_SIZE = 256
+
+
 def mittag_leffler(z: np.ndarray, alpha: float, beta: float = 1.0) -> np.ndarray:
     """Two-parameter Mittag-Leffler function ``E_{alpha,beta}(z)`` for real ``z`` (real result, same shape).
 
     Garrappa's method (``pymittagleffler``). ``E_{1,1}(z) = exp(z)``; ``E_{1/2,1}(-x) = exp(x^2) erfc(x)``.
+    A repeated call on the same large ``z`` is answered from a small cache (``_ML_CACHE``, exact).
     """
     z = np.asarray(z, float)
     flat = np.ascontiguousarray(z.ravel())
     if flat.size == 0:
         return np.zeros(z.shape)
+    key = (float(alpha), float(beta), flat.size, hash(flat.tobytes()))
+    cached = _ML_CACHE.get(key)
+    if cached is not None and np.array_equal(cached[0], flat):
+        _ML_CACHE.move_to_end(key)
+        return cached[1].reshape(z.shape).copy()
     out = np.real(np.asarray(garrappa_mittag_leffler(flat, float(alpha), float(beta))))
     # E_{a,b}(0) = 1/Gamma(b) exactly (pymittagleffler 0.3.0 returns NaN at z = 0 for alpha = 1, beta = 2)
     out = np.where(flat == 0.0, 1.0 / gamma_fn(beta), out)
+    if flat.size >= _ML_CACHE_MIN_SIZE:
+        _ML_CACHE[key] = (flat.copy(), out.copy())
+        while len(_ML_CACHE) > _ML_CACHE_ENTRIES:
+            _ML_CACHE.popitem(last=False)
     return out.reshape(z.shape)
 
 
