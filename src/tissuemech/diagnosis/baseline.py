@@ -319,7 +319,8 @@ def nnls_relaxation_times(runs: Sequence[xr.Dataset], target: str, relaxation: s
     Returns
     -------
     ``{"taus_s": active times [s], a pair of neighbouring active grid times merged (:func:`merged_times`; empty
-    when there is no window, no shear-history curve or no active mode), "grid_s", "weights" (relative to the instantaneous modulus; first entry the equilibrium share),
+    when there is no window, no shear-history curve or no active mode), "grid_s", "weights" (relative to the
+    instantaneous modulus; first entry the equilibrium share),
     "levels": {unit: c_u}, "method"}``
     """
     window = resolved_window_s(runs) if window is None else window
@@ -432,6 +433,10 @@ def level_normalised(runs: Sequence[xr.Dataset], levels: Mapping[str, float]) ->
     return out
 
 
+#: keys of the fixed-time models (``qlv_<law>_prony<n>``, ``pr_<law>_prony<n>``): family, instantaneous law tag
+FIXED_TIME_KEY = re.compile(r"(qlv|pr)_(.+)_prony\d+")
+
+
 def spectrum_model(model_key: str, taus_s: Sequence[float]) -> ConstitutiveModel:
     """The registered model ``model_key`` rebuilt on the relaxation times ``taus_s`` [s].
 
@@ -439,7 +444,7 @@ def spectrum_model(model_key: str, taus_s: Sequence[float]) -> ConstitutiveModel
     rebuilt (same instantaneous law, one branch per time, same key); every other model is returned as
     registered (free times, fractional or flow models choose their own time scales).
     """
-    m = re.fullmatch(r"(qlv|pr)_(.+)_prony\d+", model_key)
+    m = FIXED_TIME_KEY.fullmatch(model_key)
     taus = np.asarray(taus_s, float)
     if m is None or taus.size == 0:
         return get_model(model_key)

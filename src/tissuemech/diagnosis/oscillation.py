@@ -8,6 +8,7 @@ import pandas as pd
 from scipy.optimize import least_squares, nnls
 
 from .. import stats as st
+from ..spectra import log_spaced_taus, prony_oscillation_basis, tau_window_from_frequency
 from .evidence import booij_thoone
 from .findings import DiagnosisContext, cv_group_column, demean_by, fix_record, group_cv, make_finding, untested_finding
 
@@ -16,10 +17,6 @@ from .findings import DiagnosisContext, cv_group_column, demean_by, fix_record, 
 # ------------------------------------------------------------------------------------------------
 #: relaxation times per decade of the non-negative spectrum fitted to each sweep by the inertia test
 SWEEP_SPECTRUM_PER_DECADE = 4
-#: decades the sweep spectrum's grid reaches beyond the sweep's 1/omega range on each side: a mode at a tenth
-#: of 1/omega_max is already in its omega^2 regime (G' ~ G'' omega tau), one ten times slower than 1/omega_min
-#: is a plateau, so wider grids add columns indistinguishable from these
-SWEEP_SPECTRUM_PAD_DECADES = 1
 #: fewest sweeps for the inertia test: the scatter of the per-sweep estimates is its noise (t with n - 1 df)
 MIN_INERTIA_SWEEPS = 3
 
@@ -28,22 +25,19 @@ def sweep_spectrum_design(omega: np.ndarray, inertia_x: np.ndarray) -> np.ndarra
     r"""Design of one frequency sweep for :func:`sweep_inertia_fit`: rows ``[G'; G'']``, columns
     ``[plateau, Maxwell modes..., -x, +x]``.
 
-    A relaxation spectrum :math:`G_e + \sum_k h_k\,e^{-t/\tau_k}` with :math:`G_e, h_k \ge 0` gives
-    :math:`G' = G_e + \sum_k h_k \omega^2\tau_k^2/(1+\omega^2\tau_k^2)` and
-    :math:`G'' = \sum_k h_k \omega\tau_k/(1+\omega^2\tau_k^2)`; the inertial error acts on the storage
-    modulus only, :math:`G'_{app} = G' - \Delta I\,x` with :math:`x = \omega^2 2h/(\pi R^4)` [1/m^3], and
-    enters as two non-negative columns (:math:`\Delta I = c_{+} - c_{-}`, of either sign). Times: 4 per
-    decade from a tenth of :math:`1/\omega_{max}` to ten times :math:`1/\omega_{min}` (:data:`SWEEP_SPECTRUM_PER_DECADE`,
-    :data:`SWEEP_SPECTRUM_PAD_DECADES`).
+    The spectrum columns are the Prony series' G'/G'' design (:func:`tissuemech.spectra.prony_oscillation_basis`)
+    on :data:`SWEEP_SPECTRUM_PER_DECADE` times per decade over the sweep's identifiable window widened by a
+    decade on each side (:func:`tissuemech.spectra.tau_window_from_frequency`): a mode ten times faster than
+    1/omega_max is already in its omega^2 regime (G' = G'' omega tau), one ten times slower than 1/omega_min a
+    plateau. With :math:`G_e, h_k \ge 0` they give a non-negative spectrum. The inertial error acts on the
+    storage modulus only, :math:`G'_{app} = G' - \Delta I\,x` with :math:`x = \omega^2 2h/(\pi R^4)` [1/m^3], and
+    enters as two non-negative columns (:math:`\Delta I = c_{+} - c_{-}`, of either sign).
     """
     w = np.asarray(omega, float)
-    lo = np.log10(1.0 / w.max()) - SWEEP_SPECTRUM_PAD_DECADES
-    hi = np.log10(1.0 / w.min()) + SWEEP_SPECTRUM_PAD_DECADES
-    taus = np.logspace(lo, hi, int(np.ceil((hi - lo) * SWEEP_SPECTRUM_PER_DECADE)) + 1)
-    wt = w[:, None] * taus[None, :]
-    storage = np.column_stack([np.ones_like(w), wt ** 2 / (1 + wt ** 2), -inertia_x, inertia_x])
-    loss = np.column_stack([np.zeros_like(w), wt / (1 + wt ** 2), np.zeros_like(w), np.zeros_like(w)])
-    return np.vstack([storage, loss])
+    taus = log_spaced_taus(*tau_window_from_frequency(w), SWEEP_SPECTRUM_PER_DECADE)
+    storage, loss = prony_oscillation_basis(w, taus)
+    zeros = np.zeros_like(w)
+    return np.vstack([np.column_stack([storage, -inertia_x, inertia_x]), np.column_stack([loss, zeros, zeros])])
 
 
 def sweep_inertia_fit(sweep: pd.DataFrame, delta_i: float | None = None) -> dict:
@@ -83,7 +77,7 @@ def _sweep_frame(ctx: DiagnosisContext) -> pd.DataFrame:
     g1 = t[t["quantity"] == "storage_modulus"]
     g2 = t[t["quantity"] == "loss_modulus"][keys + ["observed", "sigma"]].rename(
         columns={"observed": "loss", "sigma": "sd_loss"})
-    cols = keys + ["observed", "sigma", "predicted", "inverse_gap", "radius_m", "specimen", "sample", "condition"]
+    cols = keys + ["observed", "sigma", "inverse_gap", "radius_m", "specimen", "sample", "condition"]
     cols += [c for c in ("channel_raw_phase",) if c in g1]
     f = g1[cols].rename(columns={"observed": "storage", "sigma": "sd_storage"}).merge(g2, on=keys)
     f = f[np.isfinite(f[["storage", "loss", "sd_storage", "sd_loss", "inverse_gap", "radius_m"]]).all(axis=1)

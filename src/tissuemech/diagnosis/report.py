@@ -53,7 +53,6 @@ that would separate them (:func:`tissuemech.diagnosis.generic.confounded_covaria
 """
 from __future__ import annotations
 
-import re
 
 from collections.abc import Sequence
 from pathlib import Path
@@ -67,7 +66,7 @@ from statsmodels.tools.sm_exceptions import MissingDataError
 from ..canonical import read_netcdf, write_netcdf
 from ..models.registry import available_models, get_model
 from .. import stats as st
-from .baseline import (baseline_adequacy, extension_gain, fit_runs, level_normalised, predict_runs,
+from .baseline import (FIXED_TIME_KEY, baseline_adequacy, extension_gain, fit_runs, level_normalised, predict_runs,
                        ranked_candidates,
                        nnls_relaxation_times, read_fit_record, resolved_window_s, spectrum_model,
                        window_taus)
@@ -574,7 +573,7 @@ def run_diagnosis(runs_dir: str | Path, fits_dir: str | Path, out_json: str | Pa
     else:
         order, order_source = ranked_candidates(records, _read_ranking(ranking))
     name = str(dataset or runs[0].attrs.get("dataset", ""))
-    fixed_time = [r for r in order if FIXED_TIME_QLV.fullmatch(str(r["model_key"]))]
+    fixed_time = [r for r in order if is_fixed_time_qlv(str(r["model_key"]))]
     if fixed_time:
         # the ranking chooses the instantaneous law; the relaxation times come from the data (diagnose_runs),
         # never from the registry's grid the fit stage used
@@ -617,8 +616,11 @@ def run_diagnosis(runs_dir: str | Path, fits_dir: str | Path, out_json: str | Pa
     return _write_outputs(result, base_table, out_json, out_nc, fig_dir, name)
 
 
-#: fixed-time QLV keys (``qlv_<law>_prony<n>``): the baselines :func:`run_diagnosis` rebuilds on the data's times
-FIXED_TIME_QLV = re.compile(r"qlv_.+_prony\d+")
+def is_fixed_time_qlv(model_key: str) -> bool:
+    """A fixed-time QLV key (``qlv_<law>_prony<n>``, :data:`~tissuemech.diagnosis.baseline.FIXED_TIME_KEY`): the
+    baselines :func:`run_diagnosis` rebuilds on the data's times."""
+    m = FIXED_TIME_KEY.fullmatch(model_key)
+    return bool(m) and m.group(1) == "qlv"
 
 
 def _write_outputs(result: dict, table: pd.DataFrame, out_json, out_nc, fig_dir, dataset: str) -> dict:
