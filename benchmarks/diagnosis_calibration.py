@@ -101,6 +101,27 @@ def measurement_facts(runs) -> set[str]:
     return facts
 
 
+def own_verdict(result: dict, effect: str) -> str:
+    """Why a power dataset's injected cause was or was not named, from its finding: ``detected``,
+    ``not testable``, ``not significant``, ``not practical``, ``fix not scored``, ``fix below margin``, or
+    ``baseline inadequate`` (significant and practical, but no adequate baseline to name a cause under)."""
+    f = next((f for f in result["findings"] if f["effect"] == effect), None)
+    if f is None or not f.get("tested"):
+        return "not testable"
+    if f.get("detected"):
+        return "detected"
+    if not f.get("significant"):
+        return "not significant"
+    if not f.get("practical"):
+        return "not practical"
+    fix = f.get("fix") or {}
+    if "beats_margin" not in fix:
+        return "fix not scored"
+    if fix["beats_margin"]:
+        return "baseline inadequate"
+    return "fix below margin"
+
+
 def one(job: tuple) -> dict:
     """(effect or None, magnitude, seed) -> summary of one generated and diagnosed dataset."""
     effect, magnitude, seed = job
@@ -116,7 +137,7 @@ def one(job: tuple) -> dict:
         named_facts = [e for e in det if e in facts and e != effect]
         det = [e for e in det if e not in named_facts]
         out.update(detected=det, unexplained=unex, baseline=baseline_flags(res), model=res["model"], error=None,
-                   named_facts=named_facts)
+                   named_facts=named_facts, verdict=own_verdict(res, effect) if effect else None)
     except Exception as exc:  # noqa: BLE001 -- a crash is a result of the study, recorded with its message
         out.update(detected=[], unexplained=[], baseline=[], error=f"{type(exc).__name__}: {exc}",
                    trace=traceback.format_exc(limit=3))
@@ -174,20 +195,25 @@ def null_table(rows: list[dict]) -> list[str]:
 
 def power_table(rows: list[dict], magnitudes) -> list[str]:
     lines = ["### Power per cause (detected under its own name)", "",
-             "| cause | " + " | ".join(f"{m:g}x" for m in magnitudes) + " | named instead (all magnitudes) |",
-             "|---|" + "---|" * len(magnitudes) + "---|"]
-    for eff in ir.EFFECTS:
+             "| cause | " + " | ".join(f"{m:g}x" for m in magnitudes)
+             + " | other causes named (all magnitudes) | why missed (all magnitudes) |",
+             "|---|" + "---|" * len(magnitudes) + "---|---|"]
+    for eff in [e for e in ir.EFFECTS if any(r["effect"] == e for r in rows)]:
         cells = []
         other = Counter()
         for m in magnitudes:
             sub = [r for r in rows if r["effect"] == eff and r["magnitude"] == m]
             hit = sum(eff in r["detected"] for r in sub)
             cells.append(f"{hit}/{len(sub)}" if sub else "-")
-            for r in sub:
-                if eff not in r["detected"]:
-                    other.update(r["detected"] or (["(crash)"] if r["error"] else ["(nothing)"]))
+            for r in sub:   # a wrong cause named beside the right one counts as much as one named instead
+                other.update(e for e in r["detected"] if e != eff)
+                if r["error"]:
+                    other.update(["(crash)"])
+        verdicts = Counter(r.get("verdict") for r in rows if r["effect"] == eff and r.get("verdict")
+                           and r.get("verdict") != "detected")
         lines.append(f"| {eff} | " + " | ".join(cells) + " | "
-                     + (", ".join(f"{e} ({c})" for e, c in other.most_common()) or "-") + " |")
+                     + (", ".join(f"{e} ({c})" for e, c in other.most_common()) or "-") + " | "
+                     + (", ".join(f"{v} ({c})" for v, c in verdicts.most_common()) or "-") + " |")
     return lines
 
 
@@ -196,6 +222,8 @@ def main(argv=None) -> int:
     ap.add_argument("--null", type=int, default=200, help="number of null datasets")
     ap.add_argument("--power-reps", type=int, default=5, help="datasets per cause and magnitude")
     ap.add_argument("--magnitudes", type=float, nargs="+", default=[0.5, 1.0, 2.0])
+    ap.add_argument("--effects", nargs="+", default=list(ir.EFFECTS), choices=ir.EFFECTS,
+                    help="causes of the power study (default: all; seeds do not depend on this choice)")
     ap.add_argument("--seed", type=int, default=20261123,
                     help="first seed (null: seed + i; power: seed + 100000 + 1000 * cause index + i)")
     ap.add_argument("--jobs", type=int, default=1)
@@ -207,6 +235,8 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     jobs = [(None, 0.0, a.seed + i) for i in range(a.null)]
     for k, eff in enumerate(ir.EFFECTS):
+        if eff not in a.effects:
+            continue
         for m in a.magnitudes:
             jobs += [(eff, m, a.seed + 100000 + 1000 * k + i) for i in range(a.power_reps)]
     t0 = time.perf_counter()

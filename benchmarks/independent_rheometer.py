@@ -228,6 +228,8 @@ class Truth:
     temperature_c: float
     effects: dict = field(default_factory=dict)
     specimens: dict = field(default_factory=dict)
+    #: sizes of injected effects that follow from the design (e.g. the offset torque, set by the first run)
+    injected: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
         k = self.kernel
@@ -238,7 +240,7 @@ class Truth:
                 "radius_mm": self.radius_m * 1e3, "gap_mm": [g * 1e3 for g in self.gap_m],
                 "noise_rel": self.noise_rel, "torque_floor_nm": self.torque_floor_nm,
                 "motor_inertia_kg_m2": self.motor_inertia, "temperature_c": self.temperature_c,
-                "effects": self.effects, "specimens": self.specimens}
+                "effects": self.effects, "specimens": self.specimens, "injected": self.injected}
 
 
 def _log_uniform(rng, lo, hi):
@@ -454,6 +456,7 @@ def generate(seed: int, effects: dict | None = None, dataset: str | None = None)
                     if offset_torque is None:   # 5 % (1x) of this dataset's first ramp/relaxation median torque
                         offset_torque = EFFECT_SIZES["torque_offset"]["fraction"] * effects["torque_offset"] * float(
                             np.median(np.abs(m)))
+                        truth.injected["torque_offset_nm"] = offset_torque
                     m = m + offset_torque
                 m = _noise(run_rng, m, truth)
                 ch = {"time": t[rep], "shear_strain": rim[rep], "shear_rate": np.gradient(rim, t)[rep], "torque": m,

@@ -331,7 +331,7 @@ def nnls_relaxation_times(runs: Sequence[xr.Dataset], target: str, relaxation: s
                      "decade below the resolved window to its end, with one modulus level per loaded piece"}
     curves, units = [], []
     for r in runs:
-        for c in _curves([r], relaxation, n_points):
+        for c in curves_of_runs([r], relaxation, n_points):
             if c.response == "shear_history":
                 curves.append(c)
                 units.append(loading_unit(r))
@@ -454,7 +454,9 @@ def spectrum_model(model_key: str, taus_s: Sequence[float]) -> ConstitutiveModel
     return PipkinRogersModel(law, taus.size, taus_s=taus, name=model_key)
 
 
-def _curves(runs: Sequence[xr.Dataset], relaxation: str, n_points: int) -> list[fitting.Curve]:
+def curves_of_runs(runs: Sequence[xr.Dataset], relaxation: str, n_points: int) -> list[fitting.Curve]:
+    """The runs as fitting curves (``fitting.curve_from_run``, thinned to ``n_points``); runs of tests the fit
+    stage does not describe, or that cannot be read as a curve, are left out."""
     out = []
     for r in runs:
         if r.attrs.get("test") in fitting.TEST_RESPONSE:
@@ -473,7 +475,7 @@ def fit_runs(model_key: str, runs: Sequence[xr.Dataset], target: str, relaxation
     ``taus_s``: relaxation times [s] to rebuild a fixed-time QLV/Pipkin-Rogers model on
     (:func:`spectrum_model`); None keeps the registered model."""
     model = get_model(model_key) if taus_s is None else spectrum_model(model_key, taus_s)
-    curves = _curves(runs, relaxation, n_points)
+    curves = curves_of_runs(runs, relaxation, n_points)
     problem = fitting.FitProblem(model=model, curves=curves, target=target, model_key=model_key, scope="diagnosis")
     return fitting.fit(problem, starts=[start] if start else (), n_random=n_random, seed=seed)
 
@@ -505,7 +507,7 @@ def extension_gain(runs: Sequence[xr.Dataset], baseline_key: str, extension_key:
     for label, held in folds:
         train = [r for r in runs if not held(r)]
         test = [r for r in runs if held(r)]
-        test_curves = _curves(test, relaxation, n_points)
+        test_curves = curves_of_runs(test, relaxation, n_points)
         if not train or not test_curves:
             continue
         fb = fit_runs(baseline_key, train, target, relaxation, n_points, seed=seed, taus_s=taus_s)

@@ -26,16 +26,24 @@ def _offset_design(g: pd.DataFrame) -> np.ndarray:
     return np.column_stack(cols)
 
 
-def detect_torque_offset(ctx: DiagnosisContext) -> dict:
-    """Per-curve intercept of the stress residual on the predicted stress (small-strain time-domain data).
+def offset_rows(table: pd.DataFrame) -> pd.DataFrame:
+    """The residual rows an additive torque offset is read from: the shear stress of every relaxation hold and
+    of the small-strain part (<= 20 %) of the ramps."""
+    td = table[table["test"].isin(TIME_DOMAIN) & (table["quantity"] == "shear_stress")]
+    return td[(td["test"] == "stress_relaxation") | (td["strain"] <= 0.2)]
 
-    An additive torque offset gives residual = c + (s - 1) * predicted with c the same on every curve,
-    while specimen variability only changes the slope s; the per-curve intercepts are t-tested across curves.
+
+def offset_intercept(table: pd.DataFrame) -> dict | None:
+    """Common additive intercept [Pa] of the stress residuals of :func:`offset_rows`, the estimator of
+    :func:`detect_torque_offset`.
+
+    Per curve, residual = c_k + (s_k - 1) predicted (+ a linear drift in relaxation holds); across curves,
+    c_k = c + d level_k (a shape misfit of the model leaves intercepts proportional to the curve's stress
+    level, an offset is the same on every curve), precision-weighted, cluster-robust. Returns the
+    :func:`tissuemech.stats.coefficient_test` dict of c (``estimate`` [Pa]) with ``curves`` (the curves used),
+    or None with fewer than 4 usable curves.
     """
-    eff = "torque_offset"
-    td = ctx.table[ctx.table["test"].isin(TIME_DOMAIN) & (ctx.table["quantity"] == "shear_stress")]
-    # every relaxation hold (its own intercept, precision-weighted below) and the small-strain part of the ramps
-    td = td[(td["test"] == "stress_relaxation") | (td["strain"] <= 0.2)]
+    td = offset_rows(table)
     intercepts, ses, levels_pa, curves = [], [], [], []
     for c, g in td.groupby("curve"):
         if len(g) < 8 or g["predicted"].max() < 1.5 * g["predicted"].min():
@@ -52,13 +60,27 @@ def detect_torque_offset(ctx: DiagnosisContext) -> dict:
         levels_pa.append(float(g["predicted_abs"].median()))
         curves.append(c)
     if len(intercepts) < 4:
-        return untested_finding(eff, "fewer than 4 small-strain relaxation/ramp curves with a usable stress range")
-    # second stage: an offset is the same on every curve, whereas a shape misfit of the model leaves
-    # intercepts proportional to the curve's stress level -> intercept_k = c + d * level_k, test c;
-    # weighted by the precision of each curve's intercept (robust SEs keep the between-curve scatter)
+        return None
     stage2 = st.cluster_regression(np.asarray(intercepts), pd.DataFrame({"level": levels_pa}),
                                    weights=1.0 / np.asarray(ses) ** 2)
-    t = st.coefficient_test(stage2, "const")
+    return dict(st.coefficient_test(stage2, "const"), curves=curves)
+
+
+def detect_torque_offset(ctx: DiagnosisContext) -> dict:
+    """Per-curve intercept of the stress residual on the predicted stress (small-strain time-domain data).
+
+    An additive torque offset gives residual = c + (s - 1) * predicted with c the same on every curve,
+    while specimen variability only changes the slope s; the per-curve intercepts are t-tested across curves
+    (:func:`offset_intercept`). The fix is the baseline refitted with the offset removed, scored on held-out
+    conditions (``fit_info["fixes"]["torque_offset"]``, :func:`tissuemech.diagnosis.report.with_model_fixes`)
+    when it was scored, else the held-out curves' residuals less the offset estimated on the other curves.
+    """
+    eff = "torque_offset"
+    td = offset_rows(ctx.table)
+    t = offset_intercept(ctx.table)
+    if t is None:
+        return untested_finding(eff, "fewer than 4 small-strain relaxation/ramp curves with a usable stress range")
+    curves = t.pop("curves")
     tval = t["statistic"]
     radius = float(td["radius_m"].median())
     offset_pa = float(t["estimate"])
@@ -72,20 +94,23 @@ def detect_torque_offset(ctx: DiagnosisContext) -> dict:
     late_level = float(lowest.groupby("curve")["observed"].apply(lambda v: np.median(np.abs(v))).min())
 
     def fit(train):
-        vals, lv = [], []
-        for _, g in train.groupby("curve"):
-            if len(g) < 8 or g["predicted"].max() < 1.5 * g["predicted"].min():
-                continue
-            A = _offset_design(g)
-            w = 1.0 / g["sigma"].to_numpy()
-            vals.append(np.linalg.lstsq(A * w[:, None], g["residual"].to_numpy() * w, rcond=None)[0][0])
-            lv.append(float(g["predicted_abs"].median()))
-        if len(vals) < 3:
+        est = offset_intercept(train)
+        if est is None:
             raise ValueError("too few training curves")
-        return float(np.polyfit(lv, vals, 1)[1])
+        return float(est["estimate"])
 
     def error(test, par):
-        return (test["residual"].to_numpy() - (0.0 if par is None else par)) / test["predicted_abs"].to_numpy()
+        # each held-out curve keeps its own stress level (a free factor on the prediction, with and without the
+        # offset): the baseline was fitted to offset data and has already moved its levels and long-time plateau
+        # towards the offset, so only the part of the offset that no change of level can give is scored
+        out = []
+        for _, g in test.groupby("curve"):
+            y = g["residual"].to_numpy(float) - (0.0 if par is None else par)
+            p = g["predicted"].to_numpy(float)
+            pp = float(np.dot(p, p))
+            y = y - (float(np.dot(p, y)) / pp) * p if pp > 0 else y
+            out.append(y / g["predicted_abs"].to_numpy(float))
+        return np.concatenate(out) if out else np.array([])
 
     group = "condition" if small["condition"].nunique() >= 3 else cv_group_column(small)
     before, after = group_cv(small, group, fit, error)
@@ -97,9 +122,10 @@ def detect_torque_offset(ctx: DiagnosisContext) -> dict:
     evidence = (f"Stress residuals of {ctx.model} on {len(curves)} relaxation holds and ramp starts (<= 20 %) "
                 f"have a common additive intercept of {offset_pa:+.3g} Pa ({where}; t = {tval:.2f} across curves), "
                 f"i.e. {size}: G(t, gamma0) = sigma/gamma0 diverges as 1/gamma0.")
-    fix = fix_record("torque offset M0 as a nuisance parameter (stress + 2 M0/(pi R^3))", "rms_rel_residual_small_strain",
-               before, after, f"leave-one-{group}-out", offset_pa=offset_pa, offset_uNm=offset_unm,
-               n_held_out_points=len(small))
+    fix = ctx.fit_info.get("fixes", {}).get(eff) or fix_record(
+        "torque offset M0 as a nuisance parameter (stress + 2 M0/(pi R^3))", "rms_rel_residual_small_strain",
+        before, after, f"leave-one-{group}-out", offset_pa=offset_pa, offset_uNm=offset_unm,
+        n_held_out_points=len(small))
     practical = bool(late_level > 0 and abs(offset_pa) >= 0.02 * late_level)
     return make_finding(eff, t, "t", offset_unm, "uN m", practical, evidence, fix)
 
