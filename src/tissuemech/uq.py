@@ -60,10 +60,10 @@ import xarray as xr
 from . import fitting as F
 from . import posterior as P
 from . import ranking as R
-from .cards import prony_from_step_response
+from .cards import fitted_strain_max, material_fields, prony_from_step_response
 from .canonical import atomic_write, read_netcdf, write_json, write_netcdf, write_text
 from .curves import drop_flagged, select_average
-from .models.base import bulk_modulus, initial_shear_modulus
+from .models.base import initial_shear_modulus
 from .fem.experiments import flat_punch_indentation, rheometer_torsion
 from .fem.tled import DynamicRelaxationError, ElementInversionError
 from .models.registry import get_model
@@ -409,29 +409,31 @@ def run_population(ranking_csv, runs_dir, fits_dir, cards_dir, scope: str, tests
 # ------------------------------------------------------------------------------------------------------
 def elastic_card(card: Mapping, record: F.FitRecord, params: Mapping[str, float]) -> dict | None:
     """A FEM card of the fit's elastic law at ``params``: the card's ``elastic_law`` or, without one, the
-    instantaneous law of the record's structure; bulk modulus from the card's Poisson ratio and the law's initial
-    shear modulus; for QLV and beyond-QLV fits the Prony series of the small-strain step response at ``params``
-    (exact for QLV; for a beyond-QLV law its small-strain linearisation). None where the law has no parameters
-    among ``params``."""
+    instantaneous law of the record's structure; for QLV and beyond-QLV fits the Prony series of the small-strain
+    step response at ``params`` (exact for QLV; for a beyond-QLV law its small-strain linearisation). The material
+    fields (moduli, bulk modulus from the card's Poisson ratio, Prony normalisation) are assembled by
+    :func:`tissuemech.cards.material_fields`, as in the fit's own card. None where the law has no parameters among
+    ``params``."""
     law = card.get("elastic_law") or (record.structure or {}).get("instantaneous")
     if not law:
         return None
-    names = [sp.name for sp in get_model(law).param_specs]
+    law = get_model(law)
+    names = [sp.name for sp in law.param_specs]
     if not all(n in params for n in names):
         return None
-    lp = {n: float(params[n]) for n in names}
-    nu = float(card["poisson_ratio"])
-    out = {k: v for k, v in card.items() if k not in ("elastic_law", "elastic_parameters", "bulk_modulus", "prony")}
-    out.update({"elastic_law": law, "elastic_parameters": lp, "poisson_ratio": nu,
-                "bulk_modulus": bulk_modulus(initial_shear_modulus(get_model(law), lp), nu), "prony": None})
+    prony = None
     taus = (record.structure or {}).get("taus_s")
     if record.family in ("qlv", "beyond_qlv") and taus:
         # the small-strain Prony series of the draw (exact for QLV; the small-strain linearisation of a
         # beyond-QLV law, whose strain-dependent weights the FEM does not have)
         taus = np.asarray(taus, float)
         pr = prony_from_step_response(get_model(record.model_key), params, taus, taus.min() / 10, taus.max() * 10)
-        out["prony"] = {"g": pr["g"], "tau": pr["tau"], "g_inf": pr["g_inf"],
-                        "source": "small-strain step response of the fit (tissuemech.uq)"}
+        prony = {"g": pr["g"], "tau": pr["tau"], "g_inf": pr["g_inf"],
+                 "source": "small-strain step response of the fit (tissuemech.uq)"}
+    fields, _, _ = material_fields(law, {n: float(params[n]) for n in names}, float(card["poisson_ratio"]), prony,
+                                   fitted_strain_max(card.get("validity") or {}))
+    out = {k: v for k, v in card.items() if k not in fields}
+    out.update(fields)
     return out
 
 
