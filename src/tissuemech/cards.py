@@ -326,6 +326,53 @@ def parameter_uncertainty(result: FitResult, law: ConstitutiveModel | None = Non
     return out
 
 
+def fitted_strain_max(ranges: Mapping) -> float:
+    """The largest fitted shear strain of a fit's (or a card's ``validity``) ranges, 0.5 where not given."""
+    strain_max = ranges.get("strain_max", float("nan"))
+    return float(strain_max) if strain_max is not None and np.isfinite(strain_max) else 0.5
+
+
+def material_fields(law: ConstitutiveModel | None, lp: Mapping[str, float], poisson_ratio: float,
+                    prony: dict | None = None, strain_max: float = 0.5) -> tuple[dict, list[str], bool]:
+    """The material part of a card, the one place it is assembled (:func:`make_card` and the cards of posterior
+    draws, ``uq.elastic_card``): from the elastic law, its parameters ``lp``, the Poisson ratio and the Prony
+    series (``g``, ``tau``, ``g_inf``, ``source``, ... or None).
+
+    Returns ``(fields, notes, singular_origin)``: ``fields`` = ``prony`` (with its ``normalisation`` statement),
+    ``elastic_law``, ``elastic_parameters``, ``initial_shear_modulus``, ``poisson_ratio`` and ``bulk_modulus``
+    (``models.base.bulk_modulus(G0, nu)``). A law whose tangent still grows as gamma -> 0 (``singular_origin``)
+    gets the secant modulus at ``strain_max / 20`` as its initial shear modulus; a linear elastic shear law is
+    written as the neo-Hookean law with mu = G0. ``law`` None (no solid law): NaN moduli, ``elastic_law`` None.
+    """
+    notes: list[str] = []
+    if prony is not None:
+        prony = {**prony, "normalisation": ("g_i relative to the instantaneous shear modulus: "
+                                            "G(t) = G0 (g_inf + sum g_i exp(-t/tau_i)), g_inf = 1 - sum g_i "
+                                            "(Abaqus g_i)")}
+        if len(prony["g"]) > 6:
+            notes.append("more than 6 Prony terms: the FEBio block cannot hold them")
+    mu0 = initial_shear_modulus(law, lp) if law is not None else float("nan")
+    singular_origin = law is not None and np.isfinite(mu0) and not math.isclose(
+        mu0, initial_shear_modulus(law, lp, step=1e-4), rel_tol=1e-3)
+    if singular_origin:
+        # tangent still growing as gamma -> 0 (Nunes, Amin with a negative exponent): the law has no finite
+        # initial modulus, so the bulk modulus is based on the secant modulus at the smallest checked strain
+        gamma_ref = strain_max / 20.0
+        mu0 = float(np.asarray(law.elastic_shear_stress(lp, np.array([gamma_ref])), float)[0] / gamma_ref)
+        notes.append(f"the law has an unbounded initial tangent modulus; initial_shear_modulus is its secant "
+                     f"modulus at gamma = {gamma_ref:.3g}")
+    fields = {"prony": prony, "elastic_law": None if law is None else law.name, "elastic_parameters": lp}
+    if law is not None and law.name.startswith("linear_elastic"):
+        # a linear shear law is written as the neo-Hookean law with mu = G0: identical in simple shear at any
+        # strain, and a finite-strain law every FE code (and the project's FEM) knows
+        fields["elastic_law"], fields["elastic_parameters"] = "neo_hookean", {"mu": mu0}
+        notes.append("linear elastic shear law written as neo-Hookean (mu = G0; identical in simple shear)")
+    fields["initial_shear_modulus"] = mu0
+    fields["poisson_ratio"] = float(poisson_ratio)
+    fields["bulk_modulus"] = bulk_modulus(mu0, poisson_ratio) if np.isfinite(mu0) else float("nan")
+    return fields, notes, singular_origin
+
+
 def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float,
               dataset: str = "", fit_file: str = "", strain_margin: float = 1.2) -> dict:
     """Canonical card of a fitted model (see the module docstring for the shape and conventions); ``poisson_ratio``
@@ -336,8 +383,7 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float,
             "standard_errors": dict(result.stderr), "structure": result.structure}
     law, lp = _law_and_params(model, p)
     prony = None
-    strain_max = result.ranges.get("strain_max", float("nan"))
-    strain_max = float(strain_max) if np.isfinite(strain_max) else 0.5
+    strain_max = fitted_strain_max(result.ranges)
     if model.family == "qlv" and hasattr(model, "prony_weights"):
         g_inf, g, taus = model.prony_weights(p)
         prony = {"g": [float(x) for x in g], "tau": [float(x) for x in taus], "g_inf": float(g_inf),
@@ -382,32 +428,10 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float,
         if pr["g_inf"] < 1e-6:
             notes.append("no long-term modulus (fluid-like): not a solid material law; no FE block written")
             law = None
-    if prony is not None:
-        prony["normalisation"] = ("g_i relative to the instantaneous shear modulus: "
-                                  "G(t) = G0 (g_inf + sum g_i exp(-t/tau_i)), g_inf = 1 - sum g_i (Abaqus g_i)")
-        if len(prony["g"]) > 6:
-            notes.append("more than 6 Prony terms: the FEBio block cannot hold them")
-    card["prony"] = prony
-    mu0 = initial_shear_modulus(law, lp) if law is not None else float("nan")
-    singular_origin = law is not None and np.isfinite(mu0) and not math.isclose(
-        mu0, initial_shear_modulus(law, lp, step=1e-4), rel_tol=1e-3)
-    if singular_origin:
-        # tangent still growing as gamma -> 0 (Nunes, Amin with a negative exponent): the law has no finite
-        # initial modulus, so the bulk modulus is based on the secant modulus at the smallest checked strain
-        gamma_ref = strain_max / 20.0
-        mu0 = float(np.asarray(law.elastic_shear_stress(lp, np.array([gamma_ref])), float)[0] / gamma_ref)
-        notes.append(f"the law has an unbounded initial tangent modulus; initial_shear_modulus is its secant "
-                     f"modulus at gamma = {gamma_ref:.3g}")
-    card["elastic_law"] = None if law is None else law.name
-    card["elastic_parameters"] = lp
-    if law is not None and law.name.startswith("linear_elastic"):
-        # a linear shear law is written as the neo-Hookean law with mu = G0: identical in simple shear at any
-        # strain, and a finite-strain law every FE code (and the project's FEM) knows
-        card["elastic_law"], card["elastic_parameters"] = "neo_hookean", {"mu": mu0}
-        notes.append("linear elastic shear law written as neo-Hookean (mu = G0; identical in simple shear)")
-    card["initial_shear_modulus"] = mu0
-    card["poisson_ratio"] = float(poisson_ratio)
-    card["bulk_modulus"] = bulk_modulus(mu0, poisson_ratio) if np.isfinite(mu0) else float("nan")
+    fields, law_notes, singular_origin = material_fields(law, lp, poisson_ratio, prony, strain_max)
+    card.update(fields)
+    notes += law_notes
+    prony = card["prony"]
     card["validity"] = {**result.ranges, "plate_target": result.target,
                         "marlow_strain_max": strain_max * strain_margin}
     if singular_origin:
@@ -622,7 +646,8 @@ def write_card_files(card: Mapping, folder, stem: str | None = None) -> dict[str
     return out
 
 
-__all__ = ["make_card", "card_json", "abaqus_block", "parse_abaqus_block", "abaqus_simple_shear_stress",
+__all__ = ["make_card", "material_fields", "fitted_strain_max", "card_json", "abaqus_block", "parse_abaqus_block",
+           "abaqus_simple_shear_stress",
            "abaqus_hyperelastic_form", "marlow_uniaxial_table", "febio_block", "febio_file_text",
            "febio_simple_shear_stress", "valid_range", "parameter_uncertainty",
            "prony_from_step_response", "prony_from_complex_modulus", "write_card_files"]

@@ -5,7 +5,9 @@
   (:func:`effective_sample_size`, ``science.md`` section 4.2);
 * residual-structure tests used to name what a fitted model gets wrong (``science.md`` section 4): runs test,
   Durbin-Watson, cluster-robust regression and coefficient tests, nested F-test, likelihood ratio, Holm and
-  Bonferroni, outlier tests, a random-intercept model.
+  Bonferroni, outlier tests;
+* the package's one linear mixed-effects model (:func:`mixed_effects`: specimen random intercept, nested sample
+  component, SEs, standardised BLUPs), used by ``uq.run_population`` and the diagnosis's outlier-specimen detector.
 
 Thin, pure wrappers around statsmodels/scipy that return plain dicts (JSON-ready floats) so the catalogue
 and the generic detector share one vocabulary: ``statistic``, ``p_value``, ``log10_p`` (kept separately
@@ -271,26 +273,90 @@ def deletion_outlier_test(values: np.ndarray) -> dict:
     return statistic_result(ts[b], lp, index=b, modified_z=float(modified_z_scores(x)[b]))
 
 
-def mixed_log_params(table: pd.DataFrame, value: str, group: str) -> dict:
-    """Random-intercept model ln(theta_bs) = ln(theta) + u_b + e_bs (statsmodels MixedLM).
+#: the optimizers :func:`mixed_effects` hands to ``MixedLM.fit`` by default (L-BFGS, Powell where it fails)
+MIXED_OPTIMIZERS = ("lbfgs", "powell")
+
+
+def mixed_effects(table: pd.DataFrame, value: str, specimen: str = "specimen", sample: str | None = "sample",
+                  method: Sequence[str] | None = MIXED_OPTIMIZERS) -> dict:
+    """The package's one linear mixed-effects model: ``value = mu + b_specimen [+ c_sample] + e`` (statsmodels
+    ``MixedLM``, REML).
+
+    * a specimen random intercept ``b ~ N(0, sd_specimen^2)``;
+    * when a piece (a ``specimen``/``sample`` pair) has several rows, a sample variance component nested in the
+      specimen (``c ~ N(0, sd_sample^2)``) and a within-piece residual ``sd_residual``; with one row per piece
+      (or ``sample`` None: every row is its own piece) the residual *is* the sample-to-sample SD (it includes any
+      within-row misfit) and ``sd_residual`` is NaN;
+    * standard errors: the mean's from ``MixedLM``; a variance component's from ``MixedLM``'s covariance of its
+      variance parameters (relative to the residual scale) times the scale, ``sqrt(2/df)`` for the residual
+      variance; the delta method for the SDs;
+    * ``blup_z``: the specimens' BLUPs (predicted intercepts) divided by ``sd_specimen`` (0 where that is 0;
+      |z| > 3 flags an outlier specimen); ``icc``: the specimen share of the total variance.
 
     Parameters
     ----------
-    table : one row per sample with columns ``value`` (positive parameter) and ``group`` (specimen)
+    table : one row per observation with columns ``value`` (already on the scale modelled, e.g. a log), ``specimen``
+        and, unless None, ``sample``; rows with a non-finite ``value`` are dropped
+    method : optimizers tried in turn by ``MixedLM.fit`` (None: statsmodels' default list)
 
     Returns
     -------
-    dict with ``mean_log``, ``omega_between`` (SD of u_b), ``omega_within`` (SD of e_bs), ``icc`` and the
-    standardized BLUPs ``blup_z`` per group (|z| > 3 flags an outlier specimen).
+    A JSON-ready dict: ``value``, ``n_runs`` (rows), ``n_specimens``, ``n_pieces``, ``mean``, ``mean_se``,
+    ``sd_specimen``, ``sd_specimen_se``, ``sd_sample``, ``sd_sample_se``, ``sd_residual``, ``sd_residual_se``,
+    ``icc``, ``blup_z`` (per specimen, keys as strings), ``converged`` and the ``method`` statement; with fewer than
+    2 specimens or 3 rows only the counts, ``mean`` and ``status``.
     """
-    import statsmodels.formula.api as smf
+    import statsmodels.formula.api as smf  # a slow import (module note), only here
 
-    df = pd.DataFrame({"y": np.log(table[value].to_numpy(float)), "g": table[group].astype(str).to_numpy()})
-    fit = smf.mixedlm("y ~ 1", df, groups=df["g"]).fit(reml=True)
-    var_b = float(fit.cov_re.iloc[0, 0])
-    var_w = float(fit.scale)
-    blups = {g: float(v.iloc[0]) for g, v in fit.random_effects.items()}
-    sd_b = np.sqrt(var_b) if var_b > 0 else np.nan
-    return {"mean_log": float(fit.fe_params.iloc[0]), "omega_between": float(np.sqrt(max(var_b, 0.0))),
-            "omega_within": float(np.sqrt(var_w)), "icc": float(var_b / (var_b + var_w)) if var_b + var_w > 0 else 0.0,
-            "blup_z": {g: (u / sd_b if np.isfinite(sd_b) else 0.0) for g, u in blups.items()}}
+    d = table[np.isfinite(table[value].to_numpy(float))]
+    spec = d[specimen].astype(str).to_numpy()
+    piece = spec + "/" + (d[sample].astype(str).to_numpy() if sample is not None else np.arange(len(d)).astype(str))
+    d = pd.DataFrame({"y": d[value].to_numpy(float), "specimen": spec, "piece": piece})
+    n, n_spec, n_piece = len(d), d["specimen"].nunique(), d["piece"].nunique()
+    repeated = n_piece < n
+    out = {"value": value, "n_runs": n, "n_specimens": int(n_spec), "n_pieces": int(n_piece)}
+    if n_spec < 2 or n < 3:
+        out.update({"mean": float(d["y"].mean()) if n else float("nan"), "status": "fewer than 2 specimens"})
+        return out
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # boundary / convergence warnings: reported through `converged` and the SDs
+        vc = {"sample": "0 + C(piece)"} if repeated else None
+        model = smf.mixedlm("y ~ 1", d, groups=d["specimen"], re_formula="1", vc_formula=vc)
+        fit = model.fit(reml=True, method=list(method) if method is not None else None)
+    # statsmodels parameterises the variances relative to the residual scale; cov_params holds the covariance of
+    # those relative parameters, so SE(variance) = scale x SE(relative) (the scale's own uncertainty left out)
+    scale = float(fit.scale)
+    k_fe = len(fit.fe_params)
+    cp = np.diag(np.asarray(fit.cov_params(), float))
+    rel_se = np.sqrt(np.where(cp[k_fe:] >= 0, cp[k_fe:], np.nan))
+    var_spec = float(fit.cov_re.iloc[0, 0])
+    var_spec_se = float(scale * rel_se[0])
+    if repeated:
+        var_samp, var_samp_se = float(fit.vcomp[0]), float(scale * rel_se[1])
+        var_resid, var_resid_se = scale, scale * math.sqrt(2.0 / max(n - n_piece, 1))
+    else:  # one row per piece: the residual is the sample-to-sample variance
+        var_samp, var_samp_se = scale, scale * math.sqrt(2.0 / max(n - n_spec, 1))
+        var_resid, var_resid_se = float("nan"), float("nan")
+
+    def sd(v, se):
+        v = max(v, 0.0)
+        return math.sqrt(v), (se / (2.0 * math.sqrt(v)) if v > 0 else float("nan"))
+
+    out["mean"] = float(fit.fe_params.iloc[0])
+    out["mean_se"] = float(fit.bse_fe.iloc[0])
+    out["sd_specimen"], out["sd_specimen_se"] = sd(var_spec, var_spec_se)
+    out["sd_sample"], out["sd_sample_se"] = sd(var_samp, var_samp_se)
+    out["sd_residual"], out["sd_residual_se"] = sd(var_resid, var_resid_se) if repeated else (float("nan"),) * 2
+    total = max(var_spec, 0.0) + max(var_samp, 0.0) + (var_resid if repeated else 0.0)
+    out["icc"] = float(max(var_spec, 0.0) / total) if total > 0 else 0.0
+    sd_b = out["sd_specimen"]
+    out["blup_z"] = {str(g): (float(v.iloc[0]) / sd_b if sd_b > 0 else 0.0) for g, v in fit.random_effects.items()}
+    out["converged"] = bool(getattr(fit, "converged", True))
+    out["method"] = ("statsmodels MixedLM (REML): value ~ 1 + specimen random intercept"
+                     + (" + sample variance component nested in specimen" if repeated else
+                        "; one run per piece, so the residual SD is the sample-to-sample SD (it includes the "
+                        "within-run misfit)")
+                     + "; SEs: MixedLM covariance of the variance parameters x scale, sqrt(2/df) for the residual "
+                       "variance, delta method for SDs")
+    return out

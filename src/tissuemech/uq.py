@@ -23,13 +23,13 @@ Specimen variability (``run_population``, rule ``population``): every run of the
 the run (``log s`` = weighted mean of ``log(observed / predicted)`` over the run's unflagged points, the run's own
 strain history and plate geometry); for the QLV and hyperelastic laws a common factor on the moduli scales the
 stress exactly, so ``log G0_piece = log G0_fit + log s`` is the piece's log initial shear modulus. A linear
-mixed-effects model (statsmodels ``MixedLM``, REML) ``log G0 = mu + b_specimen + e`` with a specimen random
-intercept (``b ~ N(0, sd_specimen^2)``) and, when a piece has several runs, a sample variance component nested in
-the specimen, gives the population mean ``mu`` and the SDs with standard errors (``MixedLM``'s
-covariance of the variance parameters, times the residual scale; ``sqrt(2/df)`` for the residual variance; the
-delta method for the SDs). With one run per piece the residual SD *is* the sample-to-sample SD
-(it also holds the within-run misfit; stated in the output). The JSON written next to the card carries that
-population distribution.
+mixed-effects model (:func:`tissuemech.stats.mixed_effects`: statsmodels ``MixedLM``, REML)
+``log G0 = mu + b_specimen + e`` with a specimen random intercept (``b ~ N(0, sd_specimen^2)``) and, when a piece
+has several runs, a sample variance component nested in the specimen, gives the population mean ``mu`` and the SDs
+with standard errors (``MixedLM``'s covariance of the variance parameters, times the residual scale; ``sqrt(2/df)``
+for the residual variance; the delta method for the SDs). With one run per piece the residual SD *is* the
+sample-to-sample SD (it also holds the within-run misfit; stated in the output). The JSON written next to the card
+carries that population distribution.
 
 Propagation to the FEM (``run_uq_indentation`` / ``run_uq_torsion``, rules ``uq_indentation`` / ``uq_torsion``,
 both through ``propagate``): the flat-punch indentation of ``fem.experiments.flat_punch_indentation`` (small mesh,
@@ -60,15 +60,16 @@ import xarray as xr
 from . import fitting as F
 from . import posterior as P
 from . import ranking as R
-from .cards import prony_from_step_response
+from .cards import fitted_strain_max, material_fields, prony_from_step_response
 from .canonical import atomic_write, read_netcdf, write_json, write_netcdf, write_text
 from .curves import drop_flagged, select_average
-from .models.base import bulk_modulus, initial_shear_modulus
+from .models.base import initial_shear_modulus
 from .fem.experiments import flat_punch_indentation, rheometer_torsion
 from .fem.tled import DynamicRelaxationError, ElementInversionError
 from .models.registry import get_model
 from .pipeline import load_runs
 from .plots import new_figure, save_figure
+from .stats import mixed_effects
 from .stages import scope_curves
 
 logger = logging.getLogger(__name__)
@@ -322,7 +323,7 @@ def run_posterior(ranking_csv, averages_path, fits_dir, scope: str, tests, out_n
 
 
 # ------------------------------------------------------------------------------------------------------
-# specimen variability: per-piece levels and the mixed-effects model
+# specimen variability: per-piece levels and the mixed-effects model (tissuemech.stats.mixed_effects)
 # ------------------------------------------------------------------------------------------------------
 def reference_shear_modulus(model_key: str, params: Mapping[str, float]) -> float:
     """Initial shear modulus of a fitted model (Pa): the elastic law's small-strain tangent, or for a Prony
@@ -369,63 +370,6 @@ def piece_levels(runs, record: F.FitRecord, tests, exclude_flagged: bool = True)
     return pd.DataFrame(rows)
 
 
-def mixed_effects(levels: pd.DataFrame, value: str = "log_g0") -> dict:
-    """Population mean and specimen / sample SDs of ``value`` (REML ``MixedLM``; module docstring) with SEs.
-
-    ``levels`` needs columns ``specimen``, ``sample`` and ``value``. Returns a JSON-ready dict: ``mean``,
-    ``mean_se``, ``sd_specimen``, ``sd_specimen_se``, ``sd_sample``, ``sd_sample_se``, ``sd_residual`` (within a
-    piece, only when pieces have several runs, else NaN), counts, ``converged`` and the method statement.
-    """
-    import statsmodels.formula.api as smf  # statsmodels is a dependency; its import is slow, so only here
-
-    d = levels[np.isfinite(levels[value])].copy()
-    d["piece"] = d["specimen"].astype(str) + "/" + d["sample"].astype(str)
-    n, n_spec, n_piece = len(d), d["specimen"].nunique(), d["piece"].nunique()
-    repeated = n_piece < n
-    out = {"value": value, "n_runs": n, "n_specimens": int(n_spec), "n_pieces": int(n_piece)}
-    if n_spec < 2 or n < 3:
-        out.update({"mean": float(d[value].mean()) if n else float("nan"), "status": "fewer than 2 specimens"})
-        return out
-    import warnings as _w
-    with _w.catch_warnings():
-        _w.simplefilter("ignore")  # boundary / convergence warnings: reported through `converged` and the SDs
-        vc = {"sample": "0 + C(piece)"} if repeated else None
-        model = smf.mixedlm(f"{value} ~ 1", d, groups=d["specimen"], re_formula="1", vc_formula=vc)
-        fit = model.fit(reml=True, method=["lbfgs", "powell"])
-    # statsmodels parameterises the variances relative to the residual scale; cov_params holds the covariance of
-    # those relative parameters, so SE(variance) = scale x SE(relative) (the scale's own uncertainty left out)
-    scale = float(fit.scale)
-    k_fe = len(fit.fe_params)
-    cp = np.diag(np.asarray(fit.cov_params(), float))
-    rel_se = np.sqrt(np.where(cp[k_fe:] >= 0, cp[k_fe:], np.nan))
-    var_spec = float(fit.cov_re.iloc[0, 0])
-    var_spec_se = float(scale * rel_se[0])
-    if repeated:
-        var_samp, var_samp_se = float(fit.vcomp[0]), float(scale * rel_se[1])
-        var_resid, var_resid_se = scale, scale * math.sqrt(2.0 / max(n - n_piece, 1))
-    else:  # one run per piece: the residual is the sample-to-sample variance
-        var_samp, var_samp_se = scale, scale * math.sqrt(2.0 / max(n - n_spec, 1))
-        var_resid, var_resid_se = float("nan"), float("nan")
-
-    def sd(v, se):
-        v = max(v, 0.0)
-        return math.sqrt(v), (se / (2.0 * math.sqrt(v)) if v > 0 else float("nan"))
-
-    out["mean"] = float(fit.fe_params.iloc[0])
-    out["mean_se"] = float(fit.bse_fe.iloc[0])
-    out["sd_specimen"], out["sd_specimen_se"] = sd(var_spec, var_spec_se)
-    out["sd_sample"], out["sd_sample_se"] = sd(var_samp, var_samp_se)
-    out["sd_residual"], out["sd_residual_se"] = sd(var_resid, var_resid_se) if repeated else (float("nan"),) * 2
-    out["converged"] = bool(getattr(fit, "converged", True))
-    out["method"] = ("statsmodels MixedLM (REML): value ~ 1 + specimen random intercept"
-                     + (" + sample variance component nested in specimen" if repeated else
-                        "; one run per piece, so the residual SD is the sample-to-sample SD (it includes the "
-                        "within-run misfit)")
-                     + "; SEs: MixedLM covariance of the variance parameters x scale, sqrt(2/df) for the residual "
-                       "variance, delta method for SDs")
-    return out
-
-
 def run_population(ranking_csv, runs_dir, fits_dir, cards_dir, scope: str, tests, out_json, out_csv,
                    dataset: str = "", exclude_flagged: bool = True) -> dict:
     """Specimen variability of the recommended fit of one scope: per-run levels (``out_csv``) and the mixed
@@ -441,7 +385,9 @@ def run_population(ranking_csv, runs_dir, fits_dir, cards_dir, scope: str, tests
     ok = levels[levels.get("status", pd.Series(dtype=str)) == "ok"] if not levels.empty else levels
     g0 = reference_shear_modulus(model, record.params)
     value = "log_g0" if g0 > 0 else "log_level"
-    pop = mixed_effects(ok, value=value) if not ok.empty else {"status": "no run of the scope's tests"}
+    pop = {"status": "no run of the scope's tests"}
+    if not ok.empty:  # the population JSON holds the model's counts, mean and SDs (not the diagnosis's BLUPs / ICC)
+        pop = {k: v for k, v in mixed_effects(ok, value).items() if k not in ("blup_z", "icc")}
     pop.update({"model": model, "scope": scope, "dataset": dataset, "reference_shear_modulus_pa": g0,
                 "quantity": ("natural log of the initial shear modulus (Pa) per loaded piece" if value == "log_g0"
                              else "natural log of the level factor on the fit's stress per loaded piece"),
@@ -463,29 +409,31 @@ def run_population(ranking_csv, runs_dir, fits_dir, cards_dir, scope: str, tests
 # ------------------------------------------------------------------------------------------------------
 def elastic_card(card: Mapping, record: F.FitRecord, params: Mapping[str, float]) -> dict | None:
     """A FEM card of the fit's elastic law at ``params``: the card's ``elastic_law`` or, without one, the
-    instantaneous law of the record's structure; bulk modulus from the card's Poisson ratio and the law's initial
-    shear modulus; for QLV and beyond-QLV fits the Prony series of the small-strain step response at ``params``
-    (exact for QLV; for a beyond-QLV law its small-strain linearisation). None where the law has no parameters
-    among ``params``."""
+    instantaneous law of the record's structure; for QLV and beyond-QLV fits the Prony series of the small-strain
+    step response at ``params`` (exact for QLV; for a beyond-QLV law its small-strain linearisation). The material
+    fields (moduli, bulk modulus from the card's Poisson ratio, Prony normalisation) are assembled by
+    :func:`tissuemech.cards.material_fields`, as in the fit's own card. None where the law has no parameters among
+    ``params``."""
     law = card.get("elastic_law") or (record.structure or {}).get("instantaneous")
     if not law:
         return None
-    names = [sp.name for sp in get_model(law).param_specs]
+    law = get_model(law)
+    names = [sp.name for sp in law.param_specs]
     if not all(n in params for n in names):
         return None
-    lp = {n: float(params[n]) for n in names}
-    nu = float(card["poisson_ratio"])
-    out = {k: v for k, v in card.items() if k not in ("elastic_law", "elastic_parameters", "bulk_modulus", "prony")}
-    out.update({"elastic_law": law, "elastic_parameters": lp, "poisson_ratio": nu,
-                "bulk_modulus": bulk_modulus(initial_shear_modulus(get_model(law), lp), nu), "prony": None})
+    prony = None
     taus = (record.structure or {}).get("taus_s")
     if record.family in ("qlv", "beyond_qlv") and taus:
         # the small-strain Prony series of the draw (exact for QLV; the small-strain linearisation of a
         # beyond-QLV law, whose strain-dependent weights the FEM does not have)
         taus = np.asarray(taus, float)
         pr = prony_from_step_response(get_model(record.model_key), params, taus, taus.min() / 10, taus.max() * 10)
-        out["prony"] = {"g": pr["g"], "tau": pr["tau"], "g_inf": pr["g_inf"],
-                        "source": "small-strain step response of the fit (tissuemech.uq)"}
+        prony = {"g": pr["g"], "tau": pr["tau"], "g_inf": pr["g_inf"],
+                 "source": "small-strain step response of the fit (tissuemech.uq)"}
+    fields, _, _ = material_fields(law, {n: float(params[n]) for n in names}, float(card["poisson_ratio"]), prony,
+                                   fitted_strain_max(card.get("validity") or {}))
+    out = {k: v for k, v in card.items() if k not in fields}
+    out.update(fields)
     return out
 
 
@@ -668,7 +616,7 @@ def run_uq_torsion(posterior_nc, population_json, fits_dir, averages_path, out_n
 
 __all__ = ["problem_for_record", "internal_covariance", "sample_record_posterior", "posterior_table",
            "inference_data", "write_inference_data", "read_inference_group", "run_posterior", "Z95", "IDATA_GROUPS",
-           "reference_shear_modulus", "piece_levels", "mixed_effects", "run_population", "elastic_card", "band",
+           "reference_shear_modulus", "piece_levels", "run_population", "elastic_card", "band",
            "run_uq_indentation", "run_uq_torsion", "propagate",
            "bands_dataset", "plot_bands", "SOURCES", "predictive_draws", "plot_posterior_predictive",
            "N_PREDICTIVE"]

@@ -110,10 +110,11 @@ def test_mixed_model_recovers_between_and_within_spread():
     n_b, n_s = 40, 4
     u = rng.normal(0, 0.3, n_b)
     rows = [{"g": f"b{b}", "v": np.exp(np.log(200.0) + u[b] + rng.normal(0, 0.1))} for b in range(n_b) for _ in range(n_s)]
-    res = st.mixed_log_params(pd.DataFrame(rows), "v", "g")
-    assert res["mean_log"] == pytest.approx(np.log(200.0), abs=0.15)
-    assert res["omega_between"] == pytest.approx(0.3, rel=0.3)
-    assert res["omega_within"] == pytest.approx(0.1, rel=0.2)
+    table = pd.DataFrame(rows).assign(log_v=lambda d: np.log(d["v"]))
+    res = st.mixed_effects(table, "log_v", specimen="g", sample=None, method=None)  # one row per sample
+    assert res["mean"] == pytest.approx(np.log(200.0), abs=0.15)
+    assert res["sd_specimen"] == pytest.approx(0.3, rel=0.3)
+    assert res["sd_sample"] == pytest.approx(0.1, rel=0.2)
 
 
 def test_strongest_component_is_bonferroni_over_the_components():

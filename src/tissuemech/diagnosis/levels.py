@@ -576,9 +576,8 @@ def detect_outlier_specimen(ctx: DiagnosisContext) -> dict:
     mixed = None
     try:
         per_sample = levels.groupby("sample").agg(resid=("resid", "mean"), specimen=("specimen", "first"))
-        per_sample["value"] = np.exp(per_sample["resid"])
-        if per_sample["specimen"].value_counts().max() > 1:
-            mixed = st.mixed_log_params(per_sample, "value", "specimen")
+        if per_sample["specimen"].value_counts().max() > 1:  # one row per sample: the residual is within-specimen
+            mixed = st.mixed_effects(per_sample, "resid", sample=None, method=None)
     except Exception:  # MixedLM may fail to converge on tiny designs; the deletion test stands alone
         mixed = None
     # held-out: predict each typical specimen's level from the others by mean (baseline) vs median (robust)
@@ -594,9 +593,9 @@ def detect_outlier_specimen(ctx: DiagnosisContext) -> dict:
         errs_after.append(r - others.median())
     before, after = rms(np.concatenate(errs_before)), rms(np.concatenate(errs_after))
     mixed_txt = ""
-    if mixed is not None:
-        mixed_txt = (f"; MixedLM on log-scales: omega_between = {mixed['omega_between']:.2f}, omega_within = "
-                     f"{mixed['omega_within']:.2f}, standardized BLUP of {name} = "
+    if mixed is not None and "sd_specimen" in mixed:
+        mixed_txt = (f"; MixedLM on log-scales: omega_between = {mixed['sd_specimen']:.2f}, omega_within = "
+                     f"{mixed['sd_sample']:.2f}, standardized BLUP of {name} = "
                      f"{mixed['blup_z'].get(name, np.nan):.1f}")
     evidence = (f"Specimen {name} is {ratio:.2f}x the median of the other {spec.size - 1} specimens "
                 f"(externally studentised deletion t = {t['statistic']:.2f} on {spec.size - 2} df, "

@@ -457,6 +457,8 @@ def explicit_loop(mesh, mat, laws, loads, mass, h_state, s_prev, w_prev, dt, n_s
     """Central-difference time loop. ``u``/``u_old`` hold the state at steps 0 and -1 on entry and the
     last two states on exit (``u`` newest). ``mesh``, ``mat``, ``laws``, ``loads``: :class:`KernelMesh`,
     :class:`KernelMaterial`, :class:`KernelLaws`, :class:`KernelLoads`; ``mass``: lumped nodal masses."""
+    # the unpacking and workspace below repeat the other time loop's: each loop is one compiled function, and a
+    # helper returning some twenty arrays would be no clearer
     X, elements, dndx, vol0, chunk_lo, vnode = mesh
     kind, params, kappa, use_anp, prony_g, prony_tau, branch_params = mat
     w1fn, w2fn, wlfn, bfn = laws
@@ -560,6 +562,8 @@ def dynamic_relaxation_loop(mesh, mat, laws, loads, dr_mass, h_state, s_prev, w_
     committed after convergence. Returns status, failing increment, iterations used per increment and
     the reactions/torques/contact forces per increment.
     """
+    # the unpacking and workspace below repeat the other time loop's: each loop is one compiled function, and a
+    # helper returning some twenty arrays would be no clearer
     X, elements, dndx, vol0, chunk_lo, vnode = mesh
     kind, params, kappa, use_anp, prony_g, prony_tau, branch_params = mat
     w1fn, w2fn, wlfn, bfn = laws

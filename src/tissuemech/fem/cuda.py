@@ -62,6 +62,9 @@ def _make_kernel(w1_py, w2_py, kind: int, use_anp: bool, float_name: str):
         third = ftype(1.0 / 3.0)
         kap = ftype(kappa)
         n_groups = rot_center.shape[0]
+        # Repeated on purpose: the tensor algebra below (F, cof F, b, b.b, pull-back) is fem.kinematics written out in
+        # the kernel's precision ftype, and F is computed again in the element phase after the ANP pre-pass
+        # (nothing per element is stored between the phases); tests/fem/test_cuda.py checks it against the CPU kernel
         for s in range(n_steps):
             k = k0 + s
             cur = k % 3

@@ -106,6 +106,8 @@ def symmetric_eigen3(a11, a22, a33, a12, a23, a13):
         off = abs(a12) + abs(a23) + abs(a13)
         if off <= 1e-16 * (abs(a11) + abs(a22) + abs(a33)):
             break
+        # the three plane rotations are written out (not a loop over index pairs): the matrix and the eigenvectors
+        # stay scalars in registers, as everywhere in the kernels
         if a12 != 0.0:  # rotation in the (1, 2) plane
             t, c = _jacobi_rotation(a11, a22, a12)
             s = t * c

@@ -98,6 +98,22 @@ def _nodal_forces(t11, t22, t33, t12, t23, t13, c11, c12, c13, c21, c22, c23, c3
     return r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z
 
 
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _gathered_deformation_gradient(u, conn, d9, e):
+    """``F`` of element ``e`` from the displacements of its nodes (gathered through ``conn``)."""
+    n0, n1, n2, n3 = conn[0, e], conn[1, e], conn[2, e], conn[3, e]
+    x0, y0, z0 = u[n0, 0], u[n0, 1], u[n0, 2]
+    ax, ay, az = u[n1, 0] - x0, u[n1, 1] - y0, u[n1, 2] - z0
+    bx, by, bz = u[n2, 0] - x0, u[n2, 1] - y0, u[n2, 2] - z0
+    cx, cy, cz = u[n3, 0] - x0, u[n3, 1] - y0, u[n3, 2] - z0
+    d1x, d1y, d1z = d9[0, e], d9[1, e], d9[2, e]
+    d2x, d2y, d2z = d9[3, e], d9[4, e], d9[5, e]
+    d3x, d3y, d3z = d9[6, e], d9[7, e], d9[8, e]
+    return (1.0 + ax * d1x + bx * d2x + cx * d3x, ax * d1y + bx * d2y + cx * d3y, ax * d1z + bx * d2z + cx * d3z,
+            ay * d1x + by * d2x + cy * d3x, 1.0 + ay * d1y + by * d2y + cy * d3y, ay * d1z + by * d2z + cy * d3z,
+            az * d1x + bz * d2x + cz * d3x, az * d1y + bz * d2y + cz * d3y, 1.0 + az * d1z + bz * d2z + cz * d3z)
+
+
 # --------------------------------------------------------------------------------------------------
 # passes
 # --------------------------------------------------------------------------------------------------
@@ -115,23 +131,7 @@ def kinematics_pass(u, conn, d9, vol0, kappa, pe, jm23a, f11a, f12a, f13a, f21a,
         bad = 0
         far = 0
         for e in range(lo[c], lo[c + 1]):
-            n0, n1, n2, n3 = conn[0, e], conn[1, e], conn[2, e], conn[3, e]
-            x0, y0, z0 = u[n0, 0], u[n0, 1], u[n0, 2]
-            ax, ay, az = u[n1, 0] - x0, u[n1, 1] - y0, u[n1, 2] - z0
-            bx, by, bz = u[n2, 0] - x0, u[n2, 1] - y0, u[n2, 2] - z0
-            cx, cy, cz = u[n3, 0] - x0, u[n3, 1] - y0, u[n3, 2] - z0
-            d1x, d1y, d1z = d9[0, e], d9[1, e], d9[2, e]
-            d2x, d2y, d2z = d9[3, e], d9[4, e], d9[5, e]
-            d3x, d3y, d3z = d9[6, e], d9[7, e], d9[8, e]
-            f11 = 1.0 + ax * d1x + bx * d2x + cx * d3x
-            f12 = ax * d1y + bx * d2y + cx * d3y
-            f13 = ax * d1z + bx * d2z + cx * d3z
-            f21 = ay * d1x + by * d2x + cy * d3x
-            f22 = 1.0 + ay * d1y + by * d2y + cy * d3y
-            f23 = ay * d1z + by * d2z + cy * d3z
-            f31 = az * d1x + bz * d2x + cz * d3x
-            f32 = az * d1y + bz * d2y + cz * d3y
-            f33 = 1.0 + az * d1z + bz * d2z + cz * d3z
+            f11, f12, f13, f21, f22, f23, f31, f32, f33 = _gathered_deformation_gradient(u, conn, d9, e)
             J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
             pe[e] = kappa * (J - 1.0) * vol0[e]
             jm23a[e] = jm23_newton(J)
@@ -208,9 +208,9 @@ def _element_pressure(anp_weight, kappa, J, p_node, n0, n1, n2, n3):
 @njit(cache=True, fastmath=FASTMATH, inline="always")
 def _store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
                         fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11):
-    # The passes repeat "pressure, _nodal_forces, _store_nodal_forces" instead of one helper: numba 0.68
-    # refuses an inlined helper that takes these arrays and calls other inlined helpers inside a parfor
-    # ("Calling a closure with *args is unsupported").
+    # The passes repeat "F from the stored F - I, cofactor, pressure, _nodal_forces, _store_nodal_forces" instead
+    # of one helper: numba 0.68 refuses an inlined helper that takes these arrays and calls other inlined helpers
+    # inside a parfor ("Calling a closure with *args is unsupported").
     fe0[e] = -(r1x + r2x + r3x)
     fe1[e] = -(r1y + r2y + r3y)
     fe2[e] = -(r1z + r2z + r3z)
@@ -303,6 +303,8 @@ def qlv_stress_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a,
             sp3[e] = se3 if commit else sp3[e]
             sp4[e] = se4 if commit else sp4[e]
             sp5[e] = se5 if commit else sp5[e]
+            # the four Prony terms are written out, each with its own six state arrays (ha..hd): one array per stored
+            # component keeps the loop vectorisable (module note), so no loop over terms of a 2-D state
             s0, s1, s2, s3, s4, s5 = g_inf * se0, g_inf * se1, g_inf * se2, g_inf * se3, g_inf * se4, g_inf * se5
             x0, x1, x2, x3, x4, x5 = _prony_update(da, ga, ha0[e], ha1[e], ha2[e], ha3[e], ha4[e], ha5[e],
                                                    d0, d1, d2, d3, d4, d5)
@@ -346,22 +348,6 @@ def pk2_force_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, s0a, s1
                 vol0[e] / J, d9[0, e], d9[1, e], d9[2, e], d9[3, e], d9[4, e], d9[5, e], d9[6, e], d9[7, e], d9[8, e])
             _store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
                                 fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11)
-
-
-@njit(cache=True, fastmath=FASTMATH, inline="always")
-def _gathered_deformation_gradient(u, conn, d9, e):
-    """``F`` of element ``e`` from the displacements of its nodes (gathered through ``conn``)."""
-    n0, n1, n2, n3 = conn[0, e], conn[1, e], conn[2, e], conn[3, e]
-    x0, y0, z0 = u[n0, 0], u[n0, 1], u[n0, 2]
-    ax, ay, az = u[n1, 0] - x0, u[n1, 1] - y0, u[n1, 2] - z0
-    bx, by, bz = u[n2, 0] - x0, u[n2, 1] - y0, u[n2, 2] - z0
-    cx, cy, cz = u[n3, 0] - x0, u[n3, 1] - y0, u[n3, 2] - z0
-    d1x, d1y, d1z = d9[0, e], d9[1, e], d9[2, e]
-    d2x, d2y, d2z = d9[3, e], d9[4, e], d9[5, e]
-    d3x, d3y, d3z = d9[6, e], d9[7, e], d9[8, e]
-    return (1.0 + ax * d1x + bx * d2x + cx * d3x, ax * d1y + bx * d2y + cx * d3y, ax * d1z + bx * d2z + cx * d3z,
-            ay * d1x + by * d2x + cy * d3x, 1.0 + ay * d1y + by * d2y + cy * d3y, ay * d1z + by * d2z + cy * d3z,
-            az * d1x + bz * d2x + cz * d3x, az * d1y + bz * d2y + cz * d3y, 1.0 + az * d1z + bz * d2z + cz * d3z)
 
 
 @njit(**_PASS)

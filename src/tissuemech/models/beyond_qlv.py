@@ -57,6 +57,19 @@ def _creep_by_history(model: ConstitutiveModel, p: Params, time_s: np.ndarray, s
         lambda t, g: model.shear_stress_histories(p, t, g[None, :])[0, -1], time_s, stress_pa)
 
 
+class _BatchedHistoryModel(ConstitutiveModel):
+    """A model defined by its batched ``shear_stress_histories(p, time_s, strain (k, n))``: one history is a batch
+    of one, and stress control is per-step solves on the strain-driven update (:func:`_creep_by_history`)."""
+
+    def shear_stress_history(self, p: Params, time_s: np.ndarray, strain: np.ndarray) -> np.ndarray:
+        return self.shear_stress_histories(p, time_s, np.asarray(strain, float)[None, :])[0]
+
+    def creep_strain(self, p: Params, time_s: np.ndarray, stress_pa: np.ndarray) -> np.ndarray:
+        """Strain under an imposed homogeneous stress history (per-step solves on the strain-driven update;
+        O(n^2), see :func:`tissuemech.models.qlv.stress_controlled_strain_by_history`)."""
+        return _creep_by_history(self, p, time_s, stress_pa)
+
+
 # ==========================================================================================================
 # 1.1 Pipkin-Rogers / modified superposition with strain-dependent Prony weights
 # ==========================================================================================================
@@ -209,7 +222,7 @@ _SCHAPERY_TERMS = {
 }
 
 
-class SchaperyModel(ConstitutiveModel):
+class SchaperyModel(_BatchedHistoryModel):
     """Schapery single-integral model, strain-controlled form (science.md section 1.3)::
 
         sigma(t) = h_e G_inf gamma(t) + h_1 sum_i q_i(t),
@@ -280,14 +293,6 @@ class SchaperyModel(ConstitutiveModel):
             q = prony_branch_sum_batch(np.ascontiguousarray(rho[j]), drive[j:j + 1], taus)[0]
             out[j] = self._factor(p, "he", gam2[j]) * g_inf * gam[j] + self._factor(p, "h1", gam2[j]) * q
         return out
-
-    def shear_stress_history(self, p: Params, time_s: np.ndarray, strain: np.ndarray) -> np.ndarray:
-        return self.shear_stress_histories(p, time_s, np.asarray(strain, float)[None, :])[0]
-
-    def creep_strain(self, p: Params, time_s: np.ndarray, stress_pa: np.ndarray) -> np.ndarray:
-        """Strain under an imposed homogeneous stress history (per-step solves on the strain-driven update;
-        O(n^2), see :func:`tissuemech.models.qlv.stress_controlled_strain_by_history`)."""
-        return _creep_by_history(self, p, time_s, stress_pa)
 
     def step_relaxation_stress(self, p: Params, time_s: np.ndarray, strain0: float) -> np.ndarray:
         """Closed-form ideal step response (Pa)."""
@@ -454,7 +459,7 @@ def _maxwell_branch_kernel(time_s, strain, mu, alpha, tau, tau_hat, m_exp, rate_
     return out
 
 
-class MaxwellBranchModel(ConstitutiveModel):
+class MaxwellBranchModel(_BatchedHistoryModel):
     """Equilibrium hyperelastic law + finite-strain Maxwell branches (1-D simple-shear reduction).
 
     Branch ``i``: ``tau_i = f(gamma - gamma_v,i; mu_i, alpha_i)`` with the one-term Ogden simple-shear law
@@ -554,14 +559,6 @@ class MaxwellBranchModel(ConstitutiveModel):
                                           tau_hat, m_exp, self.rate_change_tol)
         return self.equilibrium_stress(p, gam) + branches
 
-    def shear_stress_history(self, p: Params, time_s: np.ndarray, strain: np.ndarray) -> np.ndarray:
-        return self.shear_stress_histories(p, time_s, np.asarray(strain, float)[None, :])[0]
-
-    def creep_strain(self, p: Params, time_s: np.ndarray, stress_pa: np.ndarray) -> np.ndarray:
-        """Strain under an imposed homogeneous stress history (per-step solves on the strain-driven update;
-        O(n^2), see :func:`tissuemech.models.qlv.stress_controlled_strain_by_history`)."""
-        return _creep_by_history(self, p, time_s, stress_pa)
-
     def complex_modulus(self, p: Params, angular_frequency_rad_s: np.ndarray) -> np.ndarray:
         """Small strain: mu_inf + sum mu_i i omega tau_i/(1 + i omega tau_i)."""
         mu, _, tau, _, _ = self.branch_params(p)
@@ -573,7 +570,7 @@ class MaxwellBranchModel(ConstitutiveModel):
 # ==========================================================================================================
 # 1.2-type: nonlinear springs on linearly relaxing branch strains
 # ==========================================================================================================
-class StrainRelaxingBranchModel(ConstitutiveModel):
+class StrainRelaxingBranchModel(_BatchedHistoryModel):
     """Generalized Maxwell arrangement with *linear* (strain-relaxing) dashpots and *nonlinear* springs.
 
     The branch strains relax linearly and the stress is a nonlinear function of them (science.md section
@@ -635,14 +632,6 @@ class StrainRelaxingBranchModel(ConstitutiveModel):
             x = prony_branch_sum_batch(t, drive, np.array([tau_i]))           # relaxed branch strain
             out = out + mu_i * (x + c * x ** 3)
         return out
-
-    def shear_stress_history(self, p: Params, time_s: np.ndarray, strain: np.ndarray) -> np.ndarray:
-        return self.shear_stress_histories(p, time_s, np.asarray(strain, float)[None, :])[0]
-
-    def creep_strain(self, p: Params, time_s: np.ndarray, stress_pa: np.ndarray) -> np.ndarray:
-        """Strain under an imposed homogeneous stress history (per-step solves on the strain-driven update;
-        O(n^2), see :func:`tissuemech.models.qlv.stress_controlled_strain_by_history`)."""
-        return _creep_by_history(self, p, time_s, stress_pa)
 
     def complex_modulus(self, p: Params, angular_frequency_rad_s: np.ndarray) -> np.ndarray:
         mu, _, taus = self._branch(p)

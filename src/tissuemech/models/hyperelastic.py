@@ -145,6 +145,8 @@ def polynomial_dw_di1(p, i1, i2):
     return s
 
 
+# the I2 twin of polynomial_dw_di1 (as for every law here): the FEM kernels call dW/dI1 and dW/dI2 as two
+# separate numba functions of (p, i1, i2)
 @njit(cache=True)
 def polynomial_dw_di2(p, i1, i2):
     x = i1 - 3.0

@@ -139,6 +139,16 @@ def _common_channels(n: int, geometry: Geometry, temperature_c: float, instrumen
     return {"temperature": np.round(temperature, 2), "gap": np.round(gap, 7)}
 
 
+def _rim_channels(t: np.ndarray, rim: np.ndarray, idx: np.ndarray, torque_meas: np.ndarray,
+                  geometry: Geometry) -> dict[str, np.ndarray]:
+    """The channels a time-domain test reports at ``idx`` from its rim strain history ``rim(t)`` and the measured
+    torque: time, rim strain, apparent rim stress, rim rate, torque and the motor's deflection angle."""
+    strain = rim[idx]
+    return {"time": t[idx], "shear_strain": strain, "shear_stress": apparent_rim_stress(torque_meas, geometry.radius_m),
+            "shear_rate": np.gradient(rim, t)[idx], "torque": torque_meas,
+            "deflection_angle": strain * geometry.gap_m / geometry.radius_m}
+
+
 def simulate_strain_controlled(protocol: Protocol, model: ConstitutiveModel, p: Mapping[str, float],
                                geometry: Geometry, instrument: InstrumentSettings, artefacts: Artefacts,
                                temperature_c: float, rng: np.random.Generator) -> dict[str, np.ndarray]:
@@ -150,11 +160,7 @@ def simulate_strain_controlled(protocol: Protocol, model: ConstitutiveModel, p: 
     torque_true = torque[idx]
     if artefacts.torque_offset is not None:
         torque_true = torque_true + artefacts.torque_offset(t_rep)
-    torque_meas = _measure_torque(torque_true, instrument, rng)
-    stress = apparent_rim_stress(torque_meas, geometry.radius_m)
-    rate = np.gradient(rim, t)[idx]
-    out = {"time": t_rep, "shear_strain": rim[idx], "shear_stress": stress, "shear_rate": rate,
-           "torque": torque_meas, "deflection_angle": rim[idx] * geometry.gap_m / geometry.radius_m}
+    out = _rim_channels(t, rim, idx, _measure_torque(torque_true, instrument, rng), geometry)
     if _has_normal_force(model):
         rim_sample = rim if gamma_radii is None else gamma_radii[-1] * geometry.radius_m / gauss_radii(
             instrument.n_gauss, geometry.radius_m)[0][-1]
@@ -162,7 +168,7 @@ def simulate_strain_controlled(protocol: Protocol, model: ConstitutiveModel, p: 
         out["normal_force"] = force[idx] + instrument.normal_force_noise_n * rng.normal(size=idx.size)
     if protocol.kind == "stress_relaxation":
         strain0 = protocol.condition["strain_pct"] / 100.0
-        out["relaxation_modulus"] = stress / strain0
+        out["relaxation_modulus"] = out["shear_stress"] / strain0
     out.update(_common_channels(idx.size, geometry, temperature_c, instrument, rng))
     return out
 
@@ -189,15 +195,10 @@ def simulate_stress_controlled(protocol: Protocol, model: ConstitutiveModel, p: 
         # u_s follows the instantaneous stress (rate-independent slip law)
         rim = rim + 2.0 * artefacts.slip_length(np.abs(target)) / geometry.gap_m * np.sign(target)
     idx = protocol.report_index
-    t_rep = t[idx]
     torque_set = protocol.setpoint[idx] * np.pi * geometry.radius_m ** 3 / 2.0
-    torque_meas = _measure_torque(torque_set, instrument, rng)
-    stress = apparent_rim_stress(torque_meas, geometry.radius_m)
-    strain = rim[idx]
-    out = {"time": t_rep, "shear_strain": strain, "shear_stress": stress, "torque": torque_meas,
-           "shear_rate": np.gradient(rim, t)[idx], "deflection_angle": strain * geometry.gap_m / geometry.radius_m}
+    out = _rim_channels(t, rim, idx, _measure_torque(torque_set, instrument, rng), geometry)
     stress0 = protocol.condition["stress_pa"]
-    out["creep_compliance"] = strain / stress0
+    out["creep_compliance"] = out["shear_strain"] / stress0
     out.update(_common_channels(idx.size, geometry, temperature_c, instrument, rng))
     return out
 
