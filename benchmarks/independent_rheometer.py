@@ -25,8 +25,12 @@ Physics
   (piecewise-linear tau_e in time, :func:`qlv_stress`).
 * **Plate**: the rim strain is ``theta*R/h``; the strain at radius r is ``gamma_R * r/R``; the torque is
   ``M = 2*pi * int_0^R tau(r) r**2 dr`` by Gauss-Legendre quadrature (:func:`plate_torque`); the reported
-  stress is ``2*M/(pi*R**3)``. Oscillation moduli are the linear response ``G*(omega)`` of the kernel
-  (closed form for Prony; ``G_inf + (G0 - G_inf)(i w tau)^a/(1 + (i w tau)^a)`` for fractional Zener).
+  stress is ``2*M/(pi*R**3)``. Oscillation moduli are the first harmonic of the steady QLV response: the
+  kernel's ``G*(omega)/G0`` (closed form for Prony; ``G_inf + (G0 - G_inf)(i w tau)^a/(1 + (i w tau)^a)`` for
+  fractional Zener) times the first Fourier sine coefficient of the elastic stress ``sigma_e(gamma_0 r/R sin)``
+  integrated over the plate (:func:`first_harmonic_factor`; exact for QLV, whose convolution filters each
+  harmonic of ``sigma_e`` alone), as the instrument reports it: first-harmonic torque over ``gamma_0 pi R^3/2``.
+  A stiffening law therefore stiffens the amplitude sweep as it stiffens the ramps.
 * **Noise**: torque noise ``sqrt((s_rel*M)**2 + floor**2)`` with s_rel 0.2-3 % and a torque floor drawn per
   dataset; moduli noise from the complex torque amplitude.
 
@@ -203,6 +207,21 @@ def gauss_radii(n: int, radius_m: float) -> tuple[np.ndarray, np.ndarray]:
     return (x + 1.0) * radius_m / 2.0, w * radius_m / 2.0
 
 
+def first_harmonic_factor(law: str, strain_amplitude: np.ndarray, p: dict, n_theta: int = 64,
+                          n_gauss: int = 12) -> np.ndarray:
+    """First-harmonic plate torque of the elastic law under rim strain ``gamma_0 sin(theta)``, relative to the
+    linear law's ``pi R^3 mu gamma_0 / 2`` [1] (independent of R and mu).
+
+    ``a_1(gamma) = (1/pi) int_0^{2 pi} sigma_e(gamma sin th) sin th d th`` (trapezoid rule, spectrally exact for
+    a periodic integrand), at each radius ``gamma_0 r/R``, and ``M_1 = 2 pi int_0^R a_1 r^2 dr``."""
+    g0 = np.atleast_1d(np.asarray(strain_amplitude, float))
+    th = 2.0 * np.pi * np.arange(n_theta) / n_theta
+    x, w = gauss_radii(n_gauss, 1.0)                      # r/R on [0, 1]
+    gamma = g0[:, None, None] * x[None, :, None] * np.sin(th)[None, None, :]
+    a1 = 2.0 * np.mean(shear_law(law, gamma, 1.0, p) * np.sin(th), axis=-1)    # per (amplitude, radius)
+    return 2.0 * np.pi * (a1 * x * x) @ w / (np.pi * g0 / 2.0)
+
+
 def plate_torque(shear_stress_of_radius, radius_m: float, n_gauss: int = 12) -> np.ndarray:
     """M = 2 pi int_0^R tau(r) r^2 dr [N m] by Gauss-Legendre quadrature.
 
@@ -364,7 +383,8 @@ def _oscillation(kind, st, truth, kernel, factor, gap, effects, rng):
         freq = np.geomspace(st["f_min"], st["f_max"], st["n"])
         strain = np.full(st["n"], st["strain"])
     omega = 2.0 * np.pi * freq
-    g_star = truth.mu * factor * kernel.complex_modulus(omega)
+    g_star = truth.mu * factor * kernel.complex_modulus(omega) * first_harmonic_factor(truth.law, strain,
+                                                                                          truth.law_params)
     pf = np.pi * truth.radius_m ** 3 / 2.0          # torque per unit (modulus x rim strain)
     m_sample = g_star * strain * pf
     theta = strain * gap / truth.radius_m

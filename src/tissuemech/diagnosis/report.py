@@ -369,8 +369,7 @@ def _nonseparable_fix(runs, baseline_key: str, target: str, taus_s: Sequence[flo
     """Pipkin-Rogers counterpart of a QLV baseline, scored on held-out extremes of the design: the lowest and
     the highest CSR rate when there are >= 3 rates, else the relaxations at the lowest and at the highest
     nominal strain when there are >= 2 (non-separability is a strain dependence of the relaxation, so a model
-    trained on the other strains must predict the extreme one); with exactly two rates, up to three samples
-    measured at both are held out in turn. Both models are refitted in every fold on the
+    trained on the other strains must predict the extreme one). Both models are refitted in every fold on the
     baseline's relaxation times ``taus_s`` [s] (the runs-only path's NNLS times), or, when None, on a
     one-per-decade grid spanning the window the tests resolve. None when the design has neither."""
     if not baseline_key.startswith("qlv_"):
@@ -392,16 +391,6 @@ def _nonseparable_fix(runs, baseline_key: str, target: str, taus_s: Sequence[flo
         folds = [(f"relaxation at {100 * g:g} %", (lambda r, g=g: r.attrs.get("test") == "stress_relaxation"
                                                    and round(nominal_strain(r), 6) == g))
                  for g in (strains[0], strains[-1])]
-    elif len(rates) == 2:
-        # holding out one of two rates leaves one rate to learn a rate dependence from: hold out samples
-        # instead (up to three), each measured at both rates, so the training runs keep both
-        pieces = [p for p in dict.fromkeys((r.attrs.get("specimen"), r.attrs.get("sample")) for r in use)
-                  if len({float(r.attrs.get("shear_rate_1_per_s", -1)) for r in use
-                          if (r.attrs.get("specimen"), r.attrs.get("sample")) == p}) == 2][:3]
-        if len(pieces) < 2:
-            return None
-        folds = [(f"specimen {p[0]} sample {p[1]}",
-                  (lambda r, p=p: (r.attrs.get("specimen"), r.attrs.get("sample")) == p)) for p in pieces]
     else:
         return None
     # both models on the relaxation times these tests resolve (never the registry's fixed 0.1-100 s)
@@ -624,10 +613,7 @@ def diagnose_runs(runs: Sequence[xr.Dataset], baseline: str | Sequence[str] = RU
         order = sorted(keys, key=lambda k: (aicc[k] if np.isfinite(aicc[k]) else np.inf, keys.index(k)))
     else:
         order = keys
-    adequacy = []
-    for key in order:
-        fit, spectrum = candidate(key)
-        taus = spectrum["taus_s"]
+    def assessed(key, fit, taus):
         model = spectrum_model(key, taus)
         preds = predict_runs(model, fit.params, runs, target, relaxation)
         keep = [i for i, p in enumerate(preds) if p]
@@ -635,8 +621,33 @@ def diagnose_runs(runs: Sequence[xr.Dataset], baseline: str | Sequence[str] = RU
         table = residual_table(kept, [preds[i] for i in keep], key, noise=noise) if keep else pd.DataFrame()
         record = {"model_key": key, "flags": fit.flags, "stderr": fit.stderr, "varying": fit.varying,
                   "converged": fit.success}
-        adequacy.append(baseline_adequacy(record, table))
-        if adequacy[-1]["adequate"]:
+        return kept, table, baseline_adequacy(record, table)
+
+    adequacy = []
+    for key in order:
+        fit, spectrum = candidate(key)
+        taus = spectrum["taus_s"]
+        kept, table, verdict = assessed(key, fit, taus)
+        degenerate = fitting.weights_at_upper_bound(fit.flags)
+        if (not verdict["adequate"] and degenerate and len(degenerate) < taus.size
+                and set(verdict["at_bound"]) == {f"beta_{i + 1}" for i in degenerate}
+                and verdict["reasons"] == [f"parameters at a bound: {', '.join(verdict['at_bound'])}"]):
+            # only Prony ratios at their upper bound: the equilibrium modulus runs to zero against those modes,
+            # the direction in which a time outside what the data resolve trades its weight against the
+            # equilibrium modulus; the candidate is refitted without those times and judged again (reported)
+            drop = np.asarray(taus)[degenerate]
+            taus = np.delete(np.asarray(taus), degenerate)
+            fit = fit_runs(key, level_normalised(fitted, spectrum["levels"]), target, relaxation,
+                           n_points=n_points, taus_s=taus)
+            verdict["reasons"].append("refitted without the relaxation time(s) "
+                                      + ", ".join(f"{t:.3g} s" for t in drop) + " whose ratio was at its bound")
+            kept, table, again = assessed(key, fit, taus)
+            again["refitted_without_taus_s"] = [float(t) for t in drop]
+            adequacy.append(verdict)
+            fits[key], spectra[key] = fit, {**spectrum, "taus_s": taus}
+            verdict = again
+        adequacy.append(verdict)
+        if verdict["adequate"]:
             break
     fit_info = {"target": target, "relaxation": relaxation, "fitted_tests": list(fitted_tests),
                 "correlations": {}, "taus_s": [float(t) for t in taus], "window": window, "fixes": {},

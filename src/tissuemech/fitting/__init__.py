@@ -57,7 +57,7 @@ from ._data import (TEST_RESPONSE, Curve, amplitude_sweep_lve_curve, curve_and_r
                     curves_from_averages, geometry_from_runs, relaxation_history, select_strain, thin,
                     with_relaxation_history)
 from ._fit import (CORRELATION_FLAG, EQUIVALENT_CHISQR_RTOL, FITS_CSV_ATTRS, FitResult, at_bound_parameters, evaluate,
-                   fit, fit_to_dataset, fits_csv_row, has_covariance, write_fit_netcdf)
+                   fit, fit_to_dataset, fits_csv_row, has_covariance, weights_at_upper_bound, write_fit_netcdf)
 from ._problem import LOG_RESPONSES, PLATE_TARGETS, FitProblem, NoiseModel, plate_factor, predict, target_observations
 from ._prony import prony_nnls, prony_start
 
@@ -69,5 +69,5 @@ __all__ = [
     "plate_factor", "target_observations", "predict",
     "NoiseModel", "FitProblem", "FitResult", "fit", "evaluate", "log_spaced_taus",
     "prony_nnls", "prony_start", "FitRecord", "fit_to_dataset", "write_fit_netcdf", "fits_csv_row", "FITS_CSV_ATTRS",
-    "at_bound_parameters", "has_covariance",
+    "at_bound_parameters", "has_covariance", "weights_at_upper_bound",
 ]

@@ -133,6 +133,18 @@ def at_bound_parameters(flags: Iterable[str]) -> list[str]:
     return sorted(set(out))
 
 
+def weights_at_upper_bound(flags: Iterable[str]) -> list[int]:
+    """0-based indices ``i`` of the Prony ratios ``beta_{i+1}`` a fit left at their upper bound, from its flags:
+    the equilibrium modulus is below 1/bound of that mode's, the direction in which a mode outside the resolved
+    window trades its weight against the equilibrium modulus (a slow one) or acts as a viscosity (a fast one)."""
+    out = []
+    for f in flags:
+        m = _AT_BOUND.match(str(f))
+        if m and m.group(2) == "upper" and re.fullmatch(r"beta_\d+", m.group(1)):
+            out.append(int(m.group(1).split("_")[1]) - 1)
+    return sorted(set(out))
+
+
 def has_covariance(flags: Iterable[str], stderr: Mapping[str, float], varying: Sequence[str]) -> bool:
     """Whether a fit has a covariance: no ``no_covariance`` flag and a finite standard error of some varying
     parameter (true for a fit with nothing varying)."""
