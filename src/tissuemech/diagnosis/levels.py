@@ -63,7 +63,9 @@ def between_sample_test(levels: pd.DataFrame, y: str, column: str) -> dict | Non
     curve levels (condition fixed effects), the residual levels and the covariate are averaged per sample,
     and the sample means are regressed on the covariate with specimen fixed effects (plain OLS, df = samples
     - parameters). Curves of one sample share its stiffness, so the sample -- not the curve -- is the unit
-    of replication for such covariates (curve-level cluster-robust errors are anti-conservative here)."""
+    of replication for such covariates (curve-level cluster-robust errors are anti-conservative here); where
+    the design cannot afford specimen fixed effects and some specimen has several samples, the specimen means
+    are regressed instead (samples of one specimen share its level), with at least 3 residual df."""
     lv = levels[np.isfinite(levels[y]) & np.isfinite(levels[column])]
     if lv["sample"].nunique() < 5:
         return None
@@ -74,6 +76,13 @@ def between_sample_test(levels: pd.DataFrame, y: str, column: str) -> dict | Non
     if agg["x"].std() == 0:
         return None
     for fes in (["specimen"], []):
+        if not fes and agg["specimen"].nunique() < len(agg):
+            # without specimen fixed effects, samples of one specimen share its random level: their means are not
+            # independent replicates, so the specimen (its mean over samples) is the unit of replication
+            agg = agg.groupby("specimen").agg(r=("r", "mean"), x=("x", "mean")).assign(
+                specimen=lambda a: a.index)
+            if agg["x"].std() == 0:
+                return None
         X = fixed_effect_design(agg.rename(columns={"x": column}), [column], fes)
         Xc = sm.add_constant(X, has_constant="add").to_numpy(float)
         if len(agg) - Xc.shape[1] >= 3 and np.linalg.matrix_rank(Xc) == Xc.shape[1] and X[column].std() > 0:
@@ -83,7 +92,8 @@ def between_sample_test(levels: pd.DataFrame, y: str, column: str) -> dict | Non
             tval = est / se if se > 0 else 0.0
             out = st.statistic_result(tval, st.log10_p_from_t(tval, res.df_resid), estimate=est, std_error=se,
                            df=float(res.df_resid))
-            out["design"] = "sample means, " + ("specimen fixed effects" if fes else "no fixed effects")
+            out["design"] = ("sample means, specimen fixed effects" if fes else
+                             "specimen means" if agg.index.name == "specimen" else "sample means, no fixed effects")
             return out
     return None
 
