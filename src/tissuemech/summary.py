@@ -158,10 +158,10 @@ def figure_scope_fit(fit: FitRecord | xr.Dataset, curves: Sequence, title: str |
                                 elinewidth=0.6, alpha=0.8, label=f"{s['label']} data")
                 else:
                     ax.plot(x, y, "o", ms=3, color=colour, alpha=0.8, label=f"{s['label']} data")
-                ax.plot(x, f, "-", color=colour, lw=1.6)
+                ax.plot(x, f, "-", color=colour, lw=1.6 if "band" not in s else 0.8)
                 if "band" in s:
                     ax.fill_between(x, factor * s["band"][0][order], factor * s["band"][1][order], color=colour,
-                                    alpha=0.3, lw=0)
+                                    alpha=0.35, lw=0)
             if log:
                 if all_positive(xs):
                     ax.set_xscale("log")
@@ -178,8 +178,12 @@ def figure_scope_fit(fit: FitRecord | xr.Dataset, curves: Sequence, title: str |
         for ax in axes.ravel():
             ax.axis("off")
         axes[0][0].text(0.5, 0.5, "no fitted points", ha="center", va="center")
-    quality = f"NRMSE = {rec.nrmse:.3g}, AICc = {rec.aicc:.4g}" + (
-        ", shaded: 5-95 % posterior-predictive band" if band is not None else "")
+    quality = f"NRMSE = {rec.nrmse:.3g}, AICc = {rec.aicc:.4g}"
+    if band is not None:
+        width = (np.asarray(band["q95"], float) - np.asarray(band["q05"], float)) / np.abs(rec.predicted)
+        width = width[np.isfinite(width)]
+        quality += (", shaded: 5-95 % posterior-predictive band"
+                    + (f" (median width {100 * np.median(width):.2g} % of the response)" if width.size else ""))
     flags = rec.flags
     fig.suptitle((title or f"{rec.model_key} ({rec.scope}, target {rec.target})")
                  + f"\n{quality}" + (f", {len(flags)} flag(s)" if flags else ""), fontsize=10)

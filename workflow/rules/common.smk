@@ -247,7 +247,8 @@ def posterior_tables(wildcards):
 
 def uq_targets():
     """Posterior figures (and, with posterior.population, specimen-variability and FEM band) files of every enabled
-    dataset and scope (added to the default target in the Snakefile and to the summary's inputs)."""
+    dataset and scope (added to the default target in the Snakefile and to the summary's inputs).
+    """
     targets = []
     for name in DATASETS:
         for scope in posterior_scopes_of(name):

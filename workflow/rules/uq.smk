@@ -2,6 +2,7 @@
 # and FEM bands of the recommended model. Target and input functions (posterior_models_of, uq_targets ...) are in
 # common.smk, as fit.smk's rule fits_table reads the posterior tables.
 
+
 rule posterior:
     input:
         averages="results/{dataset}/averages.nc",
@@ -13,14 +14,20 @@ rule posterior:
             caption="../report/posterior_table.rst",
             category="{dataset}",
             subcategory="3 fits: {scope}",
-            labels={"scope": "{scope}", "model": "{model}: posterior (credible intervals)"},
+            labels={
+                "scope": "{scope}",
+                "model": "{model}: posterior (credible intervals)",
+            },
         ),
         figure=report(
             "results/{dataset}/figures/posterior/{scope}/{model}.png",
             caption="../report/posterior_predictive.rst",
             category="{dataset}",
             subcategory="3 fits: {scope}",
-            labels={"scope": "{scope}", "model": "{model} with posterior-predictive band"},
+            labels={
+                "scope": "{scope}",
+                "model": "{model} with posterior-predictive band",
+            },
         ),
     log:
         "logs/{dataset}/posterior_{scope}_{model}.log",
