@@ -43,11 +43,11 @@ NIFTYSIM_LAWS = {"neo_hookean": "NH"}
 
 def niftysim_reason(card: Mapping) -> str | None:
     """None when the card has a NiftySim element, else why not (module docstring)."""
-    if card.get("branches"):
+    if card.get("branches") or card.get("family") == "beyond_qlv":
         return "beyond-QLV (strain-dependent) relaxation has no NiftySim material (only NHV/TIV Prony terms)"
     law = card.get("elastic_law")
     if not law:
-        return "no solid elastic law"
+        return "no solid elastic law (e.g. a fluid-like Prony series without a long-term modulus)"
     if law not in NIFTYSIM_LAWS:
         return (f"NiftySim's material types (LE, NH, NHV, TI, TIV, AB, PY) hold no form of {law} that was checked "
                 "against the project's law; viscous terms exist only for NH and TI")

@@ -272,7 +272,7 @@ def test_beyond_qlv_card_has_no_fe_block_and_says_why():
     card = C.make_card(res, model, poisson_ratio=0.49)
     assert C.abaqus_block(card) is None and C.febio_block(card) is None
     assert any("user material" in n for n in card["notes"])
-    assert card["niftysim_reason"]  # and no NiftySim element, with the reason stated
+    assert "beyond-QLV" in card["niftysim_reason"]  # and no NiftySim element, with the reason stated
 
 
 def test_qlv_with_nonlinear_law_round_trip():
