@@ -3,6 +3,8 @@
 Figures (PNG + SVG, written through :func:`tissuemech.plots.save_figure`):
 
 * :func:`plot_scope_fits` -- every fitted model of a scope over its averaged data, linear and log axes;
+* :func:`plot_posterior_fit` -- the same figure of one sampled fit with its 5-95 % posterior-predictive band
+  (rule ``posterior``, after the fit job that draws the plain figures);
 * :func:`plot_cards` -- the material cards of a dataset as tables, one per scope (``cards.csv`` alongside);
 * :func:`plot_meshes` -- the deformed TLED meshes of the FEM experiments (VTU files), coloured by |u|;
 * :func:`plot_timing` -- TLED step time and real-time factor against mesh size.
