@@ -74,6 +74,7 @@ from scipy.optimize import nnls
 from .canonical import to_jsonable, write_text
 from .cards_febio import (FEBIO_SOURCE_COMMIT, febio_card_material, febio_document, febio_material_element,
                           febio_simple_shear_stress)
+from .cards_niftysim import niftysim_file_text, niftysim_reason
 from .fitting import FitResult
 from .models.base import ConstitutiveModel, bulk_modulus, initial_shear_modulus
 from .spectra import prony_nnls_weights, prony_oscillation_basis, prony_relaxation_basis
@@ -484,6 +485,7 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float,
             notes.append(f"no FEBio block: {card['febio_reason']}")
     card["valid_range"] = valid_range(result)
     card["uncertainty"] = parameter_uncertainty(result, law, lp)
+    card["niftysim_reason"] = niftysim_reason(card)  # None: <model>.niftysim.xml is written (cards_niftysim)
     card["notes"] = notes
     card["_law"] = law  # runtime only (not serialised)
     return card
@@ -630,9 +632,10 @@ def febio_file_text(card: Mapping, material_id: int = 1, material_name: str | No
 # files
 # ------------------------------------------------------------------------------------------------
 def write_card_files(card: Mapping, folder, stem: str | None = None) -> dict[str, Path]:
-    """Write ``<stem>.json``, ``<stem>.inp`` (Abaqus) and ``<stem>.feb.xml`` (FEBio document) where they exist.
+    """Write ``<stem>.json``, ``<stem>.inp`` (Abaqus), ``<stem>.feb.xml`` (FEBio document) and
+    ``<stem>.niftysim.xml`` (NiftySim element-set fragment, :mod:`tissuemech.cards_niftysim`) where they exist.
 
-    Returns the written paths by kind (``json``, ``abaqus``, ``febio``).
+    Returns the written paths by kind (``json``, ``abaqus``, ``febio``, ``niftysim``).
     """
     folder = Path(folder)
     stem = stem or str(card["model"])
@@ -643,6 +646,9 @@ def write_card_files(card: Mapping, folder, stem: str | None = None) -> dict[str
     fb = febio_file_text(card)
     if fb is not None:
         out["febio"] = write_text(fb, folder / f"{stem}.feb.xml")
+    ns = niftysim_file_text(card, stem)
+    if ns is not None:
+        out["niftysim"] = write_text(ns, folder / f"{stem}.niftysim.xml")
     return out
 
 

@@ -135,23 +135,57 @@ def run_fit_scope(averages_path, scope: str, spec: Mapping, target: str, seed: i
     return table
 
 
-def collect_scopes(ranking_paths: Sequence, fits_dirs: Sequence, dataset: str, ranking_out, fits_out,
+def collect_scopes(ranking_paths: Sequence, fits_dirs: Sequence, dataset: str, ranking_out, fits_out=None,
                    figure_out=None) -> pd.DataFrame:
-    """Merge the per-scope rankings into ``ranking.csv`` and every fit record into the tidy ``fits.csv``
-    (one row per record, :func:`tissuemech.fitting.fits_csv_row`)."""
+    """Merge the per-scope rankings into ``ranking.csv`` (and, with ``fits_out``, every fit record into the tidy
+    ``fits.csv`` through :func:`write_fits_table`; the pipeline writes that table in rule ``fits_table``, after
+    the posteriors, so that it carries their credible intervals)."""
     tables = [pd.read_csv(p) for p in ranking_paths if Path(p).stat().st_size > 0]
     ranking = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
     if not ranking.empty:
         ranking["recommended"] = R.recommended_mask(ranking)
     write_text(ranking.to_csv(index=False), ranking_out)
-    rows = [F.fits_csv_row(F.FitRecord.from_netcdf(path), dataset, file=str(path))
-            for folder in fits_dirs for path in sorted(Path(folder).glob("*.nc"))]
-    write_text(pd.DataFrame(rows).to_csv(index=False), fits_out)
+    if fits_out is not None:
+        write_fits_table(fits_dirs, dataset, fits_out)
     if figure_out is not None and not ranking.empty and "model" in ranking:
         shown = ranking.dropna(subset=["model"]).copy()
         shown["model"] = shown["scope"].astype(str) + ": " + shown["model"].astype(str)
         R.plot_ranking(shown, figure_out)
     return ranking
+
+
+def write_fits_table(fits_dirs: Sequence, dataset: str, out, posterior_tables: Sequence = ()) -> pd.DataFrame:
+    """The tidy ``fits.csv``: one row per fit record ``<fits_dir>/<model>.nc``
+    (:func:`tissuemech.fitting.fits_csv_row`), with the credible intervals of the records that have a posterior.
+
+    Parameters
+    ----------
+    fits_dirs : the scopes' fit-record folders.
+    dataset : dataset name (column ``dataset``).
+    out : the CSV to write.
+    posterior_tables : credible-interval tables ``posterior/<scope>/<model>.csv`` (``tissuemech.uq.run_posterior``;
+        columns ``scope``, ``model``, ``parameter``, ``ci05`` ...); an empty table (a model without a record) adds
+        nothing. A record is matched by its scope and model.
+
+    Returns
+    -------
+    The table written.
+    """
+    intervals = [pd.read_csv(p) for p in posterior_tables if Path(p).stat().st_size > 0]
+    intervals = [t for t in intervals if not t.empty]
+    by_fit = {}
+    if intervals:
+        for (scope, model), rows in pd.concat(intervals, ignore_index=True).groupby(["scope", "model"]):
+            by_fit[(str(scope), str(model))] = rows
+    rows = []
+    for folder in fits_dirs:
+        for path in sorted(Path(folder).glob("*.nc")):
+            record = F.FitRecord.from_netcdf(path)
+            rows.append(F.fits_csv_row(record, dataset, file=str(path),
+                                       posterior=by_fit.get((str(record.scope), str(record.model_key)))))
+    table = pd.DataFrame(rows)
+    write_text(table.to_csv(index=False), out)
+    return table
 
 
 # ------------------------------------------------------------------------------------------------------

@@ -3,6 +3,8 @@
 Figures (PNG + SVG, written through :func:`tissuemech.plots.save_figure`):
 
 * :func:`plot_scope_fits` -- every fitted model of a scope over its averaged data, linear and log axes;
+* :func:`plot_posterior_fit` -- the same figure of one sampled fit with its 5-95 % posterior-predictive band
+  (rule ``posterior``, after the fit job that draws the plain figures);
 * :func:`plot_cards` -- the material cards of a dataset as tables, one per scope (``cards.csv`` alongside);
 * :func:`plot_meshes` -- the deformed TLED meshes of the FEM experiments (VTU files), coloured by |u|;
 * :func:`plot_timing` -- TLED step time and real-time factor against mesh size.
@@ -38,6 +40,7 @@ from .plots import (all_positive, axis_label, figure_curves, figure_table, new_f
 from .ranking import recommended_models
 from .records import FitRecord
 from .stages import scope_curves
+from .uq import predictive_band
 
 # ------------------------------------------------------------------------------------------------------
 # fits over their data
@@ -69,7 +72,8 @@ def _match_in_order(values: np.ndarray, reference: np.ndarray) -> np.ndarray | N
     return np.asarray(out, int)
 
 
-def fit_panels(fit: FitRecord | xr.Dataset, curves: Sequence) -> dict[tuple[str, str], list[dict]]:
+def fit_panels(fit: FitRecord | xr.Dataset, curves: Sequence,
+               band: Mapping[str, np.ndarray] | None = None) -> dict[tuple[str, str], list[dict]]:
     """Group the points of a fit record by (test, observable), with their abscissa recovered from the curves.
 
     Parameters
@@ -77,10 +81,12 @@ def fit_panels(fit: FitRecord | xr.Dataset, curves: Sequence) -> dict[tuple[str,
     fit : a fit record (:class:`tissuemech.records.FitRecord`, or its Dataset): ``observed``, ``predicted``,
         ``curve_index``, ``observable`` per point and ``curve_label`` per curve.
     curves : the curves the fit was made on (:func:`tissuemech.stages.scope_curves`), matched by label.
+    band : optional per-point arrays ``q05``/``q95`` in the record's point order (the posterior-predictive band,
+        :func:`tissuemech.uq.predictive_band`); each series then carries ``"band": (q05, q95)``.
 
     Returns
     -------
-    ``{(test, observable): [{"label", "x", "xname", "observed", "predicted", "sd"}, ...]}``. ``x`` is the
+    ``{(test, observable): [{"label", "x", "xname", "observed", "predicted", "sd"[, "band"]}, ...]}``. ``x`` is the
     abscissa of :data:`FIT_ABSCISSA` at the fitted points; when a curve cannot be matched (its data changed
     since the fit) the point index is used and ``xname`` is ``"point"``.
     """
@@ -110,8 +116,11 @@ def fit_panels(fit: FitRecord | xr.Dataset, curves: Sequence) -> dict[tuple[str,
                         xname = "point"
             if xname == "angular_frequency":
                 x, xname = x / (2 * np.pi), "frequency"
-            panels.setdefault((test, str(name)), []).append(
-                {"label": label.split("|", 1)[-1], "x": x, "xname": xname, "observed": y, "predicted": f, "sd": sd})
+            series = {"label": label.split("|", 1)[-1], "x": x, "xname": xname, "observed": y, "predicted": f,
+                      "sd": sd}
+            if band is not None and np.size(band["q05"]) == observed.size:
+                series["band"] = (np.asarray(band["q05"], float)[sel], np.asarray(band["q95"], float)[sel])
+            panels.setdefault((test, str(name)), []).append(series)
     return panels
 
 
@@ -124,14 +133,17 @@ def _quiet_minor_labels(axis, values: np.ndarray) -> None:
         axis.set_minor_formatter(NullFormatter())
 
 
-def figure_scope_fit(fit: FitRecord | xr.Dataset, curves: Sequence, title: str | None = None) -> Figure:
+def figure_scope_fit(fit: FitRecord | xr.Dataset, curves: Sequence, title: str | None = None,
+                     band: Mapping[str, np.ndarray] | None = None) -> Figure:
     """A fitted model over its data: one row per (test, observable), linear axes left, log axes right.
 
     Data are markers (± SD bars of the sample average where known), the model a line of the same colour per
-    curve. A log axis is used only where every value along it is positive (signed stress stays linear).
+    curve. A log axis is used only where every value along it is positive (signed stress stays linear). With
+    ``band`` (per-point ``q05``/``q95`` in the record's point order, :func:`fit_panels`) each model line carries its
+    shaded 5-95 % posterior-predictive band.
     """
     rec = fit if isinstance(fit, FitRecord) else FitRecord.from_dataset(fit)
-    panels = fit_panels(rec, curves)
+    panels = fit_panels(rec, curves, band)
     fig, axes = new_figure(ncols=2, nrows=max(len(panels), 1), width=4.6, height=3.4)
     axes = axes.reshape(-1, 2)
     for row, ((test, name), series) in enumerate(panels.items()):
@@ -148,7 +160,10 @@ def figure_scope_fit(fit: FitRecord | xr.Dataset, curves: Sequence, title: str |
                                 elinewidth=0.6, alpha=0.8, label=f"{s['label']} data")
                 else:
                     ax.plot(x, y, "o", ms=3, color=colour, alpha=0.8, label=f"{s['label']} data")
-                ax.plot(x, f, "-", color=colour, lw=1.6)
+                ax.plot(x, f, "-", color=colour, lw=1.6 if "band" not in s else 0.8)
+                if "band" in s:
+                    ax.fill_between(x, factor * s["band"][0][order], factor * s["band"][1][order], color=colour,
+                                    alpha=0.35, lw=0)
             if log:
                 if all_positive(xs):
                     ax.set_xscale("log")
@@ -166,6 +181,11 @@ def figure_scope_fit(fit: FitRecord | xr.Dataset, curves: Sequence, title: str |
             ax.axis("off")
         axes[0][0].text(0.5, 0.5, "no fitted points", ha="center", va="center")
     quality = f"NRMSE = {rec.nrmse:.3g}, AICc = {rec.aicc:.4g}"
+    if band is not None:
+        width = (np.asarray(band["q95"], float) - np.asarray(band["q05"], float)) / np.abs(rec.predicted)
+        width = width[np.isfinite(width)]
+        quality += (", shaded: 5-95 % posterior-predictive band"
+                    + (f" (median width {100 * np.median(width):.2g} % of the response)" if width.size else ""))
     flags = rec.flags
     fig.suptitle((title or f"{rec.model_key} ({rec.scope}, target {rec.target})")
                  + f"\n{quality}" + (f", {len(flags)} flag(s)" if flags else ""), fontsize=10)
@@ -191,6 +211,21 @@ def plot_scope_fits(averages_path, fits_dir, tests: Sequence[str], out_dir) -> l
         fig = figure_scope_fit(fit, curves_by_relaxation[relaxation])
         written += save_figure(fig, out_dir / safe_name(path.stem), dpi=110)
     return written
+
+
+def plot_posterior_fit(averages_path, record_path, posterior_nc, tests: Sequence[str], out) -> list[Path]:
+    """The fit figure of one sampled fit record (:func:`figure_scope_fit`, as drawn by :func:`plot_scope_fits`)
+    with the 5-95 % posterior-predictive band of its posterior file (``posterior/<scope>/<model>.nc``,
+    :func:`tissuemech.uq.predictive_band`); a figure that says so where the record or its posterior is absent."""
+    band = predictive_band(posterior_nc) if Path(posterior_nc).is_file() else None
+    if not Path(record_path).is_file() or band is None:
+        fig, (ax,) = new_figure()
+        ax.text(0.5, 0.5, f"no posterior of {Path(record_path).stem}", ha="center", va="center")
+        ax.set_axis_off()
+        return save_figure(fig, out)
+    fit = FitRecord.from_netcdf(record_path)
+    curves = scope_curves(read_netcdf(averages_path), list(tests), relaxation=fit.relaxation)
+    return save_figure(figure_scope_fit(fit, curves, band=band), out, dpi=110)
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -365,10 +400,13 @@ SECTIONS: tuple[tuple[str, str, str], ...] = (
     ("Raw runs vs sample averages", "averages", "figures/averages/*.png"),
     ("LVE limit of the amplitude sweeps", "lve", "figures/lve/*.png"),
     ("Fits over their data", "fits", "figures/fits/*/*.png"),
+    ("Fits with posterior-predictive bands", "posterior_predictive", "figures/posterior/*/*.png"),
     ("Model ranking", "ranking", "figures/ranking.png"),
     ("Diagnosis", "diagnosis", "figures/diagnosis/*.png"),
     ("Material cards", "cards", "figures/cards/*.png"),
     ("FEM experiments", "fem", "figures/fem_*.png"),
+    ("Indentation bands: measurement and specimen variability", "uq_indentation", "figures/uq_indentation_*.png"),
+    ("Torsion bands: measurement and specimen variability", "uq_torsion", "figures/uq_torsion_*.png"),
     ("FEM meshes", "meshes", "figures/meshes/*.png"),
 )
 
@@ -522,5 +560,6 @@ def build_summary(results_dir, datasets: list[str], out_html, captions_dir=None,
 
 
 __all__ = ["FIT_ABSCISSA", "SECTIONS", "boundary_faces", "build_summary", "caption_text", "card_table",
-           "figure_mesh", "figure_scope_fit", "fit_panels", "plot_cards", "plot_meshes", "plot_scope_fits",
+           "figure_mesh", "figure_scope_fit", "fit_panels", "plot_cards", "plot_meshes", "plot_posterior_fit",
+           "plot_scope_fits",
            "plot_timing", "render_caption"]

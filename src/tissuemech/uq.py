@@ -12,11 +12,16 @@ from ``averages.nc`` and its fit record (the same curves, plate target, noise mo
   scaling), so a near-Gaussian posterior has the lmfit standard errors as its spread;
 * start and burn-in proposal: the Laplace approximation (lmfit's covariance).
 
-Outputs: ``posterior/<scope>.nc`` in ArviZ's InferenceData group layout (groups ``posterior`` with one variable
-per parameter in natural units, dims ``chain``/``draw``, and ``sample_stats`` with ``lp``; written with xarray
-and h5netcdf, readable by ``arviz.from_netcdf``) whose ``posterior`` attributes carry R-hat, ESS, acceptance,
-the warnings, priors and likelihood; ``posterior/<scope>.csv``: per parameter the lmfit value and standard error
-next to the 5/50/95 % posterior quantiles and the ratio of the 90 % credible width to the lmfit interval.
+Outputs, one pair per sampled fit (config ``posterior.models``; empty: every model the scope fits, so the QLV and
+the beyond-QLV fits of the joint scope both, and always the recommended one): ``posterior/<scope>/<model>.nc`` in
+ArviZ's InferenceData group layout (groups ``posterior`` with one variable per parameter in natural units, dims
+``chain``/``draw``, ``sample_stats`` with ``lp``, ``posterior_predictive`` with the model responses of 64 draws at
+the fitted points and ``observed_data``; written with xarray and h5netcdf) whose ``posterior`` attributes carry
+R-hat, ESS, acceptance, the warnings, priors and likelihood; ``posterior/<scope>/<model>.csv``: per parameter the
+lmfit value and standard error next to the 5/50/95 % posterior quantiles and the ratio of the 90 % credible width
+to the lmfit interval. The sampling does not read the ranking, so ``fits.csv`` (written after the posteriors by
+:func:`tissuemech.stages.write_fits_table`) carries the credible intervals next to the standard errors without a
+cycle in the workflow; the FEM bands below read the posterior of the recommended model.
 
 Specimen variability (``run_population``, rule ``population``): every run of the scope's tests is one loaded piece
 (a sample cut from a specimen). Its *level* is the factor ``s`` that scales the recommended fit's prediction onto
@@ -251,55 +256,33 @@ def predictive_draws(problem: F.FitProblem, record: F.FitRecord, post: P.Posteri
     return [{name: np.array(v) for name, v in d.items()} for d in out]
 
 
-def plot_posterior_predictive(problem: F.FitProblem, predictions, path, title: str = "") -> list[Path]:
-    """Observed curves (markers) with the 5-95 % band of the posterior draws' predictions, one panel per curve."""
-    n = len(problem.curves)
-    ncols = min(3, n)
-    fig, axes = new_figure(ncols=ncols, nrows=math.ceil(n / ncols), width=3.4, height=2.6)
-    for ax, c, (obs, _), pred in zip(axes, problem.curves, problem.observations, predictions):
-        x_key = "shear_strain" if c.test == "constant_shear_rate" else {"oscillation": "angular_frequency",
-                                                                        "flow": "shear_rate",
-                                                                        "elastic_shear": "shear_strain",
-                                                                        "uniaxial": "stretch"}.get(c.response, "time")
-        x = np.asarray(c.obs_inputs(x_key), float)
-        for name, y in obs.items():
-            b = band(pred[name])
-            ax.fill_between(x, b["q05"], b["q95"], color="tab:blue", alpha=0.35, lw=0)
-            ax.plot(x, b["q50"], color="tab:blue", lw=1)
-            ax.plot(x, y, "k.", ms=3)
-            ax.set_ylabel(name, fontsize=7)
-        if x_key in ("time", "angular_frequency", "shear_rate") and np.all(x > 0):
-            ax.set_xscale("log")
-        ax.set_xlabel(x_key, fontsize=7)
-        ax.set_title(c.label, fontsize=7)
-        ax.tick_params(labelsize=6)
-    for ax in axes[n:]:
-        ax.set_visible(False)
-    if title:
-        fig.suptitle(title, fontsize=8)
-    return save_figure(fig, path)
+def predictive_band(idata_path) -> dict[str, np.ndarray] | None:
+    """5/50/95 % quantiles per fitted point of the ``posterior_predictive`` group of a posterior file (points in
+    the fit record's order: curve by curve, observable by observable); None for a file without that group (a
+    model that was not sampled)."""
+    try:
+        pp = read_inference_group(idata_path, "posterior_predictive")
+    except (OSError, KeyError, ValueError):
+        return None
+    draws = np.asarray(pp["response"].values, float)
+    return band(draws.reshape(-1, draws.shape[-1]))
 
 
-def run_posterior(ranking_csv, averages_path, fits_dir, scope: str, tests, out_nc, out_csv, walkers=None,
-                  steps: int = 800, burn: int = 150, seed: int = 0, dataset: str = "",
-                  figure_path=None) -> pd.DataFrame:
-    """Posterior of the recommended model of one scope (``ranking.csv`` column ``recommended``): the
-    InferenceData netCDF and the credible-interval table (module docstring). A scope without a recommendation
-    writes a file whose root attribute ``status`` says so, and an empty table. ``figure_path``: the observed curves
-    with the 5-95 % posterior-predictive band (:func:`plot_posterior_predictive`); without a recommendation, a
-    figure that says so."""
-    model = R.recommended_models(ranking_csv).get(scope)
-    if model is None:
-        write_inference_data({"": xr.Dataset(attrs={"status": f"no recommended model in scope {scope}"})}, out_nc)
+def run_posterior(averages_path, fits_dir, scope: str, model: str, tests, out_nc, out_csv, walkers=None,
+                  steps: int = 800, burn: int = 150, seed: int = 0, dataset: str = "") -> pd.DataFrame:
+    """Posterior of the fit record ``<fits_dir>/<model>.nc`` of one scope: the InferenceData netCDF (with the
+    model responses of :data:`N_PREDICTIVE` posterior draws in its ``posterior_predictive`` group, aligned with the
+    record's points) and the credible-interval table (module docstring). A model without a fit record writes a file
+    whose root attribute ``status`` says so, and an empty table. The table is the source of the credible-interval
+    columns of ``fits.csv`` (:func:`tissuemech.stages.write_fits_table`); the posterior-predictive band is drawn
+    into the fit figure by :func:`tissuemech.summary.plot_posterior_fit`."""
+    path = Path(fits_dir) / f"{model}.nc"
+    if not path.is_file():
+        write_inference_data({"": xr.Dataset(attrs={"status": f"no fit record of {model} in scope {scope}"})}, out_nc)
         table = pd.DataFrame(columns=["dataset", "scope", "model", "parameter"])
         write_text(table.to_csv(index=False), out_csv)
-        if figure_path is not None:
-            fig, (ax,) = new_figure()
-            ax.text(0.5, 0.5, f"no recommended model in scope {scope}", ha="center", va="center")
-            ax.set_axis_off()
-            save_figure(fig, figure_path)
         return table
-    record = F.FitRecord.from_netcdf(Path(fits_dir) / f"{model}.nc")
+    record = F.FitRecord.from_netcdf(path)
     problem = problem_for_record(read_netcdf(averages_path), record, tests)
     post, info = sample_record_posterior(problem, record, walkers=walkers, steps=steps, burn=burn, seed=seed)
     groups = inference_data(record, post, info, dataset=dataset, scope=scope)
@@ -308,13 +291,11 @@ def run_posterior(ranking_csv, averages_path, fits_dir, scope: str, tests, out_n
     observed = np.concatenate([np.asarray(y, float) for obs, _ in problem.observations for y in obs.values()])
     groups["posterior_predictive"] = xr.Dataset(
         {"response": (("chain", "draw", "point"), flat[None], {"meaning": "model response of posterior draws "
-                                                                         "(plate target), noise not added"})},
+                                                                         "(plate target), noise not added; points "
+                                                                         "in the fit record's order"})},
         coords={"chain": [0], "draw": np.arange(flat.shape[0])})
     groups["observed_data"] = xr.Dataset({"response": ("point", observed)})
     write_inference_data(groups, out_nc)
-    if figure_path is not None:
-        plot_posterior_predictive(problem, predictions, figure_path,
-                                  title=f"{dataset} {scope}: {record.model_key}, 5-95 % posterior-predictive band")
     table = posterior_table(record, post, dataset=dataset, scope=scope)
     table["acceptance"] = post.acceptance
     table["warnings"] = "; ".join(post.warnings)
@@ -443,12 +424,24 @@ def band(values: np.ndarray) -> dict[str, np.ndarray]:
     return {"q05": q[0], "q50": q[1], "q95": q[2]}
 
 
-def _load_uq_inputs(posterior_nc, population_json, fits_dir):
-    """The population card, its population dict, the posterior group and the fit record."""
+def recommended_posterior(posterior_ncs, model: str) -> Path:
+    """The posterior file of ``model`` among a scope's posterior files (``posterior/<scope>/<model>.nc``); a clear
+    error when the recommended model was not sampled (config ``posterior.models`` left it out)."""
+    paths = {Path(p).stem: Path(p) for p in ([posterior_ncs] if isinstance(posterior_ncs, (str, Path))
+                                             else posterior_ncs)}
+    if model not in paths:
+        raise FileNotFoundError(f"the recommended model {model} has no posterior (sampled: {sorted(paths)}); "
+                                "add it to config posterior.models or leave that list empty")
+    return paths[model]
+
+
+def _load_uq_inputs(posterior_ncs, population_json, fits_dir):
+    """The population card, its population dict, the recommended model's posterior group and the fit record."""
     card = json.loads(Path(population_json).read_text())
     unc = card.get("uncertainty")
     pop = unc.get("population", {}) if isinstance(unc, Mapping) else {}
-    post = read_inference_group(posterior_nc, "posterior")
+    post = read_inference_group(recommended_posterior(posterior_ncs, str(pop.get("model", card.get("model")))),
+                                "posterior")
     record = F.FitRecord.from_netcdf(Path(fits_dir) / f"{post.attrs['model']}.nc")
     if elastic_card(card, record, record.params) is None:
         raise ValueError(f"{record.model_key}: no elastic law the FEM can run")
@@ -541,13 +534,13 @@ def plot_bands(ds: xr.Dataset, path, x_name: str, y_name: str, x_scale: float, y
     return save_figure(fig, path)
 
 
-def run_uq_indentation(posterior_nc, population_json, fits_dir, out_nc, figure_path, n_draws: int = 32,
+def run_uq_indentation(posterior_ncs, population_json, fits_dir, out_nc, figure_path, n_draws: int = 32,
                        punch_diameter_m: float = 8e-3, max_depth_m: float = 1.5e-3, speed_m_s: float = 1e-4,
                        element_size_m: float = 2e-3, n_increments: int = 6, seed: int = 0,
                        n_threads: int = 1) -> xr.Dataset:
     """Force-depth bands of the flat-punch indentation (module docstring): netCDF with the draws and the 5/50/95 %
     bands per source (``measurement``, ``specimen``, ``total``) and a figure."""
-    card, pop, post, record = _load_uq_inputs(posterior_nc, population_json, fits_dir)
+    card, pop, post, record = _load_uq_inputs(posterior_ncs, population_json, fits_dir)
 
     def solve(c):
         ds = flat_punch_indentation(c, punch_diameter_m, max_depth_m, speed_m_s, element_size_m=element_size_m,
@@ -566,7 +559,7 @@ def run_uq_indentation(posterior_nc, population_json, fits_dir, out_nc, figure_p
     return ds
 
 
-def run_uq_torsion(posterior_nc, population_json, fits_dir, averages_path, out_nc, figure_path, n_draws: int = 32,
+def run_uq_torsion(posterior_ncs, population_json, fits_dir, averages_path, out_nc, figure_path, n_draws: int = 32,
                    n_points: int = 8, element_size_m: float = 1.5e-3, draw_element_size_m: float = 2.5e-3,
                    seed: int = 0, n_threads: int = 1) -> xr.Dataset:
     """Torque-rim strain bands of the rheometer torsion at the dataset's fastest constant shear rate (the plate
@@ -574,7 +567,7 @@ def run_uq_torsion(posterior_nc, population_json, fits_dir, averages_path, out_n
     optimum is solved on the ``element_size_m`` mesh (the pipeline's torsion mesh), the draws on the coarser
     ``draw_element_size_m`` mesh corrected point by point by the optimum's fine/coarse ratio (:func:`propagate`;
     on the bundled brain the coarse mesh alone is 3 % stiffer and 3.5 times cheaper)."""
-    card, pop, post, record = _load_uq_inputs(posterior_nc, population_json, fits_dir)
+    card, pop, post, record = _load_uq_inputs(posterior_ncs, population_json, fits_dir)
     avg = read_netcdf(averages_path)
     idx = [i for i, t in enumerate(avg["test"].values) if str(t) == "constant_shear_rate"]
     if not idx:
@@ -617,6 +610,5 @@ def run_uq_torsion(posterior_nc, population_json, fits_dir, averages_path, out_n
 __all__ = ["problem_for_record", "internal_covariance", "sample_record_posterior", "posterior_table",
            "inference_data", "write_inference_data", "read_inference_group", "run_posterior", "Z95", "IDATA_GROUPS",
            "reference_shear_modulus", "piece_levels", "run_population", "elastic_card", "band",
-           "run_uq_indentation", "run_uq_torsion", "propagate",
-           "bands_dataset", "plot_bands", "SOURCES", "predictive_draws", "plot_posterior_predictive",
-           "N_PREDICTIVE"]
+           "run_uq_indentation", "run_uq_torsion", "propagate", "recommended_posterior",
+           "bands_dataset", "plot_bands", "SOURCES", "predictive_draws", "predictive_band", "N_PREDICTIVE"]

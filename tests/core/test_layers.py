@@ -23,7 +23,7 @@ LAYERS: tuple[frozenset[str], ...] = tuple(frozenset(names.split()) for names in
     "canonical units stats sourcehash",
     "records",
     "models spectra curves lve",
-    "fitting io synth plots posterior cards_febio pipeline scopes",
+    "fitting io synth plots posterior cards_febio cards_niftysim pipeline scopes",
     "ranking cards tts",
     "diagnosis stages fem uq",
     "summary cli regression",

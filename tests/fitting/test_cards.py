@@ -257,8 +257,10 @@ def test_write_card_files(tmp_path):
     truth = qlv_params(qlv, {"G0": 200.0}, G_PRONY)
     card = C.make_card(fitted_qlv(qlv, truth, "qlv_linear_prony4"), qlv, poisson_ratio=0.49)
     paths = C.write_card_files(card, tmp_path / "cards")
-    assert set(paths) == {"json", "abaqus", "febio"}
+    # a linear QLV card's law is neo-Hookean (mu = G0): NiftySim NHV with the four Prony terms as well
+    assert set(paths) == {"json", "abaqus", "febio", "niftysim"}
     assert json.loads(paths["json"].read_text())["model"] == "qlv_linear_prony4"
+    assert 'NumIsoTerms="4"' in paths["niftysim"].read_text() and card["niftysim_reason"] is None
     assert paths["abaqus"].read_text().count("*") >= 3
 
 
@@ -270,6 +272,7 @@ def test_beyond_qlv_card_has_no_fe_block_and_says_why():
     card = C.make_card(res, model, poisson_ratio=0.49)
     assert C.abaqus_block(card) is None and C.febio_block(card) is None
     assert any("user material" in n for n in card["notes"])
+    assert "beyond-QLV" in card["niftysim_reason"]  # and no NiftySim element, with the reason stated
 
 
 def test_qlv_with_nonlinear_law_round_trip():

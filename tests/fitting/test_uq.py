@@ -1,6 +1,6 @@
 """Posteriors of fit records (tissuemech.uq): on a near-Gaussian synthetic fit with known truth the 5-95 % credible
-interval agrees with the lmfit standard error within 15 %, the InferenceData file reads back, and a scope without a
-recommended model says so."""
+interval agrees with the lmfit standard error within 15 %, the InferenceData file reads back, the predictive band
+enters the fit figure and the intervals enter fits.csv, and a model without a fit record says so."""
 from __future__ import annotations
 
 import importlib
@@ -64,19 +64,61 @@ def test_inference_data_round_trip(synthetic_fit, tmp_path):
     assert len(pred) == 1 and pred[0]["shear_stress"].shape == (10, 60)
     # the draws scatter around the fitted curve
     np.testing.assert_allclose(np.median(pred[0]["shear_stress"], axis=0), record.predicted, rtol=0.05)
-    written = uq.plot_posterior_predictive(problem, pred, tmp_path / "pp.png")
-    assert all(p.stat().st_size > 0 for p in written)
 
 
-def test_scope_without_recommendation_writes_status(tmp_path):
-    ranking = tmp_path / "ranking.csv"
-    pd.DataFrame([{"scope": "simple_shear", "model": "neo_hookean", "recommended": False}]).to_csv(ranking, index=False)
-    table = uq.run_posterior(ranking, tmp_path / "none.nc", tmp_path, "simple_shear", ["simple_shear"],
+def test_posterior_band_in_fit_figure_and_credible_intervals_in_fits_csv(synthetic_fit, tmp_path):
+    """run_posterior writes the predictive draws aligned with the record's points: the band drawn in the fit
+    figure brackets the fitted curve at every point, and fits.csv carries the posterior table's quantiles next to
+    each parameter's standard error (read back from the two files, not recomputed)."""
+    from tissuemech.stages import write_fits_table
+    from tissuemech.summary import figure_scope_fit, fit_panels
+
+    problem, record = synthetic_fit
+    post, info = uq.sample_record_posterior(problem, record, walkers=4, steps=300, burn=60, seed=2)
+    fits_dir = tmp_path / "fits" / "simple_shear"
+    fits_dir.mkdir(parents=True)
+    record.to_netcdf(fits_dir / "reduced_polynomial2.nc")
+    groups = uq.inference_data(record, post, info, scope="simple_shear")
+    pred = uq.predictive_draws(problem, record, post, n_draws=32)
+    flat = np.concatenate([np.concatenate(list(d.values()), axis=1) for d in pred], axis=1)
+    import xarray as xr
+    groups["posterior_predictive"] = xr.Dataset({"response": (("chain", "draw", "point"), flat[None])})
+    nc = uq.write_inference_data(groups, tmp_path / "post.nc")
+    band = uq.predictive_band(nc)
+    assert band["q05"].shape == record.predicted.shape
+    assert np.all(band["q05"] <= record.predicted * 1.0001) and np.all(record.predicted <= band["q95"] * 1.0001)
+    panels = fit_panels(record, problem.curves, band)
+    (series,) = panels[("simple_shear", "shear_stress")]
+    np.testing.assert_allclose(series["band"][0], band["q05"])
+    fig = figure_scope_fit(record, problem.curves, band=band)
+    assert "posterior-predictive band" in fig._suptitle.get_text()
+    table = uq.posterior_table(record, post, scope="simple_shear")
+    table["acceptance"], table["warnings"] = post.acceptance, ""
+    table.to_csv(tmp_path / "post.csv", index=False)
+    fits = write_fits_table([fits_dir], "d", tmp_path / "fits.csv", posterior_tables=[tmp_path / "post.csv"])
+    back = pd.read_csv(tmp_path / "fits.csv")
+    cols = list(back.columns)
+    for name in record.varying:
+        row = table.set_index("parameter").loc[name]
+        assert back.loc[0, f"ci05_{name}"] == pytest.approx(row["ci05"], rel=1e-12)
+        assert back.loc[0, f"ci95_{name}"] == pytest.approx(row["ci95"], rel=1e-12)
+        assert cols.index(f"ci05_{name}") == cols.index(f"se_{name}") + 1  # next to the standard error
+    assert back.loc[0, "posterior_rhat_max"] == pytest.approx(table["rhat"].max())
+    # without posterior tables the same records give the same table minus the posterior columns
+    plain = write_fits_table([fits_dir], "d", tmp_path / "plain.csv")
+    assert [c for c in fits.columns if not c.startswith(("ci", "posterior_"))] == list(plain.columns)
+
+
+def test_model_without_record_writes_status(tmp_path):
+    table = uq.run_posterior(tmp_path / "none.nc", tmp_path, "simple_shear", "neo_hookean", ["simple_shear"],
                              tmp_path / "p.nc", tmp_path / "p.csv")
     assert table.empty and pd.read_csv(tmp_path / "p.csv").empty
     import xarray as xr
     with xr.open_dataset(tmp_path / "p.nc", engine="h5netcdf") as ds:
-        assert "no recommended model" in ds.attrs["status"]
+        assert "no fit record of neo_hookean" in ds.attrs["status"]
+    assert uq.predictive_band(tmp_path / "p.nc") is None
+    with pytest.raises(FileNotFoundError, match="posterior.models"):
+        uq.recommended_posterior([tmp_path / "p.nc"], "ogden1")
 
 
 # ------------------------------------------------------------------------------------------------------

@@ -136,6 +136,13 @@ def test_dry_run_of_the_repository_is_clean(tmp_path):
         for rule in ("ingest", "average", "lve", "fit_scope", "rank"):
             assert by_dataset[name][rule] >= 1, f"{name}: no {rule} job in the dry run"
     assert by_dataset[""]["all"] == 1 and by_dataset[""]["fem_timing"] == 1 and by_dataset[""]["summary"] == 1
+    # config posterior: every fit of the bundled brain's joint scope is sampled (the QLV and the beyond-QLV one),
+    # and fits.csv is written once per dataset after the posteriors (rule fits_table)
+    post = config["posterior"]
+    if "porcine_brain_thesis" in post["datasets"] and not post.get("models"):
+        assert by_dataset["porcine_brain_thesis"]["posterior"] == len(config["fit"]["joint_models"])
+    for name in expected:
+        assert by_dataset[name]["fits_table"] == (1 if by_dataset[name]["fit_scope"] else 0), name
     if not shared.is_dir():
         for name in external:
             assert f"external dataset {name!r}" in output and "skipped" in output

@@ -57,6 +57,8 @@ DATASETS = discover_datasets()
 
 wildcard_constraints:
     dataset="|".join(DATASETS) or "NO_DATASET",
+    scope="[^/]+",
+    model="[^/]+",
 
 
 def dataset_dir(wildcards):
@@ -203,4 +205,59 @@ def all_targets():
     if BRAIN_INDENTATION:  # defined in fem.smk, read when the target list is built
         targets.append(BRAIN_FILES["brain_indentation"])
     targets.append("results/summary.html")
+    return targets
+
+
+# ---- uncertainty (workflow/rules/uq.smk; fits.csv of fit.smk waits for the posterior tables) ----
+POSTERIOR = config.get("posterior", {})
+
+
+def posterior_scopes_of(name):
+    """Scopes of a dataset whose fits get posteriors (config posterior.datasets / .scopes)."""
+    if name not in POSTERIOR.get("datasets", []):
+        return []
+    wanted = POSTERIOR.get("scopes") or []
+    return [s for s in dataset_scopes_of(name) if not wanted or s in wanted]
+
+
+def posterior_models_of(name, scope):
+    """Models of a scope that are sampled: config posterior.models, or every model the scope fits (so the
+    recommended one is always among them; the sampling does not read the ranking)."""
+    fitted = list(dataset_scopes_of(name)[scope]["models"])
+    wanted = POSTERIOR.get("models") or []
+    return [m for m in fitted if not wanted or m in wanted]
+
+
+def posterior_files(wildcards):
+    """Posterior files (InferenceData netCDF) of every sampled model of one scope."""
+    return [
+        f"results/{wildcards.dataset}/posterior/{wildcards.scope}/{m}.nc"
+        for m in posterior_models_of(wildcards.dataset, wildcards.scope)
+    ]
+
+
+def posterior_tables(wildcards):
+    """Credible-interval tables of every sampled fit of a dataset (inputs of fits.csv)."""
+    return [
+        f"results/{wildcards.dataset}/posterior/{scope}/{m}.csv"
+        for scope in posterior_scopes_of(wildcards.dataset)
+        for m in posterior_models_of(wildcards.dataset, scope)
+    ]
+
+
+def uq_targets():
+    """Posterior figures (and, with posterior.population, specimen-variability and FEM band) files of every enabled
+    dataset and scope (added to the default target in the Snakefile and to the summary's inputs).
+    """
+    targets = []
+    for name in DATASETS:
+        for scope in posterior_scopes_of(name):
+            for m in posterior_models_of(name, scope):
+                targets.append(f"results/{name}/figures/posterior/{scope}/{m}.png")
+            if POSTERIOR.get("population", True):
+                targets.append(f"results/{name}/population/{scope}.card.json")
+                if POSTERIOR.get("fem_draws", 0):
+                    targets.append(f"results/{name}/uq/indentation_{scope}.nc")
+                    if has_shear_ramps(name):
+                        targets.append(f"results/{name}/uq/torsion_{scope}.nc")
     return targets

@@ -47,7 +47,6 @@ rule rank:
             subcategory="4 ranking",
             labels={"item": "ranking table"},
         ),
-        fits="results/{dataset}/fits.csv",
         figure=report(
             "results/{dataset}/figures/ranking.png",
             caption="../report/ranking.rst",
@@ -79,3 +78,21 @@ rule rank:
         pkg=script_hash("workflow/scripts/rank.py"),
     script:
         "../scripts/rank.py"
+
+
+rule fits_table:
+    # fits.csv is written after the posteriors (workflow/rules/uq.smk), which do not read the ranking, so the
+    # table carries their credible intervals next to the lmfit standard errors without a cycle
+    input:
+        fits=scope_fit_dirs,
+        posterior=posterior_tables,
+    output:
+        fits="results/{dataset}/fits.csv",
+    log:
+        "logs/{dataset}/fits_table.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/fits_table.tsv"
+    params:
+        pkg=script_hash("workflow/scripts/fits_table.py"),
+    script:
+        "../scripts/fits_table.py"

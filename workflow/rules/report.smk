@@ -82,6 +82,7 @@ rule summary:
     input:
         targets=[t for t in all_targets() if t != "results/summary.html"],
         figures=report_figure_targets(),
+        uq=lambda wildcards: uq_targets(),
     output:
         html="results/summary.html",
     log:

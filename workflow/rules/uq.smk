@@ -1,57 +1,38 @@
-# Uncertainty (issue 16): posteriors of the recommended fit of each scope (config `posterior`).
-
-POSTERIOR = config.get("posterior", {})
-
-
-def posterior_scopes_of(name):
-    """Scopes of a dataset whose recommended fit gets a posterior (config posterior.datasets / .scopes)."""
-    if name not in POSTERIOR.get("datasets", []):
-        return []
-    wanted = POSTERIOR.get("scopes") or []
-    return [s for s in dataset_scopes_of(name) if not wanted or s in wanted]
-
-
-def uq_targets():
-    """Posterior (and, with posterior.population, specimen-variability) files of every enabled dataset and scope
-    (added to the default target in the Snakefile)."""
-    targets = []
-    for name in DATASETS:
-        for scope in posterior_scopes_of(name):
-            targets.append(f"results/{name}/posterior/{scope}.nc")
-            if POSTERIOR.get("population", True):
-                targets.append(f"results/{name}/population/{scope}.card.json")
-                if POSTERIOR.get("fem_draws", 0):
-                    targets.append(f"results/{name}/uq/indentation_{scope}.nc")
-                    if has_shear_ramps(name):
-                        targets.append(f"results/{name}/uq/torsion_{scope}.nc")
-    return targets
+# Uncertainty (issue 16): posteriors of the fits of each enabled scope (config `posterior`), specimen variability
+# and FEM bands of the recommended model. Target and input functions (posterior_models_of, uq_targets ...) are in
+# common.smk, as fit.smk's rule fits_table reads the posterior tables.
 
 
 rule posterior:
     input:
-        ranking="results/{dataset}/ranking.csv",
         averages="results/{dataset}/averages.nc",
         fits="results/{dataset}/fits/{scope}",
     output:
-        idata="results/{dataset}/posterior/{scope}.nc",
+        idata="results/{dataset}/posterior/{scope}/{model}.nc",
         table=report(
-            "results/{dataset}/posterior/{scope}.csv",
+            "results/{dataset}/posterior/{scope}/{model}.csv",
             caption="../report/posterior_table.rst",
             category="{dataset}",
             subcategory="3 fits: {scope}",
-            labels={"scope": "{scope}", "model": "posterior (credible intervals)"},
+            labels={
+                "scope": "{scope}",
+                "model": "{model}: posterior (credible intervals)",
+            },
         ),
         figure=report(
-            "results/{dataset}/figures/posterior_{scope}.png",
+            "results/{dataset}/figures/posterior/{scope}/{model}.png",
             caption="../report/posterior_predictive.rst",
             category="{dataset}",
             subcategory="3 fits: {scope}",
-            labels={"scope": "{scope}", "model": "posterior-predictive band"},
+            labels={
+                "scope": "{scope}",
+                "model": "{model} with posterior-predictive band",
+            },
         ),
     log:
-        "logs/{dataset}/posterior_{scope}.log",
+        "logs/{dataset}/posterior_{scope}_{model}.log",
     benchmark:
-        "benchmarks/runs/{dataset}/posterior_{scope}.tsv"
+        "benchmarks/runs/{dataset}/posterior_{scope}_{model}.tsv"
     params:
         tests=lambda wildcards: scope_spec(wildcards)["tests"],
         walkers=POSTERIOR.get("walkers"),
@@ -95,7 +76,7 @@ rule population:
 
 rule uq_indentation:
     input:
-        posterior="results/{dataset}/posterior/{scope}.nc",
+        posterior=posterior_files,
         population="results/{dataset}/population/{scope}.card.json",
         fits="results/{dataset}/fits/{scope}",
         compiled=NUMBA_COMPILED,
@@ -124,7 +105,7 @@ rule uq_indentation:
 
 rule uq_torsion:
     input:
-        posterior="results/{dataset}/posterior/{scope}.nc",
+        posterior=posterior_files,
         population="results/{dataset}/population/{scope}.card.json",
         fits="results/{dataset}/fits/{scope}",
         compiled=NUMBA_COMPILED,

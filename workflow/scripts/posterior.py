@@ -1,14 +1,19 @@
-"""Snakemake adapter: recommended fit of one scope -> posterior (InferenceData netCDF) + credible-interval table."""
+"""Snakemake adapter: one fit record of a scope -> posterior (InferenceData netCDF), credible-interval table and
+the fit figure with its posterior-predictive band."""
+from pathlib import Path
+
 from tissuemech.pipeline import job_log
+from tissuemech.summary import plot_posterior_fit
 from tissuemech.uq import run_posterior
 
 with job_log(snakemake.log[0]) as log:
-    p = snakemake.params
-    table = run_posterior(snakemake.input.ranking, snakemake.input.averages, snakemake.input.fits,
-                          snakemake.wildcards.scope, p.tests, snakemake.output.idata, snakemake.output.table,
-                          walkers=p.walkers, steps=p.steps, burn=p.burn, seed=p.seed,
-                          dataset=snakemake.wildcards.dataset, figure_path=snakemake.output.figure)
+    p, w = snakemake.params, snakemake.wildcards
+    table = run_posterior(snakemake.input.averages, snakemake.input.fits, w.scope, w.model, p.tests,
+                          snakemake.output.idata, snakemake.output.table, walkers=p.walkers, steps=p.steps,
+                          burn=p.burn, seed=p.seed, dataset=w.dataset)
     log.info("\n%s", table.to_string())
     for warning in set(table.get("warnings", [])):
         if warning:
             log.warning("posterior diagnostics: %s", warning)
+    plot_posterior_fit(snakemake.input.averages, Path(snakemake.input.fits) / f"{w.model}.nc",
+                       snakemake.output.idata, p.tests, snakemake.output.figure)

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import lmfit
 import numpy as np
+import pandas as pd
 import xarray as xr
 
 from ..canonical import to_jsonable
@@ -324,11 +325,17 @@ FITS_CSV_ATTRS = ("family", "scope", "target", "relaxation", "success", "n", "n_
                   "message")
 
 
-def fits_csv_row(record: FitRecord | xr.Dataset, dataset: str = "", file: str = "") -> dict:
+def fits_csv_row(record: FitRecord | xr.Dataset, dataset: str = "", file: str = "",
+                 posterior: pd.DataFrame | None = None) -> dict:
     """One tidy ``fits.csv`` row of a fit record (a :class:`~tissuemech.records.FitRecord`, or its Dataset
     :func:`fit_to_dataset` / a ``fits/<scope>/<model>.nc`` read back): criteria, flags, ranges and
     ``param_<name>``/``se_<name>`` columns. The one ``fits.csv`` schema:
-    ``dataset, file, model, <FITS_CSV_ATTRS>, n_flags, flags ("; "), curves ("; "), <ranges>, param_*, se_*``.
+    ``dataset, file, model, <FITS_CSV_ATTRS>, n_flags, flags ("; "), curves ("; "), <ranges>, param_*, se_*``,
+    and with ``posterior`` (the record's rows of a posterior table, ``tissuemech.uq.posterior_table``: columns
+    ``parameter``, ``ci05``, ``ci50``, ``ci95``, ``rhat``, ``ess``, ``acceptance``, ``warnings``) the 5/50/95 %
+    credible quantiles ``ci05_<name>``/``ci50_<name>``/``ci95_<name>`` after each sampled parameter's ``se_<name>``
+    and ``posterior_rhat_max``, ``posterior_ess_min``, ``posterior_acceptance``, ``posterior_warnings``. Without a
+    posterior those columns are absent from the row (empty in the table).
     """
     rec = record if isinstance(record, FitRecord) else FitRecord.from_dataset(record)
     row = {"dataset": dataset, "file": str(file), "model": rec.model_key}
@@ -338,7 +345,18 @@ def fits_csv_row(record: FitRecord | xr.Dataset, dataset: str = "", file: str = 
     row["flags"] = "; ".join(rec.flags)
     row["curves"] = "; ".join(rec.curve_labels)
     row.update(rec.ranges)
+    sampled = ({str(r["parameter"]): r for _, r in posterior.iterrows()}
+               if posterior is not None and not posterior.empty else {})
     for name, value in rec.params.items():
         row[f"param_{name}"] = float(value)
         row[f"se_{name}"] = float(rec.stderr[name])
+        if name in sampled:
+            for q in ("ci05", "ci50", "ci95"):
+                row[f"{q}_{name}"] = float(sampled[name][q])
+    if sampled:
+        row["posterior_rhat_max"] = float(posterior["rhat"].max())
+        row["posterior_ess_min"] = float(posterior["ess"].min())
+        row["posterior_acceptance"] = float(posterior["acceptance"].iloc[0]) if "acceptance" in posterior else None
+        warn = posterior["warnings"].iloc[0] if "warnings" in posterior else ""
+        row["posterior_warnings"] = "" if pd.isna(warn) else str(warn)
     return row
