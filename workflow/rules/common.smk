@@ -82,13 +82,22 @@ def dataset_tests(name):
 
 
 def dataset_scopes_of(name):
+    """Fit scopes of a dataset; sweeps at >= 2 temperatures get the mastercurve scope instead of frequency_sweep."""
     from tissuemech.scopes import dataset_scopes
 
-    return dataset_scopes(dataset_tests(name), config["fit"])
+    return dataset_scopes(dataset_tests(name), config["fit"], tts=has_tts(name))
 
 
 def scope_spec(wildcards):
     return dataset_scopes_of(wildcards.dataset)[wildcards.scope]
+
+
+def fit_scope_inputs(wildcards):
+    """averages.nc, and tts.nc for the mastercurve scope (its sweeps are shifted to Tref before the fit)."""
+    inputs = {"averages": f"results/{wildcards.dataset}/averages.nc"}
+    if scope_spec(wildcards).get("mastercurve"):
+        inputs["tts"] = f"results/{wildcards.dataset}/tts.nc"
+    return inputs
 
 
 def scope_rankings(wildcards):
@@ -120,6 +129,7 @@ DIAGNOSIS_SCOPES = (
     "stress_relaxation",
     "creep_recovery",
     "frequency_sweep",
+    "mastercurve",
     "amplitude_sweep",
     "simple_shear",
     "flow_curve",
