@@ -252,3 +252,29 @@ def test_fit_stage_fits_the_mastercurve_and_its_card_carries_the_shift(tmp_path)
     inp = (tmp_path / "cards" / "prony4.inp").read_text().splitlines()
     keywords = [ln for ln in inp if ln.startswith("*") and not ln.startswith("**")]
     assert keywords[-2:] == ["*VISCOELASTIC, TIME=PRONY", "*TRS, DEFINITION=WLF"]
+
+
+def test_held_out_temperatures_are_predicted_within_their_noise():
+    """Issue 15, done-when: every held-out interior temperature whose neighbours still overlap once it is removed is
+    predicted from the others' mastercurve and WLF shift within its noise: the RMS log10 error of a point is at
+    most 2.5x the per-point noise (1 % -> 0.0043 decades; the prediction error holds the held-out point's own
+    noise and the mastercurve's, sqrt(2) x 0.0043 = 0.006, measured 0.006-0.008).
+
+    Not covered, and said so: below 30 degC the sweeps are 2.5-3.6 decades apart once one is removed, more than
+    or nearly the 3 decades one sweep spans, and the chained pair shift there is wrong by 0.15-1 decade (held-out
+    errors 0.03 and 0.21 decades at 20 and 10 degC); the end temperatures are extrapolations (partly outside the
+    others' mastercurve: NaN there)."""
+    temps = np.arange(0.0, 101.0, 10.0)
+    sw = synthetic_sweeps(temps)
+    noise_decades = 0.01 / np.log(10)
+    for held in range(3, temps.size - 1):
+        if temps[held] == TREF:
+            continue
+        train = [s for k, s in enumerate(sw) if k != held]
+        res = tts.shift_factors(train, t_ref_c=TREF)
+        wlf = tts.fit_wlf(res.temperatures_c, res.log_aT, res.log_aT_stderr, res.t_ref_c)
+        la = tts.wlf_log_aT(temps[held], wlf["c1"], wlf["c2_k"], res.t_ref_c)
+        mx, my = tts.mastercurve(sorted(train, key=lambda s: s.temperature_c), res.log_aT)
+        err = tts.predict_from_mastercurve(mx, my, sw[held].log_w, la) - sw[held].log_g
+        assert np.isfinite(err).all(), temps[held]
+        assert np.sqrt(np.mean(err ** 2)) < 2.5 * noise_decades, temps[held]
