@@ -4,11 +4,20 @@ POSTERIOR = config.get("posterior", {})
 
 
 def posterior_scopes_of(name):
-    """Scopes of a dataset whose recommended fit gets a posterior (config posterior.datasets / .scopes)."""
+    """Scopes of a dataset whose recommended fit gets a posterior (config posterior.datasets / .scopes).
+
+    Not the mastercurve scope: uq.run_posterior rebuilds a scope's curves from averages.nc alone, and the
+    mastercurve's curve also needs tts.nc (the shift to Tref).
+    """
     if name not in POSTERIOR.get("datasets", []):
         return []
     wanted = POSTERIOR.get("scopes") or []
-    return [s for s in dataset_scopes_of(name) if not wanted or s in wanted]
+    scopes = dataset_scopes_of(name)
+    return [
+        s
+        for s in scopes
+        if (not wanted or s in wanted) and not scopes[s].get("mastercurve")
+    ]
 
 
 def uq_targets():
