@@ -7,7 +7,8 @@ Card shape (JSON, SI units)::
      "prony": {"g": [...], "tau": [...], "g_inf": ..., "normalisation": ..., "source": ...} | null,
      "poisson_ratio": nu, "bulk_modulus": Pa, "validity": {...}, "provenance": {...},
      "fit_quality": {...}, "abaqus_form": ..., "febio_form": type | null, "febio_parameters": {...} | null,
-     "febio_reason": str | null, "valid_range": {...}, "uncertainty": {...}, "notes": [...]}
+     "febio_reason": str | null, "valid_range": {...}, "uncertainty": {...}, "notes": [...],
+     "time_temperature_shift": {...}}   # only cards fitted to a TTS mastercurve (tts.tts_card)
 
 ``elastic_law``/``elastic_parameters`` are the (instantaneous) hyperelastic law a FE code needs -- for a
 QLV model the instantaneous law, for a linear viscoelastic model a linear law with the instantaneous
@@ -528,6 +529,10 @@ def abaqus_block(card: Mapping, material_name: str | None = None) -> str | None:
     if card.get("prony"):
         lines.append("*VISCOELASTIC, TIME=PRONY")
         lines += [f"{g:.10g}, 0., {tau:.10g}" for g, tau in zip(card["prony"]["g"], card["prony"]["tau"])]
+        # a card fitted to a TTS mastercurve: its Prony times are those at Tref, and the shift function follows
+        trs = (card.get("time_temperature_shift") or {}).get("abaqus_trs")
+        if trs:
+            lines.append(trs.rstrip("\n"))
     return "\n".join(lines) + "\n"
 
 

@@ -8,7 +8,12 @@ A *scope* is a set of test kinds fitted jointly with a list of candidate models:
   models (``config.fit.joint_models``) fitted to all CSR rates plus all relaxations, cross-validated by
   leave-one-rate-out and by "fit relaxation, predict the ramps";
 * ``all_modes`` when the dataset has simple shear *and* uniaxial curves (e.g. Budday et al.): hyperelastic laws
-  fitted to every mode jointly, cross-validated by leaving one mode out.
+  fitted to every mode jointly, cross-validated by leaving one mode out;
+* ``mastercurve`` instead of ``frequency_sweep`` when the sweeps carry >= 2 temperatures: the sweeps shifted by
+  the dataset's ``tts.nc`` (rule ``tts``) form one curve at the reference temperature
+  (:func:`tissuemech.tts.mastercurve_curve`), fitted like any other curve; its cards carry the shift function
+  (``time_temperature_shift``, Abaqus ``*TRS`` after ``*VISCOELASTIC``). One parameter set fitted to sweeps at
+  20 temperatures as if they were one (the scope's former behaviour) describes no temperature.
 
 Outputs of one scope (``run_fit_scope``): ``<fits_dir>/<model>.nc`` per fitted model, a ranking table, the
 cross-validation records, the recommendation, and material cards of every converged model.
@@ -39,7 +44,8 @@ from .fem.materials import available_laws
 from .fem.tled import DynamicRelaxationError, ElementInversionError
 from .models.registry import get_model
 from .plots import plot_force_depth, plot_torque
-from .scopes import ALL_MODES_SCOPE, JOINT_SCOPE, SPECTRUM_TESTS, dataset_scopes  # noqa: F401 (re-exported)
+from .scopes import (ALL_MODES_SCOPE, JOINT_SCOPE, MASTERCURVE_SCOPE, SPECTRUM_TESTS,  # noqa: F401 (re-exported)
+                     dataset_scopes)
 
 logger = logging.getLogger(__name__)
 
@@ -61,11 +67,31 @@ def _geometry_by_test(avg: xr.Dataset, name: str) -> dict[str, float]:
     return out
 
 
-def scope_curves(averages: xr.Dataset, tests: Sequence[str], relaxation: str = "measured") -> list[F.Curve]:
-    """Averaged curves of ``tests`` with their plate geometry, thinned to :data:`POINTS_PER_CURVE` points."""
+def scope_curves(averages: xr.Dataset, tests: Sequence[str], relaxation: str = "measured",
+                 tts: xr.Dataset | None = None) -> list[F.Curve]:
+    """Averaged curves of ``tests`` with their plate geometry, thinned to :data:`POINTS_PER_CURVE` points.
+
+    With ``tts`` (the dataset's ``tts.nc``; the ``mastercurve`` scope) the frequency sweeps, one per temperature
+    and each thinned alone, are replaced by their mastercurve at the reference temperature, one curve
+    (:func:`tissuemech.tts.mastercurve_curve`); sweeps without a finite shift are left out (logged).
+    """
     curves = F.curves_from_averages(averages, radius_m=_geometry_by_test(averages, "radius_m"),
                                     gap_m=_geometry_by_test(averages, "gap_m"), relaxation=relaxation, tests=tests)
-    return [F.thin(c, POINTS_PER_CURVE) for c in curves]
+    curves = [F.thin(c, POINTS_PER_CURVE) for c in curves]
+    if tts is None:
+        return curves
+    from .tts import mastercurve_curve
+
+    labels = as_str(averages["condition"].values)
+    kinds = as_str(averages["test"].values)
+    temps = np.asarray(averages["temperature_c"].values, float) if "temperature_c" in averages else \
+        np.full(len(labels), np.nan)
+    temp_of = {(str(k), str(c)): float(t) for k, c, t in zip(kinds, labels, temps)}
+    sweeps = [c for c in curves if c.test == "frequency_sweep"]
+    master, record = mastercurve_curve(sweeps, [temp_of.get((c.test, c.condition), np.nan) for c in sweeps], tts)
+    if record["left_out"]:
+        logger.warning("mastercurve: sweeps left out: %s", record["left_out"])
+    return [c for c in curves if c.test != "frequency_sweep"] + [master]
 
 
 def scope_folds(scope: str, curves: Sequence[F.Curve]) -> list[R.Fold]:
@@ -84,7 +110,8 @@ def scope_folds(scope: str, curves: Sequence[F.Curve]) -> list[R.Fold]:
 
 
 def run_fit_scope(averages_path, scope: str, spec: Mapping, target: str, seed: int, multistart: int,
-                  fits_dir, cards_dir, ranking_path, poisson_ratio: float, dataset: str = "") -> pd.DataFrame:
+                  fits_dir, cards_dir, ranking_path, poisson_ratio: float, dataset: str = "",
+                  tts_path=None) -> pd.DataFrame:
     """Fit, cross-validate and rank every candidate of one scope; write fits, cards and the ranking table.
 
     Parameters
@@ -95,17 +122,34 @@ def run_fit_scope(averages_path, scope: str, spec: Mapping, target: str, seed: i
     seed, multistart : seeded random starts per model
     fits_dir, cards_dir : output folders (``<model>.nc``; ``<model>.json/.inp/.feb``)
     ranking_path : CSV of the ranking table (also holds the recommendation statement)
+    tts_path : the dataset's ``tts.nc``; required by a ``mastercurve`` spec (``spec["mastercurve"]``), whose
+        sweeps are fitted as one curve at the reference temperature and whose cards carry the shift function
+        (``time_temperature_shift``: :func:`tissuemech.tts.tts_card`; Abaqus ``*TRS``)
 
     Returns
     -------
     The ranking table.
     """
     avg = read_netcdf(averages_path)
-    curves = scope_curves(avg, spec["tests"])
+    tts_ds = None
+    if spec.get("mastercurve"):
+        if tts_path is None:
+            raise ValueError(f"scope {scope!r} fits the TTS mastercurve and needs the dataset's tts.nc (tts_path)")
+        tts_ds = read_netcdf(tts_path)
+    curves = scope_curves(avg, spec["tests"], tts=tts_ds)
+    shift_card = None
+    if tts_ds is not None:
+        from .tts import tts_card
+
+        shift_card = tts_card(tts_ds, dataset)
     fits_dir, cards_dir = Path(fits_dir), Path(cards_dir)
     fits_dir.mkdir(parents=True, exist_ok=True)
     cards_dir.mkdir(parents=True, exist_ok=True)
-    candidates = [R.Candidate(key, R.RegistryFactory(key)) for key in spec["models"]]
+    # a mastercurve spans far more decades of reduced frequency than the rheometer window the registry's bounds
+    # suit: its candidates' time and modulus bounds are widened to the data (fitting.oscillation_window_bounds)
+    candidates = [R.Candidate(key, R.RegistryFactory(key),
+                              bounds=F.oscillation_window_bounds(get_model(key), curves) if tts_ds is not None else {})
+                  for key in spec["models"]]
     failures: dict[str, str] = {}
     if curves:
         table, fits, cv, rec = R.rank_scope(candidates, curves, target, scope, folds=scope_folds(scope, curves),
@@ -122,6 +166,8 @@ def run_fit_scope(averages_path, scope: str, spec: Mapping, target: str, seed: i
         except (ValueError, KeyError, RuntimeError) as exc:
             failures[f"card:{key}"] = str(exc)
             continue
+        if shift_card is not None:
+            card["time_temperature_shift"] = shift_card
         cards_mod.write_card_files(card, cards_dir, stem=key)
     if not table.empty:
         table["failures"] = json.dumps(failures) if failures else ""

@@ -192,22 +192,25 @@ def figure_scope_fit(fit: FitRecord | xr.Dataset, curves: Sequence, title: str |
     return fig
 
 
-def plot_scope_fits(averages_path, fits_dir, tests: Sequence[str], out_dir) -> list[Path]:
+def plot_scope_fits(averages_path, fits_dir, tests: Sequence[str], out_dir, tts_path=None) -> list[Path]:
     """``<out_dir>/<model>.png/.svg`` for every fit record ``<fits_dir>/<model>.nc`` of a scope.
 
     The curves are rebuilt from the averages exactly as the fit stage builds them
-    (:func:`tissuemech.stages.scope_curves`), so each fitted point is drawn at its own time/strain/rate/frequency.
+    (:func:`tissuemech.stages.scope_curves`, with the dataset's ``tts.nc`` as ``tts_path`` for the ``mastercurve``
+    scope, whose one curve is drawn in reduced frequency), so each fitted point is drawn at its own
+    time/strain/rate/frequency.
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     averages = read_netcdf(averages_path)
+    tts = read_netcdf(tts_path) if tts_path is not None else None
     curves_by_relaxation: dict[str, list] = {}
     written: list[Path] = []
     for path in progress(sorted(Path(fits_dir).glob("*.nc")), f"fit figures {Path(fits_dir).name}"):
         fit = FitRecord.from_netcdf(path)
         relaxation = fit.relaxation
         if relaxation not in curves_by_relaxation:
-            curves_by_relaxation[relaxation] = scope_curves(averages, list(tests), relaxation=relaxation)
+            curves_by_relaxation[relaxation] = scope_curves(averages, list(tests), relaxation=relaxation, tts=tts)
         fig = figure_scope_fit(fit, curves_by_relaxation[relaxation])
         written += save_figure(fig, out_dir / safe_name(path.stem), dpi=110)
     return written

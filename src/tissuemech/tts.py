@@ -35,7 +35,8 @@ caller compares them).
 
 Entry points: :func:`sweeps_from_runs` (canonical runs -> :class:`Sweep`), :func:`shift_factors`,
 :func:`fit_wlf`, :func:`fit_arrhenius`, :func:`wlf_log_aT`, :func:`arrhenius_log_aT`,
-:func:`mastercurve`, :func:`predict_from_mastercurve`; the pipeline's TTS scope: :func:`run_tts` (runs ->
+:func:`mastercurve`, :func:`predict_from_mastercurve`, :func:`mastercurve_curve` (the sweeps as one fit curve at
+Tref: what the fit stage's ``mastercurve`` scope fits with the model library); the pipeline's TTS scope: :func:`run_tts` (runs ->
 ``tts.nc`` via :func:`tts_dataset`, the shift-function card :func:`tts_card` with its Abaqus ``*TRS`` block
 :func:`trs_abaqus_block`, the mastercurve figure) and :func:`distinct_temperatures` (when the scope runs).
 """
@@ -433,6 +434,79 @@ def predict_from_mastercurve(master_x: np.ndarray, master_y: np.ndarray, log_w: 
             else:
                 out[i, k] = np.mean(my)
     return out - log_bT
+
+
+def mastercurve_curve(curves: Sequence, temperatures_c: Sequence[float], tts_ds: xr.Dataset,
+                      tolerance_c: float = 0.5):
+    """The frequency sweeps of several temperatures as one fit curve at the reference temperature.
+
+    This is how the model library fits a mastercurve: the fit stage (:func:`tissuemech.stages.run_fit_scope`,
+    scope ``mastercurve``) fits this one curve like any other, so a fitted model describes the material at
+    ``t_ref_c`` in reduced angular frequency, and the shift function of ``tts_ds`` carries it to other
+    temperatures (the card's ``*TRS`` block).
+
+    Parameters
+    ----------
+    curves : oscillation :class:`tissuemech.fitting.Curve` objects of one frequency sweep per temperature (inputs
+        ``angular_frequency`` [rad/s], observed ``storage_modulus``/``loss_modulus`` [Pa], optional ``sd``)
+    temperatures_c : temperature of each curve [degC] (the averaged curve's nominal temperature)
+    tts_ds : the ``tts.nc`` dataset (:func:`tts_dataset`): ``temperature_c``, ``log_aT``, ``log_bT``, attribute
+        ``t_ref_c``
+    tolerance_c : a curve takes the shift of the ``tts_ds`` temperature nearest its own when they differ by at
+        most this much [degC] (the averaging rounds set points to 0.5 degC, the shift uses the logged channel)
+
+    Returns
+    -------
+    (curve, record): the reduced curve -- inputs ``angular_frequency`` = a_T omega [rad/s], observed and SDs
+    multiplied by b_T, sorted by reduced frequency, only the points with positive G' and G'' (those the shift
+    criterion uses; a log-residual fit cannot take a negative modulus), condition ``mastercurve Tref=<t_ref_c>degC``, ``nominal``
+    ``{"t_ref_c": t_ref_c}`` -- and ``{"temperatures_c": used, "left_out": {label: reason}}``.
+    Raises ``ValueError`` when no curve has a finite shift.
+    """
+    from dataclasses import replace
+
+    temps = np.asarray(tts_ds["temperature_c"].values, float)
+    log_at = np.asarray(tts_ds["log_aT"].values, float)
+    log_bt = np.asarray(tts_ds["log_bT"].values, float) if "log_bT" in tts_ds else np.zeros(temps.size)
+    t_ref = float(tts_ds.attrs["t_ref_c"])
+    parts, used, left_out = [], [], {}
+    for curve, t in zip(curves, temperatures_c):
+        if curve.response != "oscillation":
+            left_out[curve.label] = f"response {curve.response!r} is not an oscillation"
+            continue
+        t = float(t) if t is not None else np.nan
+        i = int(np.argmin(np.abs(temps - t))) if np.isfinite(t) and temps.size else -1
+        if i < 0 or abs(temps[i] - t) > tolerance_c:
+            left_out[curve.label] = f"no shift factor within {tolerance_c:g} degC of {t:g} degC"
+            continue
+        if not (np.isfinite(log_at[i]) and np.isfinite(log_bt[i])):
+            left_out[curve.label] = f"shift factor at {temps[i]:g} degC is not finite"
+            continue
+        a, b = 10.0 ** log_at[i], 10.0 ** log_bt[i]
+        idx = np.arange(curve.n_points) if curve.obs_index is None else np.asarray(curve.obs_index)
+        omega = np.asarray(curve.inputs["angular_frequency"], float)[idx]
+        # the points the shift criterion uses (:class:`Sweep`): finite, positive omega, G' and G''
+        ok = np.isfinite(omega) & (omega > 0)
+        for v in curve.observed.values():
+            ok &= np.isfinite(np.asarray(v, float)) & (np.asarray(v, float) > 0)
+        if not ok.any():
+            left_out[curve.label] = "no point with positive G' and G''"
+            continue
+        parts.append((omega[ok] * a, {k: np.asarray(v, float)[ok] * b for k, v in curve.observed.items()},
+                      {k: np.asarray(v, float)[ok] * b for k, v in curve.sd.items()}, curve))
+        used.append(float(t))
+    if not parts:
+        raise ValueError(f"no sweep has a finite shift factor: {left_out}")
+    omega = np.concatenate([p[0] for p in parts])
+    order = np.argsort(omega, kind="stable")
+    observed = {k: np.concatenate([p[1][k] for p in parts])[order] for k in parts[0][1]
+                if all(k in p[1] for p in parts)}
+    sd = {k: np.concatenate([p[2][k] for p in parts])[order] for k in parts[0][2] if all(k in p[2] for p in parts)}
+    first = parts[0][3]
+    curve = replace(first, condition=f"mastercurve Tref={t_ref:.4g}degC", inputs={"angular_frequency": omega[order]},
+                    observed=observed, sd=sd, obs_index=None, n_samples=min(p[3].n_samples for p in parts),
+                    nominal={"t_ref_c": t_ref})
+    return curve, {"temperatures_c": sorted(used), "left_out": left_out}
 
 
 # ------------------------------------------------------------------------------------------------

@@ -164,3 +164,117 @@ def test_real_lims_cooling_series_every_temperature_shifted(repo_root):
     card = tts.tts_card(ds, "ta_lims")
     assert card["shift_function"] == "WLF" and card["wlf"]["c1_stderr"] > 0 and card["wlf"]["c2_k_stderr"] > 0
     assert card["abaqus_trs"].splitlines()[1] == "*TRS, DEFINITION=WLF"
+
+
+def test_mastercurve_curve_shifts_each_sweep_and_drops_what_the_shift_drops():
+    """tts.mastercurve_curve: omega_r = a_T omega, G_r = b_T G, only positive moduli, unmatched temperatures out."""
+    from tissuemech.fitting import Curve
+
+    temps = np.array([20.0, 40.0, 60.0])
+    sweeps = synthetic_sweeps(temps, noise=0.0)
+    ds = tts.tts_dataset(sweeps, t_ref_c=TREF)
+    curves = [Curve("frequency_sweep", f"temperature_c={s.temperature_c:g}", "oscillation",
+                    {"angular_frequency": s.omega}, {"storage_modulus": s.storage.copy(), "loss_modulus": s.loss.copy()})
+              for s in sweeps]
+    curves[0].observed["loss_modulus"][3] = -1.0      # a negative G'' (as the real -40 degC sweep has): dropped
+    stray = Curve("frequency_sweep", "temperature_c=90", "oscillation", {"angular_frequency": sweeps[0].omega},
+                  {"storage_modulus": sweeps[0].storage, "loss_modulus": sweeps[0].loss})
+    master, record = tts.mastercurve_curve(curves + [stray], [*temps, 90.0], ds)
+    assert record["temperatures_c"] == [20.0, 40.0, 60.0] and list(record["left_out"]) == [stray.label]
+    assert master.n_points == 3 * sweeps[0].omega.size - 1 and master.nominal == {"t_ref_c": TREF}
+    w = master.inputs["angular_frequency"]
+    assert np.all(np.diff(w) >= 0) and np.all(master.observed["loss_modulus"] > 0)
+    # every reduced point lies on the truth at Tref (noise-free sweeps, shifts recovered by the criterion)
+    g1, g2 = prony_moduli(w)
+    np.testing.assert_allclose(master.observed["storage_modulus"], g1, rtol=0.05)
+    np.testing.assert_allclose(master.observed["loss_modulus"], g2, rtol=0.05)
+    span = np.log10(w.max() / w.min())
+    assert span > np.log10(sweeps[0].omega.max() / sweeps[0].omega.min()) + 2   # wider than one sweep
+
+
+def test_mastercurve_scope_replaces_the_plain_sweep_scope():
+    """Sweeps at >= 2 temperatures are never fitted as one temperature: the mastercurve scope takes their place."""
+    from tissuemech.scopes import MASTERCURVE_SCOPE, dataset_scopes
+
+    cfg = {"models": {"frequency_sweep": ["prony4"], "stress_relaxation": ["sls1"]}}
+    assert set(dataset_scopes(["frequency_sweep", "stress_relaxation"], cfg)) == {"frequency_sweep",
+                                                                                  "stress_relaxation"}
+    scopes = dataset_scopes(["frequency_sweep", "stress_relaxation"], cfg, tts=True)
+    assert set(scopes) == {MASTERCURVE_SCOPE, "stress_relaxation"}
+    assert scopes[MASTERCURVE_SCOPE] == {"tests": ["frequency_sweep"], "models": ["prony4"], "mastercurve": True}
+    cfg["models"][MASTERCURVE_SCOPE] = ["prony8", "fractional_zener"]
+    assert dataset_scopes(["frequency_sweep"], cfg, tts=True)[MASTERCURVE_SCOPE]["models"] == ["prony8",
+                                                                                              "fractional_zener"]
+
+
+def test_fit_stage_fits_the_mastercurve_and_its_card_carries_the_shift(tmp_path):
+    """run_fit_scope on a synthetic TTS dataset (3-mode Prony truth at Tref, WLF shifts): the one fit-stage path
+    fits the reduced curve, writes its record, ranking and a card whose Abaqus block ends with *TRS."""
+    import json
+
+    from tissuemech.canonical import make_run_dataset, read_netcdf, write_netcdf
+    from tissuemech.curves import average_runs, write_averages
+    from tissuemech.fitting import FitRecord
+    from tissuemech.stages import run_fit_scope
+
+    taus, weights, g_eq = np.array([1e-4, 1e-2, 1.0]), np.array([5e5, 1e5, 2e4]), 1e3
+    rng = np.random.default_rng(3)
+    omega = np.logspace(-1, 2, 16)
+    runs = []
+    for k, t in enumerate([20.0, 30.0, 40.0, 50.0, 60.0]):
+        wt = np.outer(omega * 10 ** (-C1 * (t - TREF) / (C2 + t - TREF)), taus)
+        g1 = (g_eq + (weights * wt ** 2 / (1 + wt ** 2)).sum(axis=1)) * np.exp(0.003 * rng.standard_normal(16))
+        g2 = (weights * wt / (1 + wt ** 2)).sum(axis=1) * np.exp(0.003 * rng.standard_normal(16))
+        run = make_run_dataset({"angular_frequency": omega, "frequency": omega / (2 * np.pi), "storage_modulus": g1,
+                                "loss_modulus": g2, "temperature": np.full(16, t)},
+                               {"test": "frequency_sweep", "run": f"s_{k}", "specimen": "s", "sample": "a",
+                                "order": k + 1, "temperature_c": t})
+        write_netcdf(run, tmp_path / "runs" / f"s_{k}.nc")
+        runs.append(run)
+    tts.run_tts(tmp_path / "runs", tmp_path / "tts.nc", tmp_path / "c.json", tmp_path / "c.inp", t_ref_c=TREF)
+    write_averages(average_runs(runs), tmp_path / "averages.nc")
+    spec = {"tests": ["frequency_sweep"], "models": ["prony4"], "mastercurve": True}
+    with pytest.raises(ValueError, match="tts.nc"):
+        run_fit_scope(tmp_path / "averages.nc", "mastercurve", spec, "torque", 0, 1, tmp_path / "f", tmp_path / "c",
+                      tmp_path / "r.csv", poisson_ratio=0.45)
+    table = run_fit_scope(tmp_path / "averages.nc", "mastercurve", spec, "torque", 0, 1, tmp_path / "fits",
+                          tmp_path / "cards", tmp_path / "ranking.csv", poisson_ratio=0.45, dataset="synthetic",
+                          tts_path=tmp_path / "tts.nc")
+    assert table["model"].tolist() == ["prony4"] and bool(table["recommended"].iloc[0])
+    rec = FitRecord.from_netcdf(tmp_path / "fits" / "prony4.nc")
+    assert rec.curve_labels == [f"frequency_sweep|mastercurve Tref={TREF:g}degC"]
+    assert float(table["nrmse"].iloc[0]) < 0.02                      # the truth at Tref, recovered to the noise
+    assert rec.ranges["omega_max_rad_per_s"] / rec.ranges["omega_min_rad_per_s"] > 1e5   # reduced: > one sweep
+    card = json.loads((tmp_path / "cards" / "prony4.json").read_text())
+    shift = card["time_temperature_shift"]
+    assert shift["t_ref_c"] == pytest.approx(TREF) and shift["wlf"]["c1"] == pytest.approx(
+        read_netcdf(tmp_path / "tts.nc").attrs["wlf_c1"])
+    inp = (tmp_path / "cards" / "prony4.inp").read_text().splitlines()
+    keywords = [ln for ln in inp if ln.startswith("*") and not ln.startswith("**")]
+    assert keywords[-2:] == ["*VISCOELASTIC, TIME=PRONY", "*TRS, DEFINITION=WLF"]
+
+
+def test_held_out_temperatures_are_predicted_within_their_noise():
+    """Issue 15, done-when: every held-out interior temperature whose neighbours still overlap once it is removed is
+    predicted from the others' mastercurve and WLF shift within its noise: the RMS log10 error of a point is at
+    most 2.5x the per-point noise (1 % -> 0.0043 decades; the prediction error holds the held-out point's own
+    noise and the mastercurve's, sqrt(2) x 0.0043 = 0.006, measured 0.006-0.008).
+
+    Not covered, and said so: below 30 degC the sweeps are 2.5-3.6 decades apart once one is removed, more than
+    or nearly the 3 decades one sweep spans, and the chained pair shift there is wrong by 0.15-1 decade (held-out
+    errors 0.03 and 0.21 decades at 20 and 10 degC); the end temperatures are extrapolations (partly outside the
+    others' mastercurve: NaN there)."""
+    temps = np.arange(0.0, 101.0, 10.0)
+    sw = synthetic_sweeps(temps)
+    noise_decades = 0.01 / np.log(10)
+    for held in range(3, temps.size - 1):
+        if temps[held] == TREF:
+            continue
+        train = [s for k, s in enumerate(sw) if k != held]
+        res = tts.shift_factors(train, t_ref_c=TREF)
+        wlf = tts.fit_wlf(res.temperatures_c, res.log_aT, res.log_aT_stderr, res.t_ref_c)
+        la = tts.wlf_log_aT(temps[held], wlf["c1"], wlf["c2_k"], res.t_ref_c)
+        mx, my = tts.mastercurve(sorted(train, key=lambda s: s.temperature_c), res.log_aT)
+        err = tts.predict_from_mastercurve(mx, my, sw[held].log_w, la) - sw[held].log_g
+        assert np.isfinite(err).all(), temps[held]
+        assert np.sqrt(np.mean(err ** 2)) < 2.5 * noise_decades, temps[held]

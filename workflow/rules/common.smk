@@ -84,13 +84,22 @@ def dataset_tests(name):
 
 
 def dataset_scopes_of(name):
+    """Fit scopes of a dataset; sweeps at >= 2 temperatures get the mastercurve scope instead of frequency_sweep."""
     from tissuemech.scopes import dataset_scopes
 
-    return dataset_scopes(dataset_tests(name), config["fit"])
+    return dataset_scopes(dataset_tests(name), config["fit"], tts=has_tts(name))
 
 
 def scope_spec(wildcards):
     return dataset_scopes_of(wildcards.dataset)[wildcards.scope]
+
+
+def fit_scope_inputs(wildcards):
+    """averages.nc, and tts.nc for the mastercurve scope (its sweeps are shifted to Tref before the fit)."""
+    inputs = {"averages": f"results/{wildcards.dataset}/averages.nc"}
+    if scope_spec(wildcards).get("mastercurve"):
+        inputs["tts"] = f"results/{wildcards.dataset}/tts.nc"
+    return inputs
 
 
 def scope_rankings(wildcards):
@@ -122,6 +131,7 @@ DIAGNOSIS_SCOPES = (
     "stress_relaxation",
     "creep_recovery",
     "frequency_sweep",
+    "mastercurve",
     "amplitude_sweep",
     "simple_shear",
     "flow_curve",
@@ -213,11 +223,20 @@ POSTERIOR = config.get("posterior", {})
 
 
 def posterior_scopes_of(name):
-    """Scopes of a dataset whose fits get posteriors (config posterior.datasets / .scopes)."""
+    """Scopes of a dataset whose fits get posteriors (config posterior.datasets / .scopes).
+
+    Not the mastercurve scope: uq.run_posterior rebuilds a scope's curves from averages.nc alone, and the
+    mastercurve's curve also needs tts.nc (the shift to Tref).
+    """
     if name not in POSTERIOR.get("datasets", []):
         return []
     wanted = POSTERIOR.get("scopes") or []
-    return [s for s in dataset_scopes_of(name) if not wanted or s in wanted]
+    scopes = dataset_scopes_of(name)
+    return [
+        s
+        for s in scopes
+        if (not wanted or s in wanted) and not scopes[s].get("mastercurve")
+    ]
 
 
 def posterior_models_of(name, scope):

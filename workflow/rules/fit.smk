@@ -1,10 +1,11 @@
 # Model fits per dataset and scope (joint test kinds), cross-validated ranking, material cards, and their figures
 # (drawn in the same jobs: a separate figure job per scope paid the Python and package start-up again).
+# The mastercurve scope (sweeps at >= 2 temperatures) also reads tts.nc: its sweeps are fitted shifted to Tref.
 
 
 rule fit_scope:
     input:
-        averages="results/{dataset}/averages.nc",
+        unpack(fit_scope_inputs),
     output:
         fits=directory("results/{dataset}/fits/{scope}"),
         cards=directory("results/{dataset}/cards/{scope}"),

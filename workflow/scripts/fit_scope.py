@@ -9,8 +9,9 @@ with job_log(snakemake.log[0]) as log:
         target=snakemake.params.target, seed=snakemake.params.seed, multistart=snakemake.params.multistart,
         fits_dir=snakemake.output.fits, cards_dir=snakemake.output.cards, ranking_path=snakemake.output.ranking,
         dataset=snakemake.wildcards.dataset, poisson_ratio=snakemake.params.poisson_ratio,
+        tts_path=snakemake.input.get("tts"),
     )
     log.info("scope %s: ranked %d models", snakemake.wildcards.scope, len(table))
     written = plot_scope_fits(snakemake.input.averages, snakemake.output.fits, snakemake.params.spec["tests"],
-                              snakemake.output.figures)
+                              snakemake.output.figures, tts_path=snakemake.input.get("tts"))
     log.info("%s/%s: %d fit figures", snakemake.wildcards.dataset, snakemake.wildcards.scope, len(written))

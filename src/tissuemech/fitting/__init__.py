@@ -58,7 +58,8 @@ from ._data import (TEST_RESPONSE, Curve, amplitude_sweep_lve_curve, curve_and_r
                     with_relaxation_history)
 from ._fit import (CORRELATION_FLAG, EQUIVALENT_CHISQR_RTOL, FITS_CSV_ATTRS, FitResult, at_bound_parameters, evaluate,
                    fit, fit_to_dataset, fits_csv_row, has_covariance, weights_at_upper_bound, write_fit_netcdf)
-from ._problem import LOG_RESPONSES, PLATE_TARGETS, FitProblem, NoiseModel, plate_factor, predict, target_observations
+from ._problem import (LOG_RESPONSES, PLATE_TARGETS, FitProblem, NoiseModel, oscillation_window_bounds, plate_factor,
+                       predict, target_observations)
 from ._prony import prony_nnls, prony_start
 
 
@@ -66,7 +67,7 @@ __all__ = [
     "PLATE_TARGETS", "TEST_RESPONSE", "LOG_RESPONSES", "CORRELATION_FLAG", "EQUIVALENT_CHISQR_RTOL",
     "Curve", "amplitude_sweep_lve_curve", "curve_from_run", "curve_and_rows", "curves_from_averages",
     "geometry_from_runs", "relaxation_history", "thin", "select_strain", "with_relaxation_history", "curve_ranges",
-    "plate_factor", "target_observations", "predict",
+    "plate_factor", "target_observations", "predict", "oscillation_window_bounds",
     "NoiseModel", "FitProblem", "FitResult", "fit", "evaluate", "log_spaced_taus",
     "prony_nnls", "prony_start", "FitRecord", "fit_to_dataset", "write_fit_netcdf", "fits_csv_row", "FITS_CSV_ATTRS",
     "at_bound_parameters", "has_covariance", "weights_at_upper_bound",

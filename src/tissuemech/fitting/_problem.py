@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import lmfit
@@ -118,6 +118,45 @@ def predict(model: ConstitutiveModel, p: Mapping[str, float], curve: Curve, targ
     if r == "uniaxial":
         return {"nominal_stress": model.uniaxial_nominal_stress(p, curve.obs_inputs("stretch"))}
     raise ValueError(f"unknown response kind {r!r}")
+
+
+def oscillation_window_bounds(model: ConstitutiveModel, curves: Sequence[Curve],
+                              margin_decades: float = 1.0) -> dict[str, tuple[float, float]]:
+    """Parameter bounds of ``model`` widened (never narrowed) to the window of oscillation ``curves``.
+
+    The registry's bounds suit a rheometer window (relaxation times 1e-6..1e6 s, moduli <= 1e9 Pa); a TTS
+    mastercurve spans far more decades of reduced angular frequency (the real TA LIMS series: 1e-3..1e11 rad/s).
+    With omega in [w_lo, w_hi] rad/s and moduli up to G_max Pa (max of G', G''), ``margin_decades`` = m:
+
+    * times (unit ``s``): [min(lower, 10^-m / w_hi), max(upper, 10^m / w_lo)];
+    * moduli (unit ``Pa``): upper max(upper, 10^m G_max);
+    * quasi-properties and viscosities (units ``Pa s^alpha``, ``Pa s``): lower min(lower, 10^-m G_min min(1, 1/w_hi)),
+      upper max(upper, 10^m G_max max(1, 1/w_lo)) (c = |G*| / omega^alpha with 0 < alpha <= 1).
+
+    Other parameters keep their bounds. Returns ``{name: (lower, upper)}`` for :class:`FitProblem` ``bounds``
+    (empty when no curve is an oscillation).
+    """
+    osc = [c for c in curves if c.response == "oscillation"]
+    if not osc:
+        return {}
+    w = np.concatenate([np.asarray(c.obs_inputs("angular_frequency"), float) for c in osc])
+    g = np.concatenate([np.abs(np.asarray(v, float)) for c in osc for k, v in c.observed.items()
+                        if k in ("storage_modulus", "loss_modulus")])
+    w, g = w[np.isfinite(w) & (w > 0)], g[np.isfinite(g) & (g > 0)]
+    if not (w.size and g.size):
+        return {}
+    m = 10.0 ** margin_decades
+    w_lo, w_hi, g_lo, g_hi = float(w.min()), float(w.max()), float(g.min()), float(g.max())
+    out: dict[str, tuple[float, float]] = {}
+    for s in model.param_specs:
+        unit = s.unit.replace(" ", "")
+        if unit == "s":
+            out[s.name] = (min(s.lower, 1.0 / (m * w_hi)), max(s.upper, m / w_lo))
+        elif unit == "Pa":
+            out[s.name] = (s.lower, max(s.upper, m * g_hi))
+        elif unit.startswith("Pas"):
+            out[s.name] = (min(s.lower, g_lo * min(1.0, 1.0 / w_hi) / m), max(s.upper, m * g_hi * max(1.0, 1.0 / w_lo)))
+    return out
 
 
 # ------------------------------------------------------------------------------------------------

@@ -25,7 +25,7 @@ Arrangements (Pa, Pa s, s):
                               J(t) = 1/G1 - (1/G1 - 1/(G1 + G2)) exp(-t G1 G2/(eta1 (G1 + G2)))
 ``burgers`` (G1, eta1, G2, eta2)  Maxwell (G1, eta1) in series with Kelvin-Voigt (G2, eta2): creep
                               J(t) = 1/G1 + t/eta1 + (1 - exp(-t G2/eta2))/G2; relaxation = two exponentials
-``prony{n}`` (G_inf, G_1..G_n, tau_1..tau_n)   generalized Maxwell solid
+``prony{n}`` (G_inf, G_1..G_n, tau_1..tau_n)   generalized Maxwell solid (n = 1..6, 8, 10, 12: ``PRONY_ORDERS``)
 ``prony{n}_liquid`` (G_1..G_n, tau_1..tau_n)   generalized Maxwell liquid (no equilibrium spring)
 ``gkv{n}`` (G0, G_1..G_n, tau_ret_1..tau_ret_n)  generalized Kelvin-Voigt solid: spring G0 in series with n
                               Kelvin-Voigt units (spring G_i, retardation time tau_ret_i = eta_i/G_i): creep
@@ -310,6 +310,9 @@ MODELS: dict[str, Callable[[], ConstitutiveModel]] = {
     "burgers": burgers,
 }
 for _n in range(1, 7):
+    MODELS[f"gkv{_n}"] = (lambda n=_n: gkv(n))
+#: Prony orders in the registry; 8-12 modes are for spectra over many decades (a TTS mastercurve spans ~14)
+PRONY_ORDERS = (1, 2, 3, 4, 5, 6, 8, 10, 12)
+for _n in PRONY_ORDERS:
     MODELS[f"prony{_n}"] = (lambda n=_n: prony(n))
     MODELS[f"prony{_n}_liquid"] = (lambda n=_n: prony(n, liquid=True))
-    MODELS[f"gkv{_n}"] = (lambda n=_n: gkv(n))
