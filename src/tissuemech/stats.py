@@ -20,6 +20,7 @@ of the measurement; all tests are two-sided unless stated.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
@@ -318,7 +319,6 @@ def mixed_effects(table: pd.DataFrame, value: str, specimen: str = "specimen", s
     if n_spec < 2 or n < 3:
         out.update({"mean": float(d["y"].mean()) if n else float("nan"), "status": "fewer than 2 specimens"})
         return out
-    import warnings
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # boundary / convergence warnings: reported through `converged` and the SDs
         vc = {"sample": "0 + C(piece)"} if repeated else None
