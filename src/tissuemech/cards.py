@@ -69,13 +69,15 @@ from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import nnls
+from scipy.optimize import brentq, nnls
 
 from .canonical import to_jsonable, write_text
 from .cards_febio import (FEBIO_SOURCE_COMMIT, febio_card_material, febio_document, febio_material_element,
                           febio_simple_shear_stress)
 from .fitting import FitResult
 from .models.base import ConstitutiveModel, bulk_modulus, initial_shear_modulus
+from .models.qlv import LinearElasticShear
+from .records import MaterialCard
 from .spectra import prony_nnls_weights, prony_oscillation_basis, prony_relaxation_basis
 
 #: Abaqus Arruda-Boyce series coefficients
@@ -232,8 +234,6 @@ def marlow_uniaxial_table(law: ConstitutiveModel, lp: Mapping[str, float], strai
     the stretches log-uniformly in ``lambda - 1`` over three decades, for laws whose W' is singular at
     I1 = 3 (unbounded initial tangent modulus), which a linear grid cannot resolve at small strain.
     """
-    from scipy.optimize import brentq
-
     i1_max = 3.0 + strain_max ** 2
     lam_max = brentq(lambda lam: lam ** 2 + 2.0 / lam - i1_max, 1.0 + 1e-12, 10.0 + strain_max * 10)
     if spacing == "geometric":
@@ -396,8 +396,6 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float,
                  "fit_rel_error": 0.0,
                  "source": "exact interconversion of the Kelvin-Voigt retardation spectrum (relaxation times "
                            "= eigenvalues of the series chain)"}
-        from .models.qlv import LinearElasticShear
-
         law, lp = LinearElasticShear(), {"G0": g0}
     elif model.family in ("linear_viscoelastic", "fractional") and (model.supports("shear_history")
                                                                       or model.supports("oscillation")):
@@ -422,8 +420,6 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float,
                  "source": source}
         if pr["fit_rel_error"] > 0.02:
             notes.append(f"Prony approximation of the model has {100 * pr['fit_rel_error']:.1f} % relative RMS error")
-        from .models.qlv import LinearElasticShear
-
         law, lp = LinearElasticShear(), {"G0": pr["G0"]}
         if pr["g_inf"] < 1e-6:
             notes.append("no long-term modulus (fluid-like): not a solid material law; no FE block written")
@@ -634,6 +630,7 @@ def write_card_files(card: Mapping, folder, stem: str | None = None) -> dict[str
 
     Returns the written paths by kind (``json``, ``abaqus``, ``febio``).
     """
+    MaterialCard.from_dict(dict(card))  # validated: a card that the reader would refuse is not written
     folder = Path(folder)
     stem = stem or str(card["model"])
     out = {"json": write_text(card_json(card) + "\n", folder / f"{stem}.json")}
