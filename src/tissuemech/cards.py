@@ -70,7 +70,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import nnls
+from scipy.optimize import brentq, nnls
 
 from .canonical import to_jsonable, write_text
 from .cards_febio import (FEBIO_SOURCE_COMMIT, febio_card_material, febio_document, febio_material_element,
@@ -78,6 +78,8 @@ from .cards_febio import (FEBIO_SOURCE_COMMIT, febio_card_material, febio_docume
 from .cards_niftysim import niftysim_file_text, niftysim_reason
 from .fitting import FitResult
 from .models.base import ConstitutiveModel, bulk_modulus, initial_shear_modulus
+from .models.qlv import LinearElasticShear
+from .records import MaterialCard
 from .spectra import prony_nnls_weights, prony_oscillation_basis, prony_relaxation_basis
 
 #: Abaqus Arruda-Boyce series coefficients
@@ -234,8 +236,6 @@ def marlow_uniaxial_table(law: ConstitutiveModel, lp: Mapping[str, float], strai
     the stretches log-uniformly in ``lambda - 1`` over three decades, for laws whose W' is singular at
     I1 = 3 (unbounded initial tangent modulus), which a linear grid cannot resolve at small strain.
     """
-    from scipy.optimize import brentq
-
     i1_max = 3.0 + strain_max ** 2
     lam_max = brentq(lambda lam: lam ** 2 + 2.0 / lam - i1_max, 1.0 + 1e-12, 10.0 + strain_max * 10)
     if spacing == "geometric":
@@ -375,6 +375,84 @@ def material_fields(law: ConstitutiveModel | None, lp: Mapping[str, float], pois
     return fields, notes, singular_origin
 
 
+# ------------------------------------------------------------------------------------------------
+# the material of a card, per model family
+# ------------------------------------------------------------------------------------------------
+#: what family_material returns: the elastic law (None: no solid law), its parameters, the Prony series
+#: (``g``, ``tau``, ``g_inf``, ``source``, ... or None) and notes for the card
+FamilyMaterial = tuple[ConstitutiveModel | None, dict, dict | None, list[str]]
+
+
+def _qlv_material(model: ConstitutiveModel, p: Mapping[str, float], ranges: Mapping) -> FamilyMaterial:
+    """QLV: the instantaneous law and the reduced relaxation function's Prony series, unchanged."""
+    law, lp = _law_and_params(model, p)
+    g_inf, g, taus = model.prony_weights(p)
+    prony = {"g": [float(x) for x in g], "tau": [float(x) for x in taus], "g_inf": float(g_inf),
+             "source": "QLV reduced relaxation function"}
+    return law, lp, prony, []
+
+
+def _kelvin_voigt_material(model: ConstitutiveModel, p: Mapping[str, float], ranges: Mapping) -> FamilyMaterial:
+    """Retardation-spectrum models (generalized Kelvin-Voigt): their Prony series is known exactly; the linear
+    shear law with the instantaneous modulus."""
+    g_inf, g_k, theta = model.relaxation_spectrum(p)
+    g0 = float(g_inf + np.sum(g_k))
+    prony = {"g": [float(x) for x in g_k / g0], "tau": [float(x) for x in theta], "g_inf": float(g_inf / g0),
+             "fit_rel_error": 0.0,
+             "source": "exact interconversion of the Kelvin-Voigt retardation spectrum (relaxation times "
+                       "= eigenvalues of the series chain)"}
+    return LinearElasticShear(), {"G0": g0}, prony, []
+
+
+def _spectrum_material(model: ConstitutiveModel, p: Mapping[str, float], ranges: Mapping) -> FamilyMaterial:
+    """Other linear viscoelastic and fractional models: a Prony series by NNLS on the model's step relaxation
+    modulus (or its G*(omega)) over the fitted time (or 1/omega) window, on the model's own times where it has
+    them; the linear shear law with the instantaneous modulus, none for a fluid-like model."""
+    notes: list[str] = []
+    taus = _model_taus(model, p)
+    t_lo = ranges.get("time_min_s", np.nan)
+    t_hi = ranges.get("time_max_s", np.nan)
+    w_rng = (ranges.get("omega_min_rad_per_s", np.nan), ranges.get("omega_max_rad_per_s", np.nan))
+    if not np.isfinite(t_lo) and np.all(np.isfinite(w_rng)):  # frequency-sweep fits: times = 1/omega
+        t_lo, t_hi = 1.0 / w_rng[1], 1.0 / w_rng[0]
+    t_lo = float(t_lo) if np.isfinite(t_lo) and t_lo > 0 else 1e-2
+    t_hi = float(t_hi) if np.isfinite(t_hi) and t_hi > t_lo else 1e3
+    if taus is None:
+        taus = np.geomspace(t_lo, t_hi, max(int(round(math.log10(t_hi / t_lo))) + 1, 2))
+    if model.supports("shear_history"):
+        pr = prony_from_step_response(model, p, taus, t_lo, t_hi)
+        source = f"NNLS on the model's step relaxation modulus over [{t_lo:g}, {t_hi:g}] s"
+    else:
+        w_lo, w_hi = 1.0 / t_hi, 1.0 / t_lo
+        pr = prony_from_complex_modulus(model, p, taus, w_lo, w_hi)
+        source = f"NNLS on the model's G'(omega), G''(omega) over [{w_lo:g}, {w_hi:g}] rad/s"
+    prony = {"g": pr["g"], "tau": pr["tau"], "g_inf": pr["g_inf"], "fit_rel_error": pr["fit_rel_error"],
+             "source": source}
+    if pr["fit_rel_error"] > 0.02:
+        notes.append(f"Prony approximation of the model has {100 * pr['fit_rel_error']:.1f} % relative RMS error")
+    law = LinearElasticShear()
+    if pr["g_inf"] < 1e-6:
+        notes.append("no long-term modulus (fluid-like): not a solid material law; no FE block written")
+        law = None
+    return law, {"G0": pr["G0"]}, prony, notes
+
+
+def family_material(model: ConstitutiveModel, p: Mapping[str, float], ranges: Mapping) -> FamilyMaterial:
+    """The material of a fitted model's card, per family: QLV (:func:`_qlv_material`), generalized Kelvin-Voigt
+    (:func:`_kelvin_voigt_material`), other linear viscoelastic and fractional models (:func:`_spectrum_material`);
+    any other model (hyperelastic, viscous, beyond-QLV) its elastic law (``None`` where there is none) without a
+    Prony series. ``ranges`` are the fit's data ranges (the time window of the NNLS)."""
+    if model.family == "qlv" and hasattr(model, "prony_weights"):
+        return _qlv_material(model, p, ranges)
+    if model.family == "linear_viscoelastic" and hasattr(model, "relaxation_spectrum"):
+        return _kelvin_voigt_material(model, p, ranges)
+    if model.family in ("linear_viscoelastic", "fractional") and (model.supports("shear_history")
+                                                                    or model.supports("oscillation")):
+        return _spectrum_material(model, p, ranges)
+    law, lp = _law_and_params(model, p)
+    return law, lp, None, []
+
+
 def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float,
               dataset: str = "", fit_file: str = "", strain_margin: float = 1.2) -> dict:
     """Canonical card of a fitted model (see the module docstring for the shape and conventions); ``poisson_ratio``
@@ -383,53 +461,9 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float,
     notes: list[str] = []
     card = {"model": result.model_key, "family": result.family, "parameters": dict(p), "units": dict(result.units),
             "standard_errors": dict(result.stderr), "structure": result.structure}
-    law, lp = _law_and_params(model, p)
-    prony = None
     strain_max = fitted_strain_max(result.ranges)
-    if model.family == "qlv" and hasattr(model, "prony_weights"):
-        g_inf, g, taus = model.prony_weights(p)
-        prony = {"g": [float(x) for x in g], "tau": [float(x) for x in taus], "g_inf": float(g_inf),
-                 "source": "QLV reduced relaxation function"}
-    elif model.family == "linear_viscoelastic" and hasattr(model, "relaxation_spectrum"):
-        # retardation-spectrum models (generalized Kelvin-Voigt): their Prony series is known exactly
-        g_inf, g_k, theta = model.relaxation_spectrum(p)
-        g0 = float(g_inf + np.sum(g_k))
-        prony = {"g": [float(x) for x in g_k / g0], "tau": [float(x) for x in theta], "g_inf": float(g_inf / g0),
-                 "fit_rel_error": 0.0,
-                 "source": "exact interconversion of the Kelvin-Voigt retardation spectrum (relaxation times "
-                           "= eigenvalues of the series chain)"}
-        from .models.qlv import LinearElasticShear
-
-        law, lp = LinearElasticShear(), {"G0": g0}
-    elif model.family in ("linear_viscoelastic", "fractional") and (model.supports("shear_history")
-                                                                      or model.supports("oscillation")):
-        taus = _model_taus(model, p)
-        t_lo = result.ranges.get("time_min_s", np.nan)
-        t_hi = result.ranges.get("time_max_s", np.nan)
-        w_rng = (result.ranges.get("omega_min_rad_per_s", np.nan), result.ranges.get("omega_max_rad_per_s", np.nan))
-        if not np.isfinite(t_lo) and np.all(np.isfinite(w_rng)):  # frequency-sweep fits: times = 1/omega
-            t_lo, t_hi = 1.0 / w_rng[1], 1.0 / w_rng[0]
-        t_lo = float(t_lo) if np.isfinite(t_lo) and t_lo > 0 else 1e-2
-        t_hi = float(t_hi) if np.isfinite(t_hi) and t_hi > t_lo else 1e3
-        if taus is None:
-            taus = np.geomspace(t_lo, t_hi, max(int(round(math.log10(t_hi / t_lo))) + 1, 2))
-        if model.supports("shear_history"):
-            pr = prony_from_step_response(model, p, taus, t_lo, t_hi)
-            source = f"NNLS on the model's step relaxation modulus over [{t_lo:g}, {t_hi:g}] s"
-        else:
-            w_lo, w_hi = 1.0 / t_hi, 1.0 / t_lo
-            pr = prony_from_complex_modulus(model, p, taus, w_lo, w_hi)
-            source = f"NNLS on the model's G'(omega), G''(omega) over [{w_lo:g}, {w_hi:g}] rad/s"
-        prony = {"g": pr["g"], "tau": pr["tau"], "g_inf": pr["g_inf"], "fit_rel_error": pr["fit_rel_error"],
-                 "source": source}
-        if pr["fit_rel_error"] > 0.02:
-            notes.append(f"Prony approximation of the model has {100 * pr['fit_rel_error']:.1f} % relative RMS error")
-        from .models.qlv import LinearElasticShear
-
-        law, lp = LinearElasticShear(), {"G0": pr["G0"]}
-        if pr["g_inf"] < 1e-6:
-            notes.append("no long-term modulus (fluid-like): not a solid material law; no FE block written")
-            law = None
+    law, lp, prony, family_notes = family_material(model, p, result.ranges)
+    notes += family_notes
     fields, law_notes, singular_origin = material_fields(law, lp, poisson_ratio, prony, strain_max)
     card.update(fields)
     notes += law_notes
@@ -642,6 +676,7 @@ def write_card_files(card: Mapping, folder, stem: str | None = None) -> dict[str
 
     Returns the written paths by kind (``json``, ``abaqus``, ``febio``, ``niftysim``).
     """
+    MaterialCard.from_dict(dict(card))  # validated: a card that the reader would refuse is not written
     folder = Path(folder)
     stem = stem or str(card["model"])
     out = {"json": write_text(card_json(card) + "\n", folder / f"{stem}.json")}
@@ -657,7 +692,7 @@ def write_card_files(card: Mapping, folder, stem: str | None = None) -> dict[str
     return out
 
 
-__all__ = ["make_card", "material_fields", "fitted_strain_max", "card_json", "abaqus_block", "parse_abaqus_block",
+__all__ = ["make_card", "family_material", "material_fields", "fitted_strain_max", "card_json", "abaqus_block", "parse_abaqus_block",
            "abaqus_simple_shear_stress",
            "abaqus_hyperelastic_form", "marlow_uniaxial_table", "febio_block", "febio_file_text",
            "febio_simple_shear_stress", "valid_range", "parameter_uncertainty",

@@ -19,7 +19,9 @@ beyond-QLV) and states when the ranking of the data says otherwise.
 from __future__ import annotations
 
 import math
+import multiprocessing as mp
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -514,9 +516,6 @@ def _run_jobs(jobs, workers: int) -> list:
     """Run ``(function, args)`` jobs serially or in a process pool (results in job order)."""
     if workers <= 1 or len(jobs) <= 1:
         return [fn(*args) for fn, args in jobs]
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
-
     # fork keeps the compiled numba kernels of the parent; jobs are independent pure computations
     with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork")) as pool:
         futures = [pool.submit(fn, *args) for fn, args in jobs]

@@ -6,6 +6,9 @@ one reader (:meth:`FitRecord.from_dataset` / :meth:`FitRecord.from_netcdf`). ``f
 ``fitting.write_fit_netcdf`` write through it, and every reader of a fit record (``fitting.fits_csv_row``,
 ``summary`` fit figures, ``diagnosis.baseline.read_fit_record``) reads through it.
 
+:class:`MaterialCard` is a material card ``results/<dataset>/cards/<scope>/<model>.json`` as read, validated:
+the one card reader.
+
 On disk (the layout every existing record has): dims ``param``/``param_b`` (variables ``value``, ``stderr``,
 ``varying``, ``unit``, ``correlation``), ``point`` (``observed``, ``predicted``, ``weighted_residual``,
 ``curve_index``, ``observable``) and ``curve`` (``curve_label``, ``curve_rmse``, ``curve_nrmse``); scalar
@@ -241,4 +244,95 @@ class FitRecord:
         return cls.from_dataset(read_netcdf(path), default_key=os.path.splitext(os.path.basename(path))[0])
 
 
-__all__ = ["FitRecord", "SCALAR_ATTRS"]
+#: elastic-law keys of a linear elastic shear law (``models.hyperelastic.LinearElasticShear``): a card names it
+#: only if it was written before ``cards.material_fields`` wrote such a law as the neo-Hookean law
+LINEAR_ELASTIC_LAWS = ("linear_elastic_shear", "linear_elastic")
+
+
+class CardError(ValueError):
+    """A material card that does not have the shape :class:`MaterialCard` reads."""
+
+
+def _is_number(x) -> bool:
+    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
+
+
+@dataclass(frozen=True, eq=False)
+class MaterialCard:
+    """A material card ``results/<dataset>/cards/<scope>/<model>.json`` as read: the one card reader
+    (:meth:`from_json`, :meth:`from_dict`), used by the FEM stages (``stages.select_cards``, ``stages.card_for_fem``)
+    and the card table (``summary.card_table``). ``cards.make_card`` builds the card and ``cards.write_card_files``
+    validates it through :meth:`from_dict` before it writes it.
+
+    The typed fields are what the readers use; ``data`` is the whole card as plain JSON values (no model objects).
+    Validation (:class:`CardError`): ``model`` a non-empty string, ``elastic_law`` a string or absent,
+    ``elastic_parameters`` numbers by name, ``prony`` absent or with as many ``g`` as ``tau`` (numbers, positive
+    times), ``poisson_ratio``/``bulk_modulus``/``initial_shear_modulus`` numbers or absent. NaN is a number (a
+    fluid-like model's card has NaN moduli). Compare cards by ``data`` (``eq=False``).
+    """
+
+    model: str
+    elastic_law: str | None = None
+    elastic_parameters: dict[str, float] = field(default_factory=dict)
+    initial_shear_modulus: float | None = None
+    poisson_ratio: float | None = None
+    bulk_modulus: float | None = None
+    prony: dict | None = None
+    data: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self):
+        if not isinstance(self.model, str) or not self.model:
+            raise CardError(f"card 'model' must be a non-empty string, not {self.model!r}")
+        if self.elastic_law is not None and not isinstance(self.elastic_law, str):
+            raise CardError(f"card {self.model}: 'elastic_law' must be a string, not {self.elastic_law!r}")
+        if not isinstance(self.elastic_parameters, dict) or not all(
+                isinstance(k, str) and _is_number(v) for k, v in self.elastic_parameters.items()):
+            raise CardError(f"card {self.model}: 'elastic_parameters' must map names to numbers, "
+                            f"not {self.elastic_parameters!r}")
+        for name in ("initial_shear_modulus", "poisson_ratio", "bulk_modulus"):
+            value = getattr(self, name)
+            if value is not None and not _is_number(value):
+                raise CardError(f"card {self.model}: {name!r} must be a number, not {value!r}")
+        if self.prony is not None:
+            g, tau = (self.prony.get("g"), self.prony.get("tau")) if isinstance(self.prony, dict) else (None, None)
+            if (not isinstance(g, (list, tuple)) or not isinstance(tau, (list, tuple)) or len(g) != len(tau)
+                    or not all(_is_number(x) for x in [*g, *tau]) or any(t <= 0 for t in tau)):
+                raise CardError(f"card {self.model}: 'prony' needs as many numbers 'g' as positive times 'tau', "
+                                f"not {self.prony!r}")
+
+    @classmethod
+    def from_dict(cls, card: dict) -> MaterialCard:
+        """A card from its dict (as ``json.loads`` or ``cards.make_card`` gives it)."""
+        if not isinstance(card, dict):
+            raise CardError(f"a card is a JSON object, not {type(card).__name__}")
+        return cls(model=card.get("model"), elastic_law=card.get("elastic_law"),
+                   elastic_parameters=card.get("elastic_parameters") or {},
+                   initial_shear_modulus=card.get("initial_shear_modulus"), poisson_ratio=card.get("poisson_ratio"),
+                   bulk_modulus=card.get("bulk_modulus"), prony=card.get("prony"), data=card)
+
+    @classmethod
+    def from_json(cls, path: str | os.PathLike) -> MaterialCard:
+        """Read a card file (``<model>.json``)."""
+        with open(path, encoding="utf-8") as f:
+            return cls.from_dict(json.load(f))
+
+    @property
+    def fem_law(self) -> str:
+        """The law key the FEM runs: ``elastic_law`` (else ``model``), a linear elastic shear law as its
+        finite-strain extension ``neo_hookean``."""
+        law = self.elastic_law or self.model
+        return "neo_hookean" if law in LINEAR_ELASTIC_LAWS else law
+
+    def for_fem(self) -> dict:
+        """The card as the FEM takes it (``fem.experiments.card_material``): unchanged, except that a linear
+        elastic shear law is written as the neo-Hookean law with mu = G0 (the initial shear modulus, else the
+        law's ``G0``/``G``) -- identical in simple shear."""
+        card = dict(self.data)
+        if self.elastic_law in LINEAR_ELASTIC_LAWS:
+            lp = self.elastic_parameters
+            g0 = self.initial_shear_modulus or lp.get("G0", lp.get("G"))
+            card["elastic_law"], card["elastic_parameters"] = "neo_hookean", {"mu": float(g0)}
+        return card
+
+
+__all__ = ["FitRecord", "SCALAR_ATTRS", "MaterialCard", "CardError", "LINEAR_ELASTIC_LAWS"]

@@ -44,6 +44,7 @@ from .fem.materials import available_laws
 from .fem.tled import DynamicRelaxationError, ElementInversionError
 from .models.registry import get_model
 from .plots import plot_force_depth, plot_torque
+from .records import MaterialCard
 from .scopes import (ALL_MODES_SCOPE, JOINT_SCOPE, MASTERCURVE_SCOPE, SPECTRUM_TESTS,  # noqa: F401 (re-exported)
                      dataset_scopes)
 
@@ -261,10 +262,7 @@ def select_cards(ranking_csv, cards_root, scopes: Sequence[str] = TORSION_SCOPES
         if not path.is_file():
             logger.warning("select_cards: no card %s for the recommended model of %s", path, scope)
             continue
-        card = json.loads(path.read_text())
-        law = card.get("elastic_law") or card.get("model")
-        if law in ("linear_elastic_shear", "linear_elastic"):
-            law = "neo_hookean"  # its finite-strain extension in the FEM (card_for_fem)
+        law = MaterialCard.from_json(path).fem_law
         if law not in laws:
             logger.warning("select_cards: %s/%s: the FEM has no law %r", scope, model, law)
             continue
@@ -273,12 +271,8 @@ def select_cards(ranking_csv, cards_root, scopes: Sequence[str] = TORSION_SCOPES
 
 
 def card_for_fem(path: Path) -> dict:
-    card = json.loads(Path(path).read_text())
-    if card.get("elastic_law") in ("linear_elastic_shear", "linear_elastic"):
-        # small-strain linear shear law: its finite-strain extension in the FEM is neo-Hookean with mu = G
-        g0 = card.get("initial_shear_modulus") or card["elastic_parameters"].get("G0", card["elastic_parameters"].get("G"))
-        card["elastic_law"], card["elastic_parameters"] = "neo_hookean", {"mu": float(g0)}
-    return card
+    """The card file as the FEM takes it (:meth:`tissuemech.records.MaterialCard.for_fem`)."""
+    return MaterialCard.from_json(path).for_fem()
 
 
 def run_fem_torsion(card_paths: Sequence, averages_path, out_nc, out_csv, figure_path, element_size_m: float = 2.5e-3,

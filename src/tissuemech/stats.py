@@ -20,6 +20,7 @@ of the measurement; all tests are two-sided unless stated.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
@@ -104,7 +105,10 @@ def durbin_watson(residuals: np.ndarray) -> float:
 
 
 def lag1_autocorrelation(residuals: np.ndarray) -> float:
-    """Lag-1 sample autocorrelation of a residual sequence (0 for fewer than 3 points)."""
+    """Lag-1 sample autocorrelation of a residual sequence (0 for fewer than 3 points).
+
+    The formula of ``statsmodels.tsa.stattools.acf(e, nlags=1)[1]``, written out: every fit calls it (through
+    :func:`effective_sample_size`) and the fit jobs do not import statsmodels (module note)."""
     e = np.asarray(residuals, float)
     e = e[np.isfinite(e)] - np.nanmean(e)
     if e.size < 3 or not np.any(e):
@@ -245,7 +249,7 @@ def modified_z_scores(values: np.ndarray) -> np.ndarray:
     """Iglewicz-Hoaglin modified z = 0.6745 (x - median) / MAD (|z| > 3.5 flags an outlier)."""
     x = np.asarray(values, float)
     med = np.median(x)
-    mad = np.median(np.abs(x - med))
+    mad = float(sps.median_abs_deviation(x))  # unscaled: median |x - median|
     if mad == 0:
         mad = 1.4826 * np.mean(np.abs(x - med)) / 0.6745 if np.any(x != med) else 1.0
     return 0.6745 * (x - med) / mad
@@ -318,7 +322,6 @@ def mixed_effects(table: pd.DataFrame, value: str, specimen: str = "specimen", s
     if n_spec < 2 or n < 3:
         out.update({"mean": float(d["y"].mean()) if n else float("nan"), "status": "fewer than 2 specimens"})
         return out
-    import warnings
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # boundary / convergence warnings: reported through `converged` and the SDs
         vc = {"sample": "0 + C(piece)"} if repeated else None

@@ -38,7 +38,7 @@ from .pipeline import progress
 from .plots import (all_positive, axis_label, figure_curves, figure_table, new_figure, safe_name,
                     save_figure)
 from .ranking import recommended_models
-from .records import FitRecord
+from .records import FitRecord, MaterialCard
 from .stages import scope_curves
 from .uq import predictive_band
 
@@ -242,7 +242,7 @@ def card_table(cards_root, ranking_csv=None) -> pd.DataFrame:
     """
     rows = []
     for path in sorted(Path(cards_root).glob("*/*.json")):
-        card = json.loads(path.read_text())
+        card = MaterialCard.from_json(path).data
         prony = card.get("prony") or {}
         quality = card.get("fit_quality") or {}
         law_parameters = card.get("elastic_parameters") or {}

@@ -250,3 +250,20 @@ def test_instantaneous_laws_are_the_hyperelastic_family_laws():
     p = {"C10": 300.0, "C20": 50.0, "C30": 20.0}
     np.testing.assert_allclose(law.elastic_shear_stress(p, gamma),
                                2 * p["C10"] * gamma + 4 * p["C20"] * gamma**3 + 6 * p["C30"] * gamma**5, rtol=1e-12)
+
+
+def test_the_qlv_linear_law_is_the_one_linear_elastic_law():
+    """models.qlv.LinearElasticShear is hyperelastic.LinearElasticShear with the QLV defaults (modulus G0, elastic
+    shear only), not a second law: the same stress from the same modulus, the registry's law under its own name."""
+    from tissuemech.models import hyperelastic
+
+    qlv_law, registry_law = LinearElasticShear(), get_model("linear_elastic")
+    assert isinstance(qlv_law, hyperelastic.LinearElasticShear) and type(registry_law) is hyperelastic.LinearElasticShear
+    assert qlv_law.param_names == ("G0",) and registry_law.param_names == ("G",)
+    assert qlv_law.name == "linear_elastic_shear" and qlv_law.responses == frozenset({"elastic_shear"})
+    gamma = np.linspace(-0.2, 0.3, 7)
+    assert np.array_equal(qlv_law.elastic_shear_stress({"G0": 123.0}, gamma),
+                          registry_law.elastic_shear_stress({"G": 123.0}, gamma))
+    assert np.array_equal(registry_law.elastic_shear_stress({"G": 123.0}, gamma), 123.0 * gamma)
+    assert not qlv_law.supports("normal_stress") and registry_law.supports("normal_stress")
+    assert get_model("qlv_linear_prony4").instantaneous.param_names == ("G0",)

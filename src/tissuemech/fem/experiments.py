@@ -233,6 +233,8 @@ def precompile_kernels(n_threads: int | None = 1) -> dict[str, float]:
     x = mesh.nodes
     top = np.flatnonzero(np.isclose(x[:, 2], x[:, 2].max()))
     base = [fixed_group("base", np.flatnonzero(np.isclose(x[:, 2], 0.0)))]
+    # a compile case only: no result is kept, so its moduli (and nu) reach nothing (the experiments take nu from
+    # the card, i.e. the configuration's fem.poisson_ratio)
     material = make_material("neo_hookean", {"mu": 1000.0}, poisson_ratio=0.49)
     push = translation_group("push", top, (0, 0, -1), [0.0, 1.0], [0.0, 1e-5], dofs=(False, False, True))
     punch = RigidContact("flat_punch", tuple(x[top[0]]), 2e-3, (0.0, 0.0, -1.0), np.array([0.0, 1.0]),

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import xarray as xr
 
 from ..canonical import make_run_dataset, sha256_of, write_netcdf, write_text
 from .blocks import Block
@@ -107,7 +108,7 @@ def _export_geometry(block: Block) -> dict:
 
 
 def build_run(row: dict, block: Block, dataset: str, source_path: Path,
-              dataset_meta: dict | None = None) -> tuple["xr.Dataset", list[str]]:  # noqa: F821
+              dataset_meta: dict | None = None) -> tuple[xr.Dataset, list[str]]:
     """Canonical run dataset of one row, and its notes for the ingest report.
 
     Geometry follows ``samples.csv`` (``radius_mm``/``gap_mm``) > ``dataset.yaml`` (``geometry``) > the export

@@ -595,6 +595,8 @@ class StrainRelaxingBranchModel(_BatchedHistoryModel):
                                  f"small-strain modulus of branch {i + 1}") for i in range(n_branches))
         branch += (ParamSpec("c_b", "1", 0.0, -1.0, 1e3, False, "cubic stiffening of the branch springs"),)
         specs = check_param_names(equilibrium.param_specs, branch, tspecs)
+        # the structure record and attributes of QLVModel's constructor (one layout of the fixed/free Prony times
+        # that the cards, the ranking and the diagnosis read), for the branches instead of the Prony terms
         super().__init__(name=name or f"srb_{equilibrium.name}_b{n_branches}", family="beyond_qlv",
                          param_specs=specs,
                          responses=frozenset({"shear_history", "creep", "oscillation", "elastic_shear"}),

@@ -332,7 +332,10 @@ class HyperelasticModel(ConstitutiveModel):
 class LinearElasticShear(ConstitutiveModel):
     """Linear elastic shear law ``sigma = G gamma`` (small strain; ``N1 = N2 = 0``; uniaxial ``P = 3G(lambda - 1)``).
 
-    The thesis's choice for strains below about 10 % at rate-independent conditions.
+    The thesis's choice for strains below about 10 % at rate-independent conditions. The one linear-elastic law
+    of the package: the modulus is the model's only parameter, whatever its name (``G`` here, the registry's
+    ``linear_elastic``; ``G0`` in the QLV family's small-strain instantaneous law, ``models.qlv.LinearElasticShear``,
+    which sets only other defaults).
     """
 
     name: str = "linear_elastic"
@@ -340,8 +343,13 @@ class LinearElasticShear(ConstitutiveModel):
     param_specs: tuple[ParamSpec, ...] = (_modulus("G", 200.0, "shear modulus"),)
     responses: frozenset[str] = field(default_factory=lambda: _HYPER_RESPONSES)
 
+    @property
+    def modulus_name(self) -> str:
+        """Name of the shear modulus parameter (the only one)."""
+        return self.param_specs[0].name
+
     def elastic_shear_stress(self, p: Params, strain: np.ndarray) -> np.ndarray:
-        return float(p["G"]) * np.asarray(strain, float)
+        return float(p[self.modulus_name]) * np.asarray(strain, float)
 
     def shear_stress_history(self, p: Params, time_s: np.ndarray, strain: np.ndarray) -> np.ndarray:
         return self.elastic_shear_stress(p, strain)
@@ -351,7 +359,7 @@ class LinearElasticShear(ConstitutiveModel):
         return z, z.copy()
 
     def uniaxial_nominal_stress(self, p: Params, stretch: np.ndarray) -> np.ndarray:
-        return 3.0 * float(p["G"]) * (np.asarray(stretch, float) - 1.0)
+        return 3.0 * float(p[self.modulus_name]) * (np.asarray(stretch, float) - 1.0)
 
 
 def neo_hookean() -> HyperelasticModel:
@@ -448,6 +456,7 @@ def amin() -> HyperelasticModel:
     return HyperelasticModel(name="amin", param_specs=specs, dw_di1=amin_dw_di1, dw_di2=amin_dw_di2)
 
 
+#: registry key -> factory (every model family's MODELS has this shape; models.registry merges them)
 MODELS: dict[str, Callable[[], ConstitutiveModel]] = {
     "linear_elastic": LinearElasticShear,
     "neo_hookean": neo_hookean,

@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
+from scipy.linalg import eigh
 
 from .base import ConstitutiveModel, ParamSpec, Params
 from .recursion import prony_branch_histories, relaxation_factors
@@ -228,8 +229,6 @@ def gkv_relaxation_spectrum(g0: float, g_voigt: np.ndarray, tau_ret: np.ndarray)
     ``G_k = G0^2 w_k^2 / l_k``, ``theta_k = 1/l_k`` and ``G_inf = 1/(1/G0 + sum 1/G_i)``. The relaxation times
     interlace the retardation times (``theta_1 < tau_1 < theta_2 < ...``).
     """
-    from scipy.linalg import eigh
-
     g_voigt = np.atleast_1d(np.asarray(g_voigt, float))
     tau_ret = np.atleast_1d(np.asarray(tau_ret, float))
     eta = g_voigt * tau_ret
@@ -302,6 +301,7 @@ def gkv(n_units: int) -> GeneralizedKelvinVoigt:
                                   structure={"voigt_units": n_units})
 
 
+#: registry key -> factory (every model family's MODELS has this shape; models.registry merges them)
 MODELS: dict[str, Callable[[], ConstitutiveModel]] = {
     "maxwell": maxwell,
     "kelvin_voigt": kelvin_voigt,

@@ -25,9 +25,11 @@ scale; their order is not enforced, so branches may swap labels between fits).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
+from scipy.optimize import brentq
 
 from . import hyperelastic
 from .base import ConstitutiveModel, InstantaneousLawModel, ParamSpec, Params, initial_shear_modulus
@@ -225,7 +227,6 @@ def stress_controlled_strain_by_history(stress_at_end: Callable[[np.ndarray, np.
 def _solve_scalar(fun: Callable[[float], float], x0: float, x1: float, tol: float = 1e-13,
                   max_iter: int = 60) -> float:
     """Root of an increasing scalar function: secant from (x0, x1), Brent on an expanded bracket if needed."""
-    from scipy.optimize import brentq
     f0, f1 = fun(x0), fun(x1)
     for _ in range(max_iter):
         if f1 == 0.0:
@@ -258,17 +259,17 @@ def _solve_scalar(fun: Callable[[float], float], x0: float, x1: float, tol: floa
 # ----------------------------------------------------------------------------------------------------------
 # a linear instantaneous law (small-strain shear), the thesis's "if sigma_e were linear" case
 # ----------------------------------------------------------------------------------------------------------
-class LinearElasticShear(ConstitutiveModel):
-    """Linear elastic shear ``sigma_e = G0 gamma`` (Pa). No normal stresses (small-strain theory)."""
+@dataclass
+class LinearElasticShear(hyperelastic.LinearElasticShear):
+    """Linear elastic shear ``sigma_e = G0 gamma`` (Pa) as a QLV instantaneous law: the one linear-elastic law
+    (:class:`tissuemech.models.hyperelastic.LinearElasticShear`) with the QLV family's defaults -- the modulus named
+    ``G0`` with its bounds, and only the ``elastic_shear`` response (no normal stresses: small-strain theory),
+    as in the fit records and cards of the ``qlv_linear_*`` models."""
 
-    def __init__(self, name: str = "linear_elastic_shear"):
-        super().__init__(name=name, family="hyperelastic",
-                         param_specs=(ParamSpec("G0", "Pa", 200.0, 1.0e-2, 1.0e7, True,
-                                                "instantaneous shear modulus"),),
-                         responses=frozenset({"elastic_shear"}))
-
-    def elastic_shear_stress(self, p: Params, strain: np.ndarray) -> np.ndarray:
-        return float(p["G0"]) * np.asarray(strain, float)
+    name: str = "linear_elastic_shear"
+    param_specs: tuple[ParamSpec, ...] = (ParamSpec("G0", "Pa", 200.0, 1.0e-2, 1.0e7, True,
+                                                    "instantaneous shear modulus"),)
+    responses: frozenset[str] = frozenset({"elastic_shear"})
 
 
 # ----------------------------------------------------------------------------------------------------------

@@ -194,6 +194,8 @@ def simulate_stress_controlled(protocol: Protocol, model: ConstitutiveModel, p: 
         # slip displacement accumulates irreversibly only in the sense of the rim stress history here:
         # u_s follows the instantaneous stress (rate-independent slip law)
         rim = rim + 2.0 * artefacts.slip_length(np.abs(target)) / geometry.gap_m * np.sign(target)
+    # the channel tail of simulate_strain_controlled (the shared part is _rim_channels and _common_channels; what
+    # still looks alike is each test's own quantity: relaxation modulus there, creep compliance here)
     idx = protocol.report_index
     torque_set = protocol.setpoint[idx] * np.pi * geometry.radius_m ** 3 / 2.0
     out = _rim_channels(t, rim, idx, _measure_torque(torque_set, instrument, rng), geometry)
