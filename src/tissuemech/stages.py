@@ -47,6 +47,7 @@ from .plots import plot_force_depth, plot_torque
 from .records import MaterialCard
 from .scopes import (ALL_MODES_SCOPE, JOINT_SCOPE, MASTERCURVE_SCOPE, SPECTRUM_TESTS,  # noqa: F401 (re-exported)
                      dataset_scopes)
+from .tts import mastercurve_curve, tts_card
 
 logger = logging.getLogger(__name__)
 
@@ -81,8 +82,6 @@ def scope_curves(averages: xr.Dataset, tests: Sequence[str], relaxation: str = "
     curves = [F.thin(c, POINTS_PER_CURVE) for c in curves]
     if tts is None:
         return curves
-    from .tts import mastercurve_curve
-
     labels = as_str(averages["condition"].values)
     kinds = as_str(averages["test"].values)
     temps = np.asarray(averages["temperature_c"].values, float) if "temperature_c" in averages else \
@@ -140,8 +139,6 @@ def run_fit_scope(averages_path, scope: str, spec: Mapping, target: str, seed: i
     curves = scope_curves(avg, spec["tests"], tts=tts_ds)
     shift_card = None
     if tts_ds is not None:
-        from .tts import tts_card
-
         shift_card = tts_card(tts_ds, dataset)
     fits_dir, cards_dir = Path(fits_dir), Path(cards_dir)
     fits_dir.mkdir(parents=True, exist_ok=True)

@@ -42,7 +42,6 @@ Tref: what the fit stage's ``mastercurve`` scope fits with the model library); t
 """
 from __future__ import annotations
 
-import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -52,7 +51,7 @@ import numpy as np
 import xarray as xr
 from scipy.optimize import least_squares, minimize_scalar
 
-from .canonical import read_netcdf, write_netcdf, write_text
+from .canonical import read_netcdf, write_json, write_netcdf, write_text
 from .curves import distinct_temperatures, drop_flagged  # noqa: F401 (distinct_temperatures re-exported)
 from .stats import information_criteria
 
@@ -635,7 +634,7 @@ def run_tts(runs_dir, out_nc, card_json, card_inp, figure=None, *, dataset: str 
                         held_out_folds=held["n_folds"])
     write_netcdf(ds, out_nc)
     card = tts_card(ds, dataset)
-    write_text(json.dumps(card, indent=2, allow_nan=False, default=str) + "\n", card_json)
+    write_json(card, card_json)
     write_text(card["abaqus_trs"] or "** no WLF shift function: " + "; ".join(card["notes"]) + "\n", card_inp)
     if figure is not None:
         from .plots import plot_mastercurve
