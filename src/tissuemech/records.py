@@ -9,6 +9,9 @@ one reader (:meth:`FitRecord.from_dataset` / :meth:`FitRecord.from_netcdf`). ``f
 :class:`MaterialCard` is a material card ``results/<dataset>/cards/<scope>/<model>.json`` as read, validated:
 the one card reader.
 
+:class:`Finding` is one entry of ``diagnosis.json``'s ``findings`` (a named cause: its test, effect size and
+held-out fix), validated where the diagnosis writes it and read through it by the report.
+
 On disk (the layout every existing record has): dims ``param``/``param_b`` (variables ``value``, ``stderr``,
 ``varying``, ``unit``, ``correlation``), ``point`` (``observed``, ``predicted``, ``weighted_residual``,
 ``curve_index``, ``observable``) and ``curve`` (``curve_label``, ``curve_rmse``, ``curve_nrmse``); scalar
@@ -335,4 +338,97 @@ class MaterialCard:
         return card
 
 
-__all__ = ["FitRecord", "SCALAR_ATTRS", "MaterialCard", "CardError", "LINEAR_ELASTIC_LAWS"]
+class FindingError(ValueError):
+    """A diagnosis finding that does not have the shape :class:`Finding` reads."""
+
+
+def _number_or_null(x) -> bool:
+    return x is None or _is_number(x)
+
+
+#: fields of a finding that are numbers, or null where not computed (NaN is written as null)
+FINDING_NUMBERS = ("statistic", "p_value", "p_holm", "log10_p", "effect_size")
+#: fields of a finding that are booleans where present
+FINDING_FLAGS = ("tested", "detected", "significant", "practical")
+
+
+@dataclass(frozen=True, eq=False)
+class Finding:
+    """One named-cause finding of ``diagnosis.json`` as written and read: the diagnosis validates each finding
+    through :meth:`from_dict` before it writes the file (``diagnosis.findings.write_diagnosis_json``), and the
+    report reads them through it (``summary``).
+
+    Typed fields: ``effect`` (the cause id, a non-empty string), the flags ``tested``, ``detected``,
+    ``significant``, ``practical`` (booleans; absent -> False, except ``significant``, None when not judged),
+    the statistics ``statistic`` (its name in ``statistic_name``), ``p_value``, ``p_holm`` (Holm-adjusted over
+    the family), ``log10_p`` and ``effect_size`` (in ``effect_size_unit``), each a float, NaN where not computed
+    (null on disk); ``evidence`` (the sentence the report prints) and ``fix`` (None, or the held-out score of
+    the cause's fix: ``model`` and ``metric`` strings, ``before``/``after``/``gain`` numbers or null). ``data``
+    is the whole finding as plain JSON values, detector-specific keys included; compare findings by ``data``.
+    Validation errors (:class:`FindingError`) name the finding's effect and the field.
+    """
+
+    effect: str
+    tested: bool = False
+    detected: bool = False
+    significant: bool | None = None
+    practical: bool = False
+    statistic: float = np.nan
+    statistic_name: str = ""
+    p_value: float = np.nan
+    p_holm: float = np.nan
+    log10_p: float = np.nan
+    effect_size: float = np.nan
+    effect_size_unit: str = ""
+    evidence: str = ""
+    fix: dict | None = None
+    data: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def from_dict(cls, finding: dict) -> Finding:
+        """A finding from its dict (as the diagnosis makes it, or as ``json.load`` reads it back)."""
+        if not isinstance(finding, dict):
+            raise FindingError(f"a finding is a JSON object, not {type(finding).__name__}")
+        effect = finding.get("effect")
+        if not isinstance(effect, str) or not effect:
+            raise FindingError(f"finding 'effect' must be a non-empty string, not {effect!r}")
+        for name in FINDING_FLAGS:
+            value = finding.get(name)
+            if value is not None and not isinstance(value, (bool, np.bool_)):
+                raise FindingError(f"finding {effect}: {name!r} must be true or false, not {value!r}")
+        for name in FINDING_NUMBERS:
+            if not _number_or_null(finding.get(name)):
+                raise FindingError(f"finding {effect}: {name!r} must be a number or null, not {finding[name]!r}")
+        for name in ("statistic_name", "effect_size_unit", "evidence"):
+            if not isinstance(finding.get(name, ""), str):
+                raise FindingError(f"finding {effect}: {name!r} must be a string, not {finding[name]!r}")
+        fix = finding.get("fix")
+        if fix is not None:
+            if not isinstance(fix, dict) or not isinstance(fix.get("model"), str) or \
+                    not isinstance(fix.get("metric"), str) or \
+                    not all(_number_or_null(fix.get(k)) for k in ("before", "after", "gain")):
+                raise FindingError(f"finding {effect}: 'fix' must hold 'model' and 'metric' strings and "
+                                   f"'before'/'after'/'gain' numbers, not {fix!r}")
+
+        def number(name):
+            value = finding.get(name)
+            return np.nan if value is None else float(value)
+
+        significant = finding.get("significant")
+        return cls(effect=effect, tested=bool(finding.get("tested", False)),
+                   detected=bool(finding.get("detected", False)),
+                   significant=None if significant is None else bool(significant),
+                   practical=bool(finding.get("practical", False)),
+                   statistic_name=finding.get("statistic_name", ""), effect_size_unit=finding.get("effect_size_unit", ""),
+                   evidence=finding.get("evidence", ""), fix=fix, data=finding,
+                   **{name: number(name) for name in FINDING_NUMBERS})
+
+    @property
+    def fix_gain(self) -> float:
+        """Held-out gain of the fix (NaN without a scored fix)."""
+        gain = (self.fix or {}).get("gain")
+        return np.nan if gain is None else float(gain)
+
+
+__all__ = ["FitRecord", "SCALAR_ATTRS", "MaterialCard", "CardError", "LINEAR_ELASTIC_LAWS", "Finding", "FindingError",
+           "FINDING_NUMBERS", "FINDING_FLAGS"]

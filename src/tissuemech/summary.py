@@ -38,7 +38,7 @@ from .pipeline import progress
 from .plots import (all_positive, axis_label, figure_curves, figure_table, new_figure, safe_name,
                     save_figure)
 from .ranking import recommended_models
-from .records import FitRecord, MaterialCard
+from .records import Finding, FitRecord, MaterialCard
 from .stages import scope_curves
 from .uq import predictive_band
 
@@ -483,15 +483,14 @@ def _diagnosis(path: Path) -> str:
         return "<p><i>no diagnosis</i></p>"
     d = json.loads(path.read_text())
     out = []
-    for f in d.get("findings", []):
-        if not f.get("detected"):
+    for f in (Finding.from_dict(x) for x in d.get("findings", [])):
+        if not f.detected:
             continue
-        fix = f.get("fix") or {}
-        gain = fix.get("gain")
-        out.append(f'<div class="finding"><b>{html.escape(f["effect"])}</b> (p = {_g(f.get("p_value"))}, '
-                   f'effect size {_g(f.get("effect_size"))}): {html.escape(str(f.get("evidence", "")))}'
-                   + (f"<br>fix: {html.escape(str(fix.get('model')))} — {html.escape(str(fix.get('metric')))} "
-                      f"{_g(fix.get('before'))} → {_g(fix.get('after'))} (gain {_g(gain)})" if fix else "")
+        fix = f.fix or {}
+        out.append(f'<div class="finding"><b>{html.escape(f.effect)}</b> (p = {_g(f.p_value)}, '
+                   f'effect size {_g(f.effect_size)}): {html.escape(f.evidence)}'
+                   + (f"<br>fix: {html.escape(fix['model'])} — {html.escape(fix['metric'])} "
+                      f"{_g(fix.get('before'))} → {_g(fix.get('after'))} (gain {_g(f.fix_gain)})" if fix else "")
                    + "</div>")
     for s in d.get("not_identifiable", []):
         if isinstance(s, dict):

@@ -74,6 +74,7 @@ from .fem.tled import DynamicRelaxationError, ElementInversionError
 from .models.registry import get_model
 from .pipeline import load_runs
 from .plots import new_figure, save_figure
+from .records import MaterialCard
 from .stats import mixed_effects
 from .stages import scope_curves
 
@@ -375,7 +376,7 @@ def run_population(ranking_csv, runs_dir, fits_dir, cards_dir, scope: str, tests
                 "by_test_mean": {str(t): float(v) for t, v in ok.groupby("test")[value].mean().items()}
                 if not ok.empty else {}})
     card_path = Path(cards_dir) / f"{model}.json"
-    card = json.loads(card_path.read_text()) if card_path.is_file() else {"model": model}
+    card = dict(MaterialCard.from_json(card_path).data) if card_path.is_file() else {"model": model}
     unc = card.get("uncertainty")
     unc = dict(unc) if isinstance(unc, Mapping) else {"lmfit": unc}
     unc["population"] = pop
@@ -437,7 +438,7 @@ def recommended_posterior(posterior_ncs, model: str) -> Path:
 
 def _load_uq_inputs(posterior_ncs, population_json, fits_dir):
     """The population card, its population dict, the recommended model's posterior group and the fit record."""
-    card = json.loads(Path(population_json).read_text())
+    card = MaterialCard.from_json(population_json).data
     unc = card.get("uncertainty")
     pop = unc.get("population", {}) if isinstance(unc, Mapping) else {}
     post = read_inference_group(recommended_posterior(posterior_ncs, str(pop.get("model", card.get("model")))),

@@ -35,6 +35,7 @@ from ..models.beyond_qlv import PipkinRogersModel
 from ..models.plate import oscillation_moduli
 from ..models.qlv import QLVModel, instantaneous_law
 from ..models.registry import get_model
+from ..ranking import recommended_mask
 from ..spectra import decade_aligned_taus
 
 
@@ -133,7 +134,7 @@ def ranked_candidates(records: Sequence[Mapping], ranking: pd.DataFrame | None) 
             order = {str(m): float(k) for m, k in zip(rows["model"], rows["rank"])}
             source = "ranking.csv (rank within scope " + ", ".join(sorted(scopes)) + ")"
             if "recommended" in rows:
-                recommended = set(rows.loc[rows["recommended"].astype(str).str.lower() == "true", "model"].astype(str))
+                recommended = set(rows["model"].astype(str).to_numpy()[recommended_mask(rows)])
                 families = {str(r["model_key"]): r.get("family") for r in records}
                 if recommended:
                     rec = ", ".join(sorted(recommended))

@@ -13,6 +13,7 @@ import pandas as pd
 import xarray as xr
 
 from ..canonical import to_jsonable, write_text
+from ..records import Finding
 
 CATALOGUE_IDS: tuple[str, ...] = (
     "nonseparable_relaxation", "rim_stress_nonlinearity", "wall_slip", "elapsed_time_drift",
@@ -232,8 +233,12 @@ def cv_group_column(frame: pd.DataFrame) -> str:
 
 def write_diagnosis_json(result: dict, path: str | Path, dataset: str = "") -> Path:
     """Atomically write a diagnosis result as ``diagnosis.json`` (structure tests are summarised, not dumped;
-    NaN/inf -> null through :func:`tissuemech.canonical.to_jsonable`)."""
+    NaN/inf -> null through :func:`tissuemech.canonical.to_jsonable`). Every finding is validated as the
+    :class:`tissuemech.records.Finding` the report reads (:class:`~tissuemech.records.FindingError` names it)."""
     out = {k: v for k, v in result.items() if k != "structure_tests"}
     out["dataset"] = dataset
     out["n_structure_tests"] = len(result.get("structure_tests", []))
-    return write_text(json.dumps(to_jsonable(out), indent=2) + "\n", path)
+    out = to_jsonable(out)
+    for finding in out.get("findings", []):
+        Finding.from_dict(finding)  # the record the report reads: a malformed finding stops here, named
+    return write_text(json.dumps(out, indent=2) + "\n", path)
