@@ -25,6 +25,8 @@ from tissuemech.fem.tled import (RigidContact, build_model, fixed_group, run_exp
 
 
 def cases(cells):
+    # the cases of fem.experiments.precompile_kernels, written out here (not imported) because this script also
+    # runs against older versions of the package, where that function builds other cases or is absent
     mesh = block_mesh((1e-2, 1e-2, 5e-3), cells)
     x = mesh.nodes
     top = np.flatnonzero(np.isclose(x[:, 2], x[:, 2].max()))
