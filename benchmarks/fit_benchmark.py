@@ -115,9 +115,8 @@ def main() -> None:
         else:
             for job in jobs:
                 _fit_scope(job)
-        ranking = stages.collect_scopes([out / "ranking" / f"{name}.csv" for name in scopes],
-                                        [out / "fits" / name for name in scopes], "benchmark",
-                                        out / "ranking.csv", out / "fits.csv")
+        ranking = stages.collect_scopes([out / "ranking" / f"{name}.csv" for name in scopes], out / "ranking.csv")
+        stages.write_fits_table([out / "fits" / name for name in scopes], "benchmark", out / "fits.csv")
         dt = time.perf_counter() - t0
         n_fits = len(list(out.glob("fits/*/*.nc")))
     print(f"full fit + rank + cards stage: {dt:.1f} s ({n_fits} fits, scopes {list(scopes)}); target < 60 s")

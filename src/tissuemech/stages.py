@@ -179,18 +179,15 @@ def run_fit_scope(averages_path, scope: str, spec: Mapping, target: str, seed: i
     return table
 
 
-def collect_scopes(ranking_paths: Sequence, fits_dirs: Sequence, dataset: str, ranking_out, fits_out=None,
-                   figure_out=None) -> pd.DataFrame:
-    """Merge the per-scope rankings into ``ranking.csv`` (and, with ``fits_out``, every fit record into the tidy
-    ``fits.csv`` through :func:`write_fits_table`; the pipeline writes that table in rule ``fits_table``, after
-    the posteriors, so that it carries their credible intervals)."""
+def collect_scopes(ranking_paths: Sequence, ranking_out, figure_out=None) -> pd.DataFrame:
+    """Merge the per-scope rankings into ``ranking.csv`` (and draw the ranking figure). The tidy ``fits.csv`` is
+    :func:`write_fits_table`'s (rule ``fits_table``, after the posteriors, so that it carries their credible
+    intervals)."""
     tables = [pd.read_csv(p) for p in ranking_paths if Path(p).stat().st_size > 0]
     ranking = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
     if not ranking.empty:
         ranking["recommended"] = R.recommended_mask(ranking)
     write_text(ranking.to_csv(index=False), ranking_out)
-    if fits_out is not None:
-        write_fits_table(fits_dirs, dataset, fits_out)
     if figure_out is not None and not ranking.empty and "model" in ranking:
         shown = ranking.dropna(subset=["model"]).copy()
         shown["model"] = shown["scope"].astype(str) + ": " + shown["model"].astype(str)

@@ -251,8 +251,8 @@ def test_fit_stage_writes_fits_ranking_cards(tmp_path):
     assert (tmp_path / "ranking" / f"{scope}.recommendation.json").exists()
     assert len(pd.read_csv(tmp_path / "ranking" / f"{scope}.cv.csv")) == len(RATES)
 
-    stages.collect_scopes([tmp_path / "ranking" / f"{scope}.csv"], [fits_dir], "demo", tmp_path / "ranking.csv",
-                          tmp_path / "fits.csv", tmp_path / "ranking.png")
+    stages.collect_scopes([tmp_path / "ranking" / f"{scope}.csv"], tmp_path / "ranking.csv", tmp_path / "ranking.png")
+    stages.write_fits_table([fits_dir], "demo", tmp_path / "fits.csv")
     fits = pd.read_csv(tmp_path / "fits.csv")
     assert list(fits["model"]) == ["qlv_linear_prony4"] and (fits["dataset"] == "demo").all()
     assert fits.loc[0, "target"] == "apparent_stress" and fits.loc[0, "param_G0"] == pytest.approx(200.0, rel=0.02)

@@ -38,7 +38,6 @@ rule fit_scope:
 rule rank:
     input:
         rankings=scope_rankings,
-        fits=scope_fit_dirs,
         cards=scope_card_dirs,
     output:
         ranking=report(

@@ -5,8 +5,7 @@ from tissuemech.stages import collect_scopes
 from tissuemech.summary import plot_cards
 
 with job_log(snakemake.log[0]) as log:
-    ranking = collect_scopes(snakemake.input.rankings, snakemake.input.fits, snakemake.wildcards.dataset,
-                             snakemake.output.ranking, figure_out=snakemake.output.figure)
+    ranking = collect_scopes(snakemake.input.rankings, snakemake.output.ranking, figure_out=snakemake.output.figure)
     log.info("ranking with %d rows", len(ranking))
     written = plot_cards(snakemake.params.cards_root, snakemake.output.ranking, snakemake.output.card_figures,
                          snakemake.output.cards_table)
