@@ -419,7 +419,8 @@ class Finding:
                    detected=bool(finding.get("detected", False)),
                    significant=None if significant is None else bool(significant),
                    practical=bool(finding.get("practical", False)),
-                   statistic_name=finding.get("statistic_name", ""), effect_size_unit=finding.get("effect_size_unit", ""),
+                   statistic_name=finding.get("statistic_name", ""),
+                   effect_size_unit=finding.get("effect_size_unit", ""),
                    evidence=finding.get("evidence", ""), fix=fix, data=finding,
                    **{name: number(name) for name in FINDING_NUMBERS})
 

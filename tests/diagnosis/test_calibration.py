@@ -104,6 +104,22 @@ def test_ogden_alpha_two_is_neo_hookean_and_gent_stiffens():
     assert ir.shear_law("gent", np.array([0.5]), 1.0, {"jm": 1.0})[0] == pytest.approx(0.5 / 0.75)
 
 
+def test_first_harmonic_factor_matches_the_series_of_each_law():
+    """The sweeps' amplitude factor: first Fourier sine coefficient of the law's stress under gamma0 r/R sin(th),
+    integrated over the plate, over the linear law's. For sigma = mu gamma (1 + c gamma^2 + e gamma^4 + ...) the
+    sine coefficients of sin^3 and sin^5 are 3/4 and 5/8 and the plate weights of gamma^3 and gamma^5 are
+    int x^5 / int x^3 = 2/3 and int x^7 / int x^3 = 1/2, so the factor is 1 + c gamma0^2 / 2 + 5 e gamma0^4 / 16 + O(gamma0^6)
+    (below 1e-6 at gamma0 <= 0.1 here)."""
+    g0 = np.array([0.02, 0.05, 0.1])
+    np.testing.assert_allclose(ir.first_harmonic_factor("neo_hookean", g0, {}), 1.0, rtol=1e-12)
+    b = 2.0   # exponential: mu gamma exp(b gamma^2) -> c = b, e = b^2 / 2
+    np.testing.assert_allclose(ir.first_harmonic_factor("exponential", g0, {"b": b}),
+                               1 + b * g0 ** 2 / 2 + 5 * (b * b / 2) * g0 ** 4 / 16, rtol=1e-6)
+    jm = 0.8  # Gent: mu gamma / (1 - gamma^2/jm) -> c = 1/jm, e = 1/jm^2
+    np.testing.assert_allclose(ir.first_harmonic_factor("gent", g0, {"jm": jm}),
+                               1 + g0 ** 2 / (2 * jm) + 5 * g0 ** 4 / (16 * jm * jm), rtol=2e-6)
+
+
 # ------------------------------------------------------------------------------------------ contract
 def test_generator_imports_no_package_physics():
     tree = ast.parse((ROOT / "benchmarks" / "independent_rheometer.py").read_text())

@@ -165,6 +165,10 @@ def test_at_bound_parameters_and_covariance_from_flags():
     flags = ["at_bound: G0 at its upper bound 1e+06", "at_bound: beta_2 at its lower bound 0",
              "at_bound: beta_3 at its upper bound 1000", "correlated: a~b (rho=+0.990)"]
     assert F.at_bound_parameters(flags) == ["G0", "beta_3"]  # an absent Prony mode (beta_i = 0) is no collapse
+    # 0-based indices of the Prony ratios at their *upper* bound only (beta_3 -> 2; not G0, not beta_2 at 0)
+    assert F.weights_at_upper_bound(flags + ["at_bound: beta_1 at its upper bound 1000"]) == [0, 2]
+    assert F.weights_at_upper_bound(["at_bound: beta_10 at its upper bound 1000"]) == [9]
+    assert F.weights_at_upper_bound(flags[:2]) == []
     assert F.has_covariance([], {"a": 1.0, "b": np.nan}, ["a", "b"])
     assert not F.has_covariance([], {"a": np.nan}, ["a"])
     assert not F.has_covariance(["no_covariance: the Jacobian is singular"], {"a": 1.0}, ["a"])
