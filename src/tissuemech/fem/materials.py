@@ -28,10 +28,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import cfunc, njit, types
+from numba import njit
 
 from ..models.base import bulk_modulus
-from ..models.hyperelastic import (HYPERELASTIC_LAWS, lopez_pamies_dw_di1, mooney_rivlin_dw_di1, mooney_rivlin_dw_di2,
+from ..models.hyperelastic import (HYPERELASTIC_LAWS, INVARIANT_SIG, STRETCH_SIG, as_cfunc, lopez_pamies_dw_di1,
+                                  mooney_rivlin_dw_di1, mooney_rivlin_dw_di2,
                                   neo_hookean_dw_di1, ogden_dw_dlambda, reduced_polynomial_dw_di1, zero_dw_di2)
 from .kinematics import FASTMATH, left_cauchy_green, symmetric_eigen3, symmetric_square
 
@@ -42,9 +43,6 @@ KIND_SVK = 2
 #: kernels skip the ``dW/dI2`` call and ``bbar^2`` (an indirect call costs ~8 ns of a ~70 ns element update)
 KIND_INVARIANT_I1 = 3
 
-#: numba signatures of the scalar laws passed to the kernels
-INVARIANT_SIG = types.float64(types.float64[::1], types.float64, types.float64)
-STRETCH_SIG = types.float64(types.float64[::1], types.float64)
 
 
 
@@ -128,10 +126,10 @@ def _compile(key: str, spec: LawSpec) -> None:
     :class:`LawCompileError` naming the law."""
     try:
         if spec.kind == "invariant":
-            _as_cfunc(spec.dw_di1, INVARIANT_SIG)
-            _as_cfunc(spec.dw_di2, INVARIANT_SIG)
+            as_cfunc(spec.dw_di1, INVARIANT_SIG)
+            as_cfunc(spec.dw_di2, INVARIANT_SIG)
         elif spec.kind == "stretch":
-            _as_cfunc(spec.dw_dlambda, STRETCH_SIG)
+            as_cfunc(spec.dw_dlambda, STRETCH_SIG)
     except Exception as exc:  # numba raises TypingError and others; re-raised with the law's key
         raise LawCompileError(f"hyperelastic law {key!r} does not compile with the FEM kernel signature: {exc}") from exc
 
@@ -164,13 +162,6 @@ def _law_from_table_entry(entry) -> LawSpec | None:
     if kind == "invariant":
         return LawSpec("invariant", tuple(names), funcs[0], funcs[1] if len(funcs) > 1 else _zero_w)
     return LawSpec("stretch", tuple(names), dw_dlambda=funcs[0])
-
-
-@functools.lru_cache(maxsize=None)
-def _as_cfunc(fn, signature):
-    """Compile a numba law into a C function pointer the kernels accept as a first-class function."""
-    py = getattr(fn, "py_func", fn)
-    return cfunc(signature, cache=True)(py)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -211,13 +202,13 @@ class Material:
     def functions(self):
         """The three C function pointers ``(dw_di1, dw_di2, dw_dlambda)`` for the kernels."""
         law = self.law
-        return (_as_cfunc(law.dw_di1, INVARIANT_SIG), _as_cfunc(law.dw_di2, INVARIANT_SIG),
-                _as_cfunc(law.dw_dlambda, STRETCH_SIG))
+        return (as_cfunc(law.dw_di1, INVARIANT_SIG), as_cfunc(law.dw_di2, INVARIANT_SIG),
+                as_cfunc(law.dw_dlambda, STRETCH_SIG))
 
     def branch_function(self):
         """C function pointer of the branch law's ``dW/dI1`` (a zero law when there are no branches)."""
         fn = _zero_w if self.branch_law_key is None else available_laws()[self.branch_law_key].dw_di1
-        return _as_cfunc(fn, INVARIANT_SIG)
+        return as_cfunc(fn, INVARIANT_SIG)
 
     @property
     def dilatational_modulus_pa(self) -> float:

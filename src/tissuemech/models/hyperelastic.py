@@ -26,17 +26,34 @@ shear modulus, ``C10 = mu/2``), ``C10, C01, C20, ...`` (polynomial coefficients,
 """
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
+from numba import cfunc, njit, types
 
 from .base import ConstitutiveModel, ParamSpec, Params
 
 # ------------------------------------------------------------------------------------------------------
 # scalar laws (numba): the single implementation used by the 1-D closed forms and by the FEM kernels
 # ------------------------------------------------------------------------------------------------------
+
+#: numba signatures of the scalar laws: ``dW/dI(params, I1, I2)`` and ``dW/dlambda(params, lambda)``
+INVARIANT_SIG = types.float64(types.float64[::1], types.float64, types.float64)
+STRETCH_SIG = types.float64(types.float64[::1], types.float64)
+
+
+@functools.lru_cache(maxsize=None)
+def as_cfunc(fn, signature):
+    """A numba law compiled into a C function pointer (a first-class function of ``signature``).
+
+    Kernels that take laws as first-class functions are compiled once for every law and can be cached on
+    disk; kernels that take jitted dispatchers are compiled again per law in every process (numba#2956).
+    """
+    py = getattr(fn, "py_func", fn)
+    return cfunc(signature, cache=True)(py)
+
 
 
 @njit(cache=True)
@@ -203,7 +220,7 @@ def amin_dw_di2(p, i1, i2):
     return p[3]
 
 
-@njit(cache=False)  # takes jitted callables: numba cannot cache those reliably (numba#2956)
+@njit(cache=True)  # the laws arrive as C function pointers (as_cfunc): one cached compile for every law
 def _invariant_shear(dw1, dw2, p, gamma):
     n = gamma.size
     sigma = np.empty(n)
@@ -218,7 +235,7 @@ def _invariant_shear(dw1, dw2, p, gamma):
     return sigma, n2
 
 
-@njit(cache=False)  # takes jitted callables: numba cannot cache those reliably (numba#2956)
+@njit(cache=True)  # the laws arrive as C function pointers (as_cfunc): one cached compile for every law
 def _invariant_uniaxial(dw1, dw2, p, lam):
     out = np.empty(lam.size)
     for k in range(lam.size):
@@ -229,7 +246,7 @@ def _invariant_uniaxial(dw1, dw2, p, lam):
     return out
 
 
-@njit(cache=False)  # takes jitted callables: numba cannot cache those reliably (numba#2956)
+@njit(cache=True)  # the laws arrive as C function pointers (as_cfunc): one cached compile for every law
 def _stretch_shear(dwl, p, gamma):
     n = gamma.size
     sigma = np.empty(n)
@@ -249,7 +266,7 @@ def _stretch_shear(dwl, p, gamma):
     return sigma, n2
 
 
-@njit(cache=False)  # takes jitted callables: numba cannot cache those reliably (numba#2956)
+@njit(cache=True)  # the laws arrive as C function pointers (as_cfunc): one cached compile for every law
 def _stretch_uniaxial(dwl, p, lam):
     out = np.empty(lam.size)
     for k in range(lam.size):
@@ -296,13 +313,16 @@ class HyperelasticModel(ConstitutiveModel):
     def _vector(self, p: Params) -> np.ndarray:
         return np.array([float(p[n]) for n in self.param_names], dtype=np.float64)
 
+    def _invariant_functions(self):
+        return as_cfunc(self.dw_di1, INVARIANT_SIG), as_cfunc(self.dw_di2 or zero_dw_di2, INVARIANT_SIG)
+
     def _shear(self, p: Params, strain) -> tuple[np.ndarray, np.ndarray]:
         g = np.ascontiguousarray(np.asarray(strain, dtype=np.float64))
         flat = g.ravel()
         if self.kind == "invariant":
-            s, n2 = _invariant_shear(self.dw_di1, self.dw_di2 or zero_dw_di2, self._vector(p), flat)
+            s, n2 = _invariant_shear(*self._invariant_functions(), self._vector(p), flat)
         else:
-            s, n2 = _stretch_shear(self.dw_dlambda, self._vector(p), flat)
+            s, n2 = _stretch_shear(as_cfunc(self.dw_dlambda, STRETCH_SIG), self._vector(p), flat)
         return s.reshape(g.shape), n2.reshape(g.shape)
 
     def elastic_shear_stress(self, p: Params, strain: np.ndarray) -> np.ndarray:
@@ -322,9 +342,9 @@ class HyperelasticModel(ConstitutiveModel):
         lam = np.ascontiguousarray(np.asarray(stretch, dtype=np.float64))
         flat = lam.ravel()
         if self.kind == "invariant":
-            out = _invariant_uniaxial(self.dw_di1, self.dw_di2 or zero_dw_di2, self._vector(p), flat)
+            out = _invariant_uniaxial(*self._invariant_functions(), self._vector(p), flat)
         else:
-            out = _stretch_uniaxial(self.dw_dlambda, self._vector(p), flat)
+            out = _stretch_uniaxial(as_cfunc(self.dw_dlambda, STRETCH_SIG), self._vector(p), flat)
         return out.reshape(lam.shape)
 
 
