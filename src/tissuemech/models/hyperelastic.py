@@ -55,6 +55,18 @@ def as_cfunc(fn, signature):
     return cfunc(signature, cache=True)(py)
 
 
+@functools.lru_cache(maxsize=None)
+def compiled_law_kernel(kernel, kind: str):
+    """The compiled entry point of a 1-D kernel ``kernel(*laws, params, x)`` taking ``kind`` laws as C pointers.
+
+    Calling the entry point skips the dispatcher's type resolution of the function-pointer arguments, which
+    costs more than the kernel itself on the short arrays of a fit (``Dispatcher.compile`` loads the disk cache).
+    """
+    law = types.FunctionType(INVARIANT_SIG if kind == "invariant" else STRETCH_SIG)
+    laws = (law, law) if kind == "invariant" else (law,)
+    return kernel.compile((*laws, types.float64[::1], types.float64[::1]))
+
+
 
 @njit(cache=True)
 def zero_dw_di2(p, i1, i2):
@@ -313,16 +325,15 @@ class HyperelasticModel(ConstitutiveModel):
     def _vector(self, p: Params) -> np.ndarray:
         return np.array([float(p[n]) for n in self.param_names], dtype=np.float64)
 
-    def _invariant_functions(self):
-        return as_cfunc(self.dw_di1, INVARIANT_SIG), as_cfunc(self.dw_di2 or zero_dw_di2, INVARIANT_SIG)
+    def _law_functions(self) -> tuple:
+        if self.kind == "invariant":
+            return as_cfunc(self.dw_di1, INVARIANT_SIG), as_cfunc(self.dw_di2 or zero_dw_di2, INVARIANT_SIG)
+        return (as_cfunc(self.dw_dlambda, STRETCH_SIG),)
 
     def _shear(self, p: Params, strain) -> tuple[np.ndarray, np.ndarray]:
         g = np.ascontiguousarray(np.asarray(strain, dtype=np.float64))
-        flat = g.ravel()
-        if self.kind == "invariant":
-            s, n2 = _invariant_shear(*self._invariant_functions(), self._vector(p), flat)
-        else:
-            s, n2 = _stretch_shear(as_cfunc(self.dw_dlambda, STRETCH_SIG), self._vector(p), flat)
+        kernel = _invariant_shear if self.kind == "invariant" else _stretch_shear
+        s, n2 = compiled_law_kernel(kernel, self.kind)(*self._law_functions(), self._vector(p), g.ravel())
         return s.reshape(g.shape), n2.reshape(g.shape)
 
     def elastic_shear_stress(self, p: Params, strain: np.ndarray) -> np.ndarray:
@@ -340,11 +351,8 @@ class HyperelasticModel(ConstitutiveModel):
     def uniaxial_nominal_stress(self, p: Params, stretch: np.ndarray) -> np.ndarray:
         """Incompressible uniaxial nominal stress P11 (Pa) at stretch ``lambda``."""
         lam = np.ascontiguousarray(np.asarray(stretch, dtype=np.float64))
-        flat = lam.ravel()
-        if self.kind == "invariant":
-            out = _invariant_uniaxial(*self._invariant_functions(), self._vector(p), flat)
-        else:
-            out = _stretch_uniaxial(as_cfunc(self.dw_dlambda, STRETCH_SIG), self._vector(p), flat)
+        kernel = _invariant_uniaxial if self.kind == "invariant" else _stretch_uniaxial
+        out = compiled_law_kernel(kernel, self.kind)(*self._law_functions(), self._vector(p), lam.ravel())
         return out.reshape(lam.shape)
 
 
