@@ -15,8 +15,6 @@ JOINT_SCOPE = "viscoelastic_joint"
 ALL_MODES_SCOPE = "all_modes"
 #: frequency sweeps at >= 2 temperatures: the shifted sweeps as one curve at Tref (``tts.mastercurve_curve``)
 MASTERCURVE_SCOPE = "mastercurve"
-#: test kinds whose averaged curves get a relaxation (or retardation) spectrum, ``stages.run_spectrum``
-SPECTRUM_TESTS = ("frequency_sweep", "stress_relaxation", "creep_recovery")
 
 
 def dataset_scopes(tests: Sequence[str], fit_config: Mapping, tts: bool = False) -> dict[str, dict]:

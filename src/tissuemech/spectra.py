@@ -76,7 +76,12 @@ import xarray as xr
 from scipy.linalg import eigh
 from scipy.optimize import nnls
 
+from .canonical import read_netcdf, write_netcdf
+from .curves import as_str, select_average
 from .models.recursion import prony_branch_histories
+
+#: test kinds whose averaged curves get a relaxation (or retardation) spectrum (:func:`run_spectrum`)
+SPECTRUM_TESTS = ("frequency_sweep", "stress_relaxation", "creep_recovery")
 
 #: default density of the inversion grid, times per decade
 PER_DECADE = 10
@@ -745,3 +750,125 @@ __all__ = [
     "retardation_spectrum_from_creep", "retardation_spectrum_from_compliance", "kramers_kronig_check",
     "relaxation_predicts_sweep", "sweep_predicts_relaxation",
 ]
+
+
+# ------------------------------------------------------------------------------------------------------
+# spectra of a dataset's averaged curves (spectrum.nc)
+# ------------------------------------------------------------------------------------------------------
+def _finite_sd(curve: xr.Dataset, name: str) -> np.ndarray | None:
+    sd = curve.get(f"{name}_sd")
+    if sd is None:
+        return None
+    sd = np.asarray(sd.values, float)
+    return sd if np.all(np.isfinite(sd) & (sd > 0)) else None
+
+
+def _curve_spectrum(c: xr.Dataset, test: str) -> tuple[Spectrum, float]:
+    """Spectrum of one averaged curve and its Kramers-Kronig discrepancy (NaN when not a sweep)."""
+    if test == "frequency_sweep":
+        w = (c["angular_frequency"].values if "angular_frequency" in c.coords
+             else 2.0 * np.pi * c["frequency"].values)  # averages grid sweeps on frequency [Hz]
+        gp, gpp = c["storage_modulus_mean"].values, c["loss_modulus_mean"].values
+        spec = relaxation_spectrum_from_modulus(w, gp, gpp, sd_storage_pa=_finite_sd(c, "storage_modulus"),
+                                                  sd_loss_pa=_finite_sd(c, "loss_modulus"))
+        return spec, kramers_kronig_check(w, gp, gpp)["discrepancy"]
+    t, stress = c["time"].values, c["shear_stress_mean"].values
+    strain = c["shear_strain_mean"].values
+    if test == "creep_recovery":
+        # the creep phase: the first contiguous run of points carrying at least half the peak stress (the
+        # recovery that follows has none); J(t) = gamma/sigma_0, an ideal stress step at t = 0
+        on = np.abs(stress) >= 0.5 * np.nanmax(np.abs(stress))
+        i0 = int(np.argmax(on))
+        i1 = i0 + (int(np.argmin(on[i0:])) if not on[i0:].all() else int(on[i0:].size))
+        sigma0 = float(np.mean(stress[i0:i1]))
+        sd = _finite_sd(c, "shear_strain")
+        spec = retardation_spectrum_from_creep(t[i0:i1], strain[i0:i1] / sigma0,
+                                                 sd_per_pa=None if sd is None else sd[i0:i1] / abs(sigma0))
+        return spec, float("nan")
+    sd = _finite_sd(c, "shear_stress")
+    if np.nanmin(np.abs(strain)) >= 0.98 * np.nanmax(np.abs(strain)):
+        # the averaged curve holds the hold only: G(t) = sigma/gamma, step at t = 0 (thesis analysis)
+        gamma0 = float(np.nanmean(strain))
+        spec = relaxation_spectrum_from_relaxation(t, stress / gamma0, sd_pa=None if sd is None else sd / abs(gamma0))
+    else:  # the ramp is in the curve: invert through the strain history
+        spec = relaxation_spectrum_from_relaxation(t, stress, strain=strain, sd_pa=sd)
+    return spec, float("nan")
+
+
+def spectra_from_averages(averages: xr.Dataset) -> xr.Dataset:
+    """Relaxation or retardation spectrum of every averaged sweep, relaxation and creep (``tissuemech.spectra``).
+
+    Frequency sweeps: relaxation spectrum of G' and G'' jointly, plus the Kramers-Kronig discrepancy of the
+    sweep; relaxations: relaxation spectrum of the shear stress through the averaged strain history when the
+    curve holds the ramp, else of ``G(t) = sigma/gamma_0`` as the response to an ideal step at ``t = 0`` (the
+    averaged curve then starts in the hold); creep: retardation spectrum (with a flow term) of
+    ``J(t) = gamma/sigma_0`` over the creep phase (first run of points with at least half the peak stress;
+    the recovery is not used). Rows are weighted by the sample SD where every point has one (>= 2 samples),
+    else by the relative misfit.
+
+    Returns
+    -------
+    xarray.Dataset with dims ``curve`` and ``tau_index`` (per-curve grids padded with NaN): ``tau`` [s],
+    ``kind`` (``relaxation``/``retardation``); relaxation curves: ``weight`` and ``spectrum`` (H(tau)) [Pa],
+    ``equilibrium_modulus`` [Pa]; retardation curves: ``retardation_weight`` and ``retardation_spectrum``
+    (L(tau)) [1/Pa], ``glassy_compliance`` [1/Pa], ``fluidity`` [1/(Pa s)] (NaN where not applicable);
+    all: ``lambda``, ``rel_rms_residual``, ``kk_discrepancy`` (sweeps; NaN otherwise), ``test``,
+    ``condition``, ``source``. No ``curve`` when the dataset has none of these tests.
+    """
+    tests = as_str(averages["test"].values)
+    labels = as_str(averages["condition"].values)
+    rows = []
+    for test, label in zip(tests, labels):
+        if test in SPECTRUM_TESTS:
+            spec, kk = _curve_spectrum(select_average(averages, test, label), test)
+            rows.append((test, label, spec, kk))
+    n, n_tau = len(rows), max((r[2].tau_s.size for r in rows), default=0)
+
+    def per_tau(kind: str, get) -> np.ndarray:
+        out = np.full((n, n_tau), np.nan)
+        for i, r in enumerate(rows):
+            if kind in ("any", r[2].kind):
+                values = get(r[2])
+                out[i, : values.size] = values
+        return out
+
+    def per_curve(kind: str, get) -> np.ndarray:
+        return np.array([get(r[2]) if r[2].kind == kind else np.nan for r in rows], float)
+
+    rel, ret = "relaxation", "retardation"
+    return xr.Dataset(
+        {"tau": (("curve", "tau_index"), per_tau("any", lambda s: s.tau_s),
+                 {"units": "s", "long_name": "relaxation or retardation time of the inversion grid"}),
+         "kind": ("curve", np.array([r[2].kind for r in rows], dtype=str)),
+         "weight": (("curve", "tau_index"), per_tau(rel, lambda s: s.weights),
+                    {"units": "Pa", "long_name": "discrete relaxation weight h_i"}),
+         "spectrum": (("curve", "tau_index"), per_tau(rel, lambda s: s.continuous),
+                      {"units": "Pa", "long_name": "continuous relaxation spectrum H(tau) = h_i / d ln tau"}),
+         "equilibrium_modulus": ("curve", per_curve(rel, lambda s: s.equilibrium), {"units": "Pa"}),
+         "retardation_weight": (("curve", "tau_index"), per_tau(ret, lambda s: s.weights),
+                                {"units": "1/Pa", "long_name": "discrete retardation weight j_i"}),
+         "retardation_spectrum": (("curve", "tau_index"), per_tau(ret, lambda s: s.continuous),
+                                  {"units": "1/Pa",
+                                   "long_name": "continuous retardation spectrum L(tau) = j_i / d ln tau"}),
+         "glassy_compliance": ("curve", per_curve(ret, lambda s: s.equilibrium), {"units": "1/Pa"}),
+         "fluidity": ("curve", per_curve(ret, lambda s: s.fluidity),
+                      {"units": "1/(Pa s)", "long_name": "1/eta_0 (steady flow term of the creep)"}),
+         "lambda": ("curve", np.array([r[2].lam for r in rows], float),
+                    {"long_name": "Tikhonov parameter chosen by GCV"}),
+         "rel_rms_residual": ("curve", np.array([r[2].rel_rms_residual for r in rows], float)),
+         "kk_discrepancy": ("curve", np.array([r[3] for r in rows], float),
+                            {"long_name": "Kramers-Kronig discrepancy: joint-spectrum residual over |G*|"}),
+         "test": ("curve", np.array([r[0] for r in rows], dtype=str)),
+         "condition": ("curve", np.array([r[1] for r in rows], dtype=str)),
+         "source": ("curve", np.array([r[2].source for r in rows], dtype=str))},
+        attrs={"method": "NNLS + second-difference Tikhonov, lambda by GCV (tissuemech.spectra)",
+               **({} if rows else {"not_testable": "no frequency sweep, relaxation or creep in the averages"}),
+               "grid_rule": "tau 1/(10 w_max)..10/w_min for sweeps, t_min..10 t_max for time data, "
+                            f"{PER_DECADE} per decade"})
+
+
+def run_spectrum(averages_path, out_nc) -> xr.Dataset:
+    """Read ``averages.nc``, compute :func:`spectra_from_averages` and write it atomically to ``out_nc``."""
+    ds = spectra_from_averages(read_netcdf(averages_path))
+    write_netcdf(ds, out_nc)
+    return ds

@@ -15,7 +15,7 @@ from tissuemech.diagnosis.evidence import booij_thoone
 from tissuemech.io.dispatch import read_export
 from tissuemech.models.linear import gkv_relaxation_spectrum
 from tissuemech.models.registry import get_model
-from tissuemech.stages import run_spectrum
+from tissuemech.spectra import run_spectrum
 
 REAL = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "real"
 LIMS = REAL / "ta_lims" / "ares_g2_frequency_sweep_tts.txt"

@@ -19,7 +19,7 @@ def _rules(repo_root):
 
 def test_the_parser_sees_the_rules(repo_root):
     rules = _rules(repo_root)
-    assert {"ingest", "average", "lve", "fit_scope", "rank", "summary", "mesh_figures", "all"} <= set(rules)
+    assert {"ingest", "average", "fit_scope", "rank", "summary", "mesh_figures", "all"} <= set(rules)
 
 
 @pytest.mark.parametrize("directive,prefix", [("log", "logs/"), ("benchmark", "benchmarks/runs/")])

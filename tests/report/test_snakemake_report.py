@@ -29,7 +29,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("snakemake_report")]
 DATASET = "agar_3pct_thesis"
 TARGETS = [f"results/{DATASET}/lve.csv", f"results/{DATASET}/figures/fits/flow_curve"]
 #: workflow/scripts of the rules that produce TARGETS
-JOB_SCRIPTS = {"ingest.py", "average.py", "lve.py", "fit_scope.py"}
+JOB_SCRIPTS = {"ingest.py", "average.py", "fit_scope.py"}
 
 
 class _Scripts(HTMLParser):
@@ -141,7 +141,7 @@ def test_figures_have_svg_twins_and_jobs_have_logs_and_benchmarks(small_run):
     figures = small_run / "results" / DATASET / "figures"
     pngs = sorted(figures.rglob("*.png"))
     assert pngs and all(p.with_suffix(".svg").is_file() for p in pngs)
-    for job in ("ingest", "average", "lve", "fit_flow_curve"):
+    for job in ("ingest", "average", "fit_flow_curve"):
         assert (small_run / "logs" / DATASET / f"{job}.log").is_file(), job
         assert (small_run / "benchmarks" / "runs" / DATASET / f"{job}.tsv").is_file(), job
     # the fit job draws its scope's figures itself (no separate figure job paying the start-up again)

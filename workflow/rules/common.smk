@@ -164,13 +164,6 @@ def has_shear_ramps(name):
     return "constant_shear_rate" in dataset_tests(name)
 
 
-def has_spectrum_tests(name):
-    """Sweeps, relaxations or creep: tests whose averaged curves get a spectrum (rule spectrum)."""
-    from tissuemech.scopes import SPECTRUM_TESTS
-
-    return bool(set(dataset_tests(name)) & set(SPECTRUM_TESTS))
-
-
 def tts_temperatures(name):
     """Distinct nominal temperatures (sample sheet ``temperature_c``) of a dataset's frequency sweeps."""
     from tissuemech.curves import distinct_temperatures
@@ -196,9 +189,8 @@ def all_targets():
             f"results/{name}/ingest_report.csv",
             f"results/{name}/averages.nc",
             f"results/{name}/lve.csv",
+            f"results/{name}/spectrum.nc",
         ]
-        if has_spectrum_tests(name):
-            targets.append(f"results/{name}/spectrum.nc")
         if has_tts(name):
             targets.append(f"results/{name}/tts.nc")
         if dataset_scopes_of(name):
@@ -218,7 +210,7 @@ def all_targets():
     return targets
 
 
-# ---- uncertainty (workflow/rules/uq.smk; fits.csv of fit.smk waits for the posterior tables) ----
+# ---- uncertainty (workflow/rules/uq.smk; rule rank writes fits.csv once the posterior tables exist) ----
 POSTERIOR = config.get("posterior", {})
 
 

@@ -1,8 +1,10 @@
-# Sample averages per test and condition, LVE limits and their figures, relaxation/retardation spectra,
-# time-temperature superposition of sweeps at several temperatures.
+# Sample averages per test and condition with their LVE limits, figures and relaxation/retardation spectra (one
+# job), time-temperature superposition of sweeps at several temperatures.
 
 
 rule average:
+    # averages, their LVE limits and spectra in one job: each is seconds of work, and a job of its own paid the
+    # start-up (Python, xarray, numba) again (issue 17)
     input:
         runs="results/{dataset}/runs",
     output:
@@ -19,30 +21,15 @@ rule average:
                 "variable": "{variable}",
             },
         ),
-    log:
-        "logs/{dataset}/average.log",
-    benchmark:
-        "benchmarks/runs/{dataset}/average.tsv"
-    params:
-        pkg=script_hash("workflow/scripts/average.py"),
-    script:
-        "../scripts/average.py"
-
-
-rule lve:
-    input:
-        runs="results/{dataset}/runs",
-        averages="results/{dataset}/averages.nc",
-    output:
         lve="results/{dataset}/lve.nc",
-        summary=report(
+        lve_summary=report(
             "results/{dataset}/lve.csv",
             caption="../report/lve_table.rst",
             category="{dataset}",
             subcategory="2 LVE limit",
             labels={"source": "table", "sweep": "all"},
         ),
-        figures=report(
+        lve_figures=report(
             directory("results/{dataset}/figures/lve"),
             patterns=["lve__{source}__{sweep}.png"],
             caption="../report/lve.rst",
@@ -50,29 +37,16 @@ rule lve:
             subcategory="2 LVE limit",
             labels={"source": "{source}", "sweep": "{sweep}"},
         ),
-    log:
-        "logs/{dataset}/lve.log",
-    benchmark:
-        "benchmarks/runs/{dataset}/lve.tsv"
-    params:
-        pkg=script_hash("workflow/scripts/lve.py"),
-    script:
-        "../scripts/lve.py"
-
-
-rule spectrum:
-    input:
-        averages="results/{dataset}/averages.nc",
-    output:
         spectrum="results/{dataset}/spectrum.nc",
     log:
-        "logs/{dataset}/spectrum.log",
+        "logs/{dataset}/average.log",
     benchmark:
-        "benchmarks/runs/{dataset}/spectrum.tsv"
+        "benchmarks/runs/{dataset}/average.tsv"
     params:
-        pkg=script_hash("workflow/scripts/spectrum.py"),
+        exclude_flagged=config["fit"].get("exclude_flagged", True),
+        pkg=script_hash("workflow/scripts/average.py"),
     script:
-        "../scripts/spectrum.py"
+        "../scripts/average.py"
 
 
 rule tts:

@@ -36,10 +36,15 @@ rule fit_scope:
 
 
 rule rank:
+    # fits.csv waits for the posterior tables of the dataset (none for most datasets; rule posterior reads the fits,
+    # not the ranking) so that it carries their credible intervals next to the lmfit standard errors
     input:
         rankings=scope_rankings,
         cards=scope_card_dirs,
+        fits=scope_fit_dirs,
+        posterior=posterior_tables,
     output:
+        fits="results/{dataset}/fits.csv",
         ranking=report(
             "results/{dataset}/ranking.csv",
             caption="../report/ranking_table.rst",
@@ -78,21 +83,3 @@ rule rank:
         pkg=script_hash("workflow/scripts/rank.py"),
     script:
         "../scripts/rank.py"
-
-
-rule fits_table:
-    # fits.csv is written after the posteriors (workflow/rules/uq.smk), which do not read the ranking, so the
-    # table carries their credible intervals next to the lmfit standard errors without a cycle
-    input:
-        fits=scope_fit_dirs,
-        posterior=posterior_tables,
-    output:
-        fits="results/{dataset}/fits.csv",
-    log:
-        "logs/{dataset}/fits_table.log",
-    benchmark:
-        "benchmarks/runs/{dataset}/fits_table.tsv"
-    params:
-        pkg=script_hash("workflow/scripts/fits_table.py"),
-    script:
-        "../scripts/fits_table.py"

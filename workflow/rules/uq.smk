@@ -1,6 +1,6 @@
 # Uncertainty (issue 16): posteriors of the fits of each enabled scope (config `posterior`), specimen variability
 # and FEM bands of the recommended model. Target and input functions (posterior_models_of, uq_targets ...) are in
-# common.smk, as fit.smk's rule fits_table reads the posterior tables.
+# common.smk, as fit.smk's rule rank reads the posterior tables (for fits.csv).
 
 
 rule posterior:
