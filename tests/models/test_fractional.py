@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 from scipy.integrate import quad
+from pymittagleffler import mittag_leffler as garrappa
 from scipy.special import erfcx, gamma
 
 from tissuemech import fitting as F
@@ -167,3 +168,34 @@ def test_fractional_qlv_is_fitted_jointly_to_relaxation_and_constant_rate_ramps(
     for k, v in truth.items():
         assert res.params[k] == pytest.approx(v, rel=0.05), k
     assert np.isfinite(res.aicc)
+
+
+@pytest.mark.parametrize("alpha", [0.05, 0.3, 0.7, 0.99])
+@pytest.mark.parametrize("beta_offset", [0.0, 1.0])
+def test_mittag_leffler_of_many_negative_arguments_matches_garrappa_everywhere(alpha, beta_offset):
+    # tens of thousands of distinct lags (a hereditary integral over a noisy measured strain) go through the spline
+    beta = 1.0 + beta_offset
+    x = np.sort(10.0 ** np.random.default_rng(3).uniform(-7.0, 4.0, 20_000))
+    z = np.r_[0.0, -x]
+    exact = np.real(np.asarray(garrappa(np.ascontiguousarray(z), alpha, beta)))
+    exact[0] = 1.0 / gamma(beta)
+    fr._ML_CACHE.clear()
+    got = fr.mittag_leffler(z, alpha, beta)
+    assert got.shape == z.shape
+    np.testing.assert_allclose(got, exact, rtol=0, atol=2e-9)
+    assert not np.array_equal(got[1:], exact[1:])  # the spline path ran (exact evaluation would be bit-equal)
+
+
+def test_mittag_leffler_spline_is_refused_for_positive_arguments_and_failed_checks(monkeypatch):
+    z = -np.linspace(1e-3, 50.0, 5000)
+    exact = np.real(np.asarray(garrappa(np.ascontiguousarray(z), 0.6, 1.0)))
+    fr._ML_CACHE.clear()
+    monkeypatch.setattr(fr, "_ML_SPLINE_TOLERANCE", 0.0)  # no spline can pass: evaluated exactly
+    np.testing.assert_array_equal(fr.mittag_leffler(z, 0.6, 1.0), exact)
+    assert fr._mittag_leffler_negative_spline(np.r_[z, 1.0], 0.6, 1.0) is None
+
+
+def test_mittag_leffler_half_of_many_arguments_is_still_the_complementary_error_function():
+    x = np.sort(10.0 ** np.random.default_rng(4).uniform(-6.0, 3.0, 30_000))
+    fr._ML_CACHE.clear()
+    np.testing.assert_allclose(fr.mittag_leffler(-x, 0.5), erfcx(x), rtol=0, atol=2e-9)
