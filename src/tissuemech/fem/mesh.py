@@ -117,23 +117,117 @@ def boundary_nodes(elements: np.ndarray) -> np.ndarray:
     return np.unique(boundary_faces(elements))
 
 
+def locality_order(elements: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """Reverse Cuthill-McKee node order and the element order sorted by each element's smallest new node.
+
+    Returns
+    -------
+    node_order : (n_nodes,) old node index of every new node (``new nodes = nodes[node_order]``)
+    element_order : (n_elements,) old element index of every new element
+    """
+    e = np.asarray(elements, dtype=np.int64)
+    rows = np.repeat(e, 4, axis=1).ravel()
+    cols = np.tile(e, (1, 4)).ravel()
+    graph = coo_matrix((np.ones(rows.size, dtype=np.int8), (rows, cols)), shape=(n_nodes, n_nodes)).tocsr()
+    node_order = np.asarray(reverse_cuthill_mckee(graph, symmetric_mode=True), dtype=np.int64)
+    new_index = np.empty(n_nodes, dtype=np.int64)
+    new_index[node_order] = np.arange(n_nodes)
+    element_order = np.argsort(new_index[e].min(axis=1), kind="stable")
+    return node_order, element_order
+
+
+def mean_element_span(elements: np.ndarray) -> float:
+    """Mean over the elements of (largest - smallest node index): how far apart in memory the nodes that one
+    element gathers lie (the bandwidth that :func:`locality_order` reduces)."""
+    e = np.asarray(elements, dtype=np.int64)
+    return float(np.mean(e.max(axis=1) - e.min(axis=1))) if e.size else 0.0
+
+
 def reorder_for_locality(mesh: TetMesh) -> TetMesh:
-    """Renumber nodes by reverse Cuthill-McKee and sort elements by their smallest node.
+    """Renumber nodes by reverse Cuthill-McKee and sort elements by their smallest node
+    (:func:`locality_order`).
 
     Neighbouring elements then touch neighbouring memory, which is what the gather/scatter of the explicit
     element pass needs (cache reuse on CPUs, coalescing on GPUs). The geometry is unchanged.
     """
-    n = mesh.n_nodes
-    e = mesh.elements.astype(np.int64)
-    rows = np.repeat(e, 4, axis=1).ravel()
-    cols = np.tile(e, (1, 4)).ravel()
-    graph = coo_matrix((np.ones(rows.size, dtype=np.int8), (rows, cols)), shape=(n, n)).tocsr()
-    perm = reverse_cuthill_mckee(graph, symmetric_mode=True)
-    new_index = np.empty(n, dtype=np.int64)
-    new_index[perm] = np.arange(n)
-    elements = new_index[e]
-    elements = elements[np.argsort(elements.min(axis=1), kind="stable")]
-    return TetMesh(mesh.nodes[perm].copy(), elements.astype(np.int32))
+    node_order, element_order = locality_order(mesh.elements, mesh.n_nodes)
+    new_index = np.empty(mesh.n_nodes, dtype=np.int64)
+    new_index[node_order] = np.arange(mesh.n_nodes)
+    elements = new_index[mesh.elements.astype(np.int64)[element_order]]
+    return TetMesh(mesh.nodes[node_order].copy(), elements.astype(np.int32))
+
+
+def _star_min_altitudes(nodes: np.ndarray, star: np.ndarray, node: int, trials: np.ndarray) -> np.ndarray:
+    """Smallest altitude (m, negative for an inverted element) of the elements ``star`` when ``node`` is moved to each
+    of the ``trials`` positions ``(n_trials, 3)``."""
+    x = np.broadcast_to(nodes[star], (trials.shape[0], *star.shape, 3)).copy()
+    moved = star == node
+    x[:, moved] = np.repeat(trials, int(moved.sum()), axis=0).reshape(trials.shape[0], -1, 3)
+    d1, d2, d3 = x[..., 1, :] - x[..., 0, :], x[..., 2, :] - x[..., 0, :], x[..., 3, :] - x[..., 0, :]
+    vol = np.einsum("tki,tki->tk", d1, np.cross(d2, d3)) / 6.0
+    area = np.zeros(vol.shape)
+    for a, b, c in TET_FACES:
+        area = np.maximum(area, 0.5 * np.linalg.norm(np.cross(x[..., b, :] - x[..., a, :], x[..., c, :] - x[..., a, :]),
+                                                     axis=-1))
+    return (3.0 * vol / area).min(axis=1)
+
+
+def improve_min_altitude(mesh: TetMesh, n_passes: int = 30, worst_fraction: float = 0.01,
+                         fixed_nodes: np.ndarray | None = None) -> TetMesh:
+    """Move the free nodes of the worst elements to raise the smallest element altitude (the explicit critical
+    step), keeping the boundary.
+
+    Optimisation-based smoothing (Freitag & Ollivier-Gooch 1997, here derivative-free): in each pass, every
+    interior node of the ``worst_fraction`` of elements with the smallest altitude (at least 20 elements) is moved
+    to the best of a set of trial positions -- along the normal of the face opposite it in the worst element of its
+    star (moving away from that face raises that element's altitude), towards the centroid of its neighbours and
+    along the coordinate axes, each at five step lengths -- when that raises the smallest altitude of the
+    elements around it. Boundary nodes (and ``fixed_nodes``) do not move, so the surface is unchanged; no element
+    inverts (a move must keep every altitude of the star above its current smallest). Connectivity is unchanged.
+
+    Returns a mesh with the same elements and moved interior nodes (m).
+    """
+    nodes = mesh.nodes.copy()
+    el = mesh.elements.astype(np.int64)
+    frozen = np.zeros(mesh.n_nodes, bool)
+    frozen[boundary_nodes(el)] = True
+    if fixed_nodes is not None:
+        frozen[np.asarray(fixed_nodes, np.int64)] = True
+    order = np.argsort(el.ravel(), kind="stable")
+    ptr = np.concatenate([[0], np.cumsum(np.bincount(el.ravel(), minlength=mesh.n_nodes))])
+    n_worst = max(20, int(worst_fraction * mesh.n_elements))
+    steps = np.array([1.0, 0.5, 0.25, 0.1, 0.03])
+    axes = np.vstack([np.eye(3), -np.eye(3)])
+    for _ in range(n_passes):
+        alt = element_min_altitudes(nodes, el)
+        worst = np.argsort(alt)[:n_worst]
+        candidates = np.unique(el[worst].ravel())
+        candidates = candidates[~frozen[candidates]]
+        moved = 0
+        for n in candidates[np.argsort([alt[order[ptr[c]:ptr[c + 1]] // 4].min() for c in candidates])]:
+            star = el[order[ptr[n]:ptr[n + 1]] // 4]
+            current = _star_min_altitudes(nodes, star, n, nodes[n][None])[0]
+            # the worst element of the star: the normal of the face opposite n, pointing at n
+            xs = nodes[star]
+            d1, d2, d3 = xs[:, 1] - xs[:, 0], xs[:, 2] - xs[:, 0], xs[:, 3] - xs[:, 0]
+            k = int(np.argmin(element_min_altitudes(nodes, star)))
+            face = [v for v in star[k] if v != n]
+            normal = np.cross(nodes[face[1]] - nodes[face[0]], nodes[face[2]] - nodes[face[0]])
+            normal /= np.linalg.norm(normal)
+            if np.dot(nodes[n] - nodes[face[0]], normal) < 0:
+                normal = -normal
+            centroid = nodes[np.unique(star)].mean(axis=0) - nodes[n]
+            scale = float(np.cbrt(np.abs(np.einsum("ki,ki->k", d1, np.cross(d2, d3))).mean()))
+            dirs = np.vstack([normal, centroid / max(np.linalg.norm(centroid), 1e-300), axes])
+            trials = nodes[n] + (0.3 * scale * steps[:, None, None] * dirs[None]).reshape(-1, 3)
+            values = _star_min_altitudes(nodes, star, n, trials)
+            best = int(np.argmax(values))
+            if values[best] > current * (1.0 + 1e-9):
+                nodes[n] = trials[best]
+                moved += 1
+        if moved == 0:
+            break
+    return TetMesh(nodes, mesh.elements.copy())
 
 
 # --------------------------------------------------------------------------------------------------
