@@ -172,10 +172,15 @@ def _star_min_altitudes(nodes: np.ndarray, star: np.ndarray, node: int, trials: 
     return (3.0 * vol / area).min(axis=1)
 
 
+#: :func:`improve_min_altitude` slides a boundary node only where all its boundary faces are within this angle of
+#: its vertex normal (not on edges or corners)
+SLIDE_FEATURE_ANGLE_DEG = 44.0
+
+
 def improve_min_altitude(mesh: TetMesh, n_passes: int = 30, worst_fraction: float = 0.01,
-                         fixed_nodes: np.ndarray | None = None) -> TetMesh:
+                         fixed_nodes: np.ndarray | None = None, boundary_slide_m: float = 0.0) -> TetMesh:
     """Move the free nodes of the worst elements to raise the smallest element altitude (the explicit critical
-    step), keeping the boundary.
+    step), keeping the boundary (or, with ``boundary_slide_m``, letting boundary nodes slide along it).
 
     Optimisation-based smoothing (Freitag & Ollivier-Gooch 1997, here derivative-free): in each pass, every
     interior node of the ``worst_fraction`` of elements with the smallest altitude (at least 20 elements) is moved
@@ -185,7 +190,15 @@ def improve_min_altitude(mesh: TetMesh, n_passes: int = 30, worst_fraction: floa
     elements around it. Boundary nodes (and ``fixed_nodes``) do not move, so the surface is unchanged; no element
     inverts (a move must keep every altitude of the star above its current smallest). Connectivity is unchanged.
 
-    Returns a mesh with the same elements and moved interior nodes (m).
+    Once interior moves are exhausted the smallest altitude is usually that of a thin surface triangle (an element
+    with three nodes on the boundary cannot be taller than its boundary face is wide). With ``boundary_slide_m > 0``
+    a boundary node of a worst element (not on a feature edge or corner, :data:`SLIDE_FEATURE_ANGLE_DEG`) may also
+    move, within the tangent plane of the original surface at that
+    node (area-weighted normal of its boundary faces), by at most ``boundary_slide_m`` from its original position:
+    the surface then moves off the original triangulation by about ``slide^2 / (2 R)`` for a local radius of
+    curvature ``R`` (second order), plus the change of its piecewise-linear chords.
+
+    Returns a mesh with the same elements and moved nodes (m).
     """
     nodes = mesh.nodes.copy()
     el = mesh.elements.astype(np.int64)
@@ -193,6 +206,26 @@ def improve_min_altitude(mesh: TetMesh, n_passes: int = 30, worst_fraction: floa
     frozen[boundary_nodes(el)] = True
     if fixed_nodes is not None:
         frozen[np.asarray(fixed_nodes, np.int64)] = True
+    boundary = frozen.copy()
+    if fixed_nodes is not None:
+        boundary[np.asarray(fixed_nodes, np.int64)] = False
+    slide = float(boundary_slide_m)
+    origin = mesh.nodes
+    if slide > 0:
+        faces = boundary_faces(el)
+        fn = np.cross(origin[faces[:, 1]] - origin[faces[:, 0]], origin[faces[:, 2]] - origin[faces[:, 0]])
+        vnormal = np.zeros_like(origin)
+        for k in range(3):
+            np.add.at(vnormal, faces[:, k], fn)
+        vnormal /= np.maximum(np.linalg.norm(vnormal, axis=1), 1e-300)[:, None]
+        # a node on a feature (edge, corner: a face normal more than SLIDE_FEATURE_ANGLE from the vertex normal)
+        # stays where it is: sliding it would cut the feature
+        fn /= np.maximum(np.linalg.norm(fn, axis=1), 1e-300)[:, None]
+        cos_min = np.ones(mesh.n_nodes)
+        for k in range(3):
+            np.minimum.at(cos_min, faces[:, k], np.einsum("ij,ij->i", fn, vnormal[faces[:, k]]))
+        smooth = boundary & (cos_min > np.cos(np.radians(SLIDE_FEATURE_ANGLE_DEG)))
+        frozen = frozen & ~smooth  # fixed_nodes and feature nodes stay where they are
     order = np.argsort(el.ravel(), kind="stable")
     ptr = np.concatenate([[0], np.cumsum(np.bincount(el.ravel(), minlength=mesh.n_nodes))])
     n_worst = max(20, int(worst_fraction * mesh.n_elements))
@@ -220,6 +253,14 @@ def improve_min_altitude(mesh: TetMesh, n_passes: int = 30, worst_fraction: floa
             scale = float(np.cbrt(np.abs(np.einsum("ki,ki->k", d1, np.cross(d2, d3))).mean()))
             dirs = np.vstack([normal, centroid / max(np.linalg.norm(centroid), 1e-300), axes])
             trials = nodes[n] + (0.3 * scale * steps[:, None, None] * dirs[None]).reshape(-1, 3)
+            if boundary[n]:
+                # tangent plane of the original surface, within boundary_slide_m of the original position
+                nv = vnormal[n]
+                off = trials - origin[n]
+                off -= np.outer(off @ nv, nv)
+                length = np.linalg.norm(off, axis=1)
+                off *= np.minimum(1.0, slide / np.maximum(length, 1e-300))[:, None]
+                trials = origin[n] + off
             values = _star_min_altitudes(nodes, star, n, trials)
             best = int(np.argmax(values))
             if values[best] > current * (1.0 + 1e-9):
@@ -444,7 +485,7 @@ def _altitude_to_edge_ratio(mesh: TetMesh) -> float:
 
 def brain_mesh(edge_length_fac: float = 0.21, smoothing_voxels: float = 4.0, decimate: float = 0.975,
                epsilon: float = 3.5e-3, stop_energy: float = 8.0, cache_dir: str | Path | None = None,
-               num_threads: int = 1) -> TetMesh:
+               num_threads: int = 1, boundary_slide_m: float | None = 0.5e-3) -> TetMesh:
     """Whole-brain tetrahedral mesh (MNI ICBM152-2009 space, metres) from data shipped in the nilearn wheel.
 
     Pipeline: (GM + WM probability) > 0.5 -> fill holes -> largest connected component -> pad 6 voxels ->
@@ -460,9 +501,15 @@ def brain_mesh(edge_length_fac: float = 0.21, smoothing_voxels: float = 4.0, dec
     ``cache_dir`` when given.
     Needs ``nibabel``, ``pyvista``, ``pytetwild`` and the nilearn wheel (the ``mesh`` extra; nilearn itself
     is not imported, its bundled template is read from the installed distribution, no network).
+
+    The fTetWild mesh is then improved by :func:`improve_min_altitude` (``boundary_slide_m``; None: not at all):
+    its worst elements are thin surface elements, so interior moves alone raise the smallest altitude by ~20 %,
+    and sliding surface nodes by at most 0.5 mm within their tangent planes gives ~1.8x (issue 17, one mesh: 1.09 ->
+    1.30 mm interior only, -> 1.99 mm with 0.5 mm slides; nodes then lie within 0.31 mm of the fTetWild surface,
+    below the template's 1 mm voxel and fTetWild's own envelope of ~0.9 mm; ~8 CPU s).
     """
-    key = hashlib.sha1(f"{edge_length_fac}-{smoothing_voxels}-{decimate}-{epsilon}-{stop_energy}".encode()
-                       ).hexdigest()[:10]
+    key = hashlib.sha1(f"{edge_length_fac}-{smoothing_voxels}-{decimate}-{epsilon}-{stop_energy}-{boundary_slide_m}"
+                       .encode()).hexdigest()[:10]
     if cache_dir is not None:
         cached = Path(cache_dir) / f"brain_mni_{key}.vtu"
         if cached.is_file():
@@ -512,6 +559,8 @@ def brain_mesh(edge_length_fac: float = 0.21, smoothing_voxels: float = 4.0, dec
             best, best_ratio = candidate, ratio
         if ratio >= SLIVER_FREE_ALTITUDE_RATIO:
             break
+    if boundary_slide_m is not None:
+        best = improve_min_altitude(best, boundary_slide_m=boundary_slide_m)
     mesh = reorder_for_locality(best)
     if cache_dir is not None:
         write_mesh(Path(cache_dir) / f"brain_mni_{key}.vtu", mesh)
