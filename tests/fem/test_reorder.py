@@ -109,3 +109,16 @@ def test_inverted_element_id_is_the_callers(kernel):
     with pytest.raises(ElementInversionError) as err:
         run_explicit(model, 1e-5, dt_s=1e-6, u0_m=u0, kernel=kernel)
     assert err.value.element in inverted
+
+
+def test_auto_threads_runs_small_meshes_on_one_thread():
+    from tissuemech.fem.tled import AUTO_THREADS_MIN_ELEMENTS, resolve_threads
+
+    mat = make_material("neo_hookean", {"mu": 1000.0}, poisson_ratio=0.45)
+    small = build_model(block_mesh((L, L, L), (2, 2, 2)), mat)
+    large = build_model(block_mesh((L, L, L), (6, 6, 6)), mat)
+    assert small.mesh.n_elements < AUTO_THREADS_MIN_ELEMENTS <= large.mesh.n_elements
+    assert resolve_threads(small, "auto") == 1 and resolve_threads(large, "auto") is None
+    assert resolve_threads(large, 2) == 2 and resolve_threads(large, None) is None
+    with pytest.raises(ValueError, match="n_threads"):
+        resolve_threads(small, "all")

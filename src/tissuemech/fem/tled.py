@@ -537,6 +537,22 @@ def numba_threads(n_threads: int | None):
         numba.set_num_threads(old)
 
 
+#: ``n_threads="auto"`` runs meshes with fewer elements than this on one thread (a parallel region costs a few
+#: microseconds of fork/join, and each step has 3-5; docs/fem_timing.md, issue 17: 2 threads were 0.96-1.25x the
+#: 1-thread rate at 384 tets and 1.2-1.4x at 1,296 tets on the 2-core VM)
+AUTO_THREADS_MIN_ELEMENTS = 1000
+
+
+def resolve_threads(model: TLEDModel, n_threads: int | str | None) -> int | None:
+    """The thread count a run uses: ``"auto"`` is 1 below :data:`AUTO_THREADS_MIN_ELEMENTS` elements, else numba's
+    current setting (None); an int or None is returned as given."""
+    if n_threads == "auto":
+        return 1 if model.kernel_mesh.n_elements < AUTO_THREADS_MIN_ELEMENTS else None
+    if isinstance(n_threads, str):
+        raise ValueError(f"n_threads must be an int, None or 'auto', not {n_threads!r}")
+    return n_threads
+
+
 def _check_status(model, status, bad, where, time_s):
     if status == STATUS_INVERTED:
         bad = int(model.element_order[bad])
@@ -562,7 +578,7 @@ def _kernel_arguments(model: TLEDModel) -> tuple[KernelMesh, KernelMaterial, Ker
 def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None, safety: float = 0.7,
                  damping_1_s: float = 0.0, n_outputs: int = 100, u0_m: np.ndarray | None = None,
                  v0_m_s: np.ndarray | None = None, state: tuple | None = None,
-                 n_threads: int | None = None, track_energy: bool = True, kernel: str = "auto") -> RunResult:
+                 n_threads: int | str | None = "auto", track_energy: bool = True, kernel: str = "auto") -> RunResult:
     """Explicit dynamic run from ``t = 0`` to ``t_end_s``.
 
     Parameters
@@ -572,7 +588,8 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
     n_outputs : approximate number of recorded outputs
     u0_m, v0_m_s : initial displacement (m) and velocity (m/s) fields
     state : viscoelastic ``RunResult.state`` to start from (default virgin)
-    n_threads : numba threads for this run (None: numba's current setting)
+    n_threads : numba threads for this run (None: numba's current setting; ``"auto"``: :func:`resolve_threads`, one
+        thread for small meshes)
     track_energy : accumulate the energy balance (``RunResult.energy_j``; a serial pass over the nodes per
         step, a few % of the step time)
     kernel : ``"auto"`` (the vectorised kernels of :mod:`.vectorised` for SVK and invariant laws, with or
@@ -587,7 +604,7 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
     u_old = u.copy() if v0_m_s is None else (u - dt * model.to_kernel_nodes(v0_m_s)).astype(model.dtype)
     h_state, s_prev, w_prev = _state(model, state)
     vec, fbuf, pbuf = _vector_setup(model, kernel, h_state, s_prev)
-    with numba_threads(n_threads):
+    with numba_threads(resolve_threads(model, n_threads)):
         res = explicit_loop(*_kernel_arguments(model), model.mass, h_state, s_prev, w_prev, dt, n_steps, damping_1_s,
                             out_every, u, u_old, fbuf, pbuf, bool(track_energy), vec)
     _vector_state_back(vec, h_state, s_prev)
@@ -603,7 +620,7 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
 
 def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, min_iter: int = 20,
                       max_iter: int = 200_000, u0_m: np.ndarray | None = None, state: tuple | None = None,
-                      n_threads: int | None = None, kernel: str = "auto") -> RunResult:
+                      n_threads: int | str | None = "auto", kernel: str = "auto") -> RunResult:
     """Static equilibrium by dynamic relaxation at each time of ``times_s`` (loads from the histories).
 
     Parameters
@@ -612,7 +629,7 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
         advance between them (quasi-static viscoelasticity: inertia neglected)
     tol_m : displacement error bound for the Joldes termination criterion (default 1e-6 of the smallest
         element altitude)
-    n_threads : numba threads for this run (None: numba's current setting)
+    n_threads : numba threads for this run (None: numba's current setting; ``"auto"``: see :func:`run_explicit`)
     kernel : ``"auto"``, ``"vectorised"`` or ``"generic"`` (see :func:`run_explicit`)
     """
     times = np.atleast_1d(np.asarray(times_s, float))
@@ -623,7 +640,7 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
         np.array(model.to_kernel_nodes(u0_m), dtype=model.dtype)
     h_state, s_prev, w_prev = _state(model, state)
     vec, fbuf, pbuf = _vector_setup(model, kernel, h_state, s_prev)
-    with numba_threads(n_threads):
+    with numba_threads(resolve_threads(model, n_threads)):
         res = dynamic_relaxation_loop(*_kernel_arguments(model), model.dr_mass, h_state, s_prev, w_prev, times, tol,
                                       min_iter, max_iter, u, fbuf, pbuf, vec)
     _vector_state_back(vec, h_state, s_prev)
