@@ -157,9 +157,10 @@ def reorder_for_locality(mesh: TetMesh) -> TetMesh:
     return TetMesh(mesh.nodes[node_order].copy(), elements.astype(np.int32))
 
 
-def _star_min_altitudes(nodes: np.ndarray, star: np.ndarray, node: int, trials: np.ndarray) -> np.ndarray:
-    """Smallest altitude (m, negative for an inverted element) of the elements ``star`` when ``node`` is moved to each
-    of the ``trials`` positions ``(n_trials, 3)``."""
+def _star_min_altitudes(nodes: np.ndarray, star: np.ndarray, node: int,
+                        trials: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Smallest altitude (m, negative for an inverted element) and largest aspect (longest edge / smallest altitude)
+    of the elements ``star`` when ``node`` is moved to each of the ``trials`` positions ``(n_trials, 3)``."""
     x = np.broadcast_to(nodes[star], (trials.shape[0], *star.shape, 3)).copy()
     moved = star == node
     x[:, moved] = np.repeat(trials, int(moved.sum()), axis=0).reshape(trials.shape[0], -1, 3)
@@ -169,7 +170,12 @@ def _star_min_altitudes(nodes: np.ndarray, star: np.ndarray, node: int, trials: 
     for a, b, c in TET_FACES:
         area = np.maximum(area, 0.5 * np.linalg.norm(np.cross(x[..., b, :] - x[..., a, :], x[..., c, :] - x[..., a, :]),
                                                      axis=-1))
-    return (3.0 * vol / area).min(axis=1)
+    alt = 3.0 * vol / area
+    longest = np.zeros(vol.shape)
+    for i in range(4):
+        for j in range(i + 1, 4):
+            longest = np.maximum(longest, np.linalg.norm(x[..., i, :] - x[..., j, :], axis=-1))
+    return alt.min(axis=1), (longest / np.abs(alt)).max(axis=1)
 
 
 #: :func:`improve_min_altitude` slides a boundary node only where all its boundary faces are within this angle of
@@ -187,7 +193,8 @@ def improve_min_altitude(mesh: TetMesh, n_passes: int = 30, worst_fraction: floa
     to the best of a set of trial positions -- along the normal of the face opposite it in the worst element of its
     star (moving away from that face raises that element's altitude), towards the centroid of its neighbours and
     along the coordinate axes, each at five step lengths -- when that raises the smallest altitude of the
-    elements around it. Boundary nodes (and ``fixed_nodes``) do not move, so the surface is unchanged; no element
+    elements around it, without making any element more elongated (longest edge / smallest altitude) than the
+    worst element of the input mesh. Boundary nodes (and ``fixed_nodes``) do not move, so the surface is unchanged; no element
     inverts (a move must keep every altitude of the star above its current smallest). Connectivity is unchanged.
 
     Once interior moves are exhausted the smallest altitude is usually that of a thin surface triangle (an element
@@ -229,6 +236,7 @@ def improve_min_altitude(mesh: TetMesh, n_passes: int = 30, worst_fraction: floa
     order = np.argsort(el.ravel(), kind="stable")
     ptr = np.concatenate([[0], np.cumsum(np.bincount(el.ravel(), minlength=mesh.n_nodes))])
     n_worst = max(20, int(worst_fraction * mesh.n_elements))
+    aspect_limit = mesh_quality(mesh)["max_aspect"]
     steps = np.array([1.0, 0.5, 0.25, 0.1, 0.03])
     axes = np.vstack([np.eye(3), -np.eye(3)])
     for _ in range(n_passes):
@@ -239,7 +247,7 @@ def improve_min_altitude(mesh: TetMesh, n_passes: int = 30, worst_fraction: floa
         moved = 0
         for n in candidates[np.argsort([alt[order[ptr[c]:ptr[c + 1]] // 4].min() for c in candidates])]:
             star = el[order[ptr[n]:ptr[n + 1]] // 4]
-            current = _star_min_altitudes(nodes, star, n, nodes[n][None])[0]
+            current, current_aspect = (v[0] for v in _star_min_altitudes(nodes, star, n, nodes[n][None]))
             # the worst element of the star: the normal of the face opposite n, pointing at n
             xs = nodes[star]
             d1, d2, d3 = xs[:, 1] - xs[:, 0], xs[:, 2] - xs[:, 0], xs[:, 3] - xs[:, 0]
@@ -261,7 +269,9 @@ def improve_min_altitude(mesh: TetMesh, n_passes: int = 30, worst_fraction: floa
                 length = np.linalg.norm(off, axis=1)
                 off *= np.minimum(1.0, slide / np.maximum(length, 1e-300))[:, None]
                 trials = origin[n] + off
-            values = _star_min_altitudes(nodes, star, n, trials)
+            values, aspects = _star_min_altitudes(nodes, star, n, trials)
+            # no element may become more elongated than the worst one of the mesh before (accuracy)
+            values[aspects > max(aspect_limit, current_aspect)] = -np.inf
             best = int(np.argmax(values))
             if values[best] > current * (1.0 + 1e-9):
                 nodes[n] = trials[best]
@@ -505,8 +515,8 @@ def brain_mesh(edge_length_fac: float = 0.21, smoothing_voxels: float = 4.0, dec
     The fTetWild mesh is then improved by :func:`improve_min_altitude` (``boundary_slide_m``; None: not at all):
     its worst elements are thin surface elements, so interior moves alone raise the smallest altitude by ~20 %,
     and sliding surface nodes by at most 0.5 mm within their tangent planes gives ~1.8x (issue 17, one mesh: 1.09 ->
-    1.30 mm interior only, -> 1.99 mm with 0.5 mm slides; nodes then lie within 0.31 mm of the fTetWild surface,
-    below the template's 1 mm voxel and fTetWild's own envelope of ~0.9 mm; ~8 CPU s).
+    1.30 mm interior only, -> 1.96 mm with 0.5 mm slides; nodes then lie within 0.31 mm of the fTetWild surface,
+    below the template's 1 mm voxel and fTetWild's own envelope of ~0.9 mm; largest aspect unchanged; ~10 CPU s).
     """
     key = hashlib.sha1(f"{edge_length_fac}-{smoothing_voxels}-{decimate}-{epsilon}-{stop_energy}-{boundary_slide_m}"
                        .encode()).hexdigest()[:10]
