@@ -167,6 +167,8 @@ class TLEDModel:
     mass: np.ndarray
     dr_mass: np.ndarray
     min_altitude_m: float
+    stable_step_s: float
+    added_mass_fraction: float
     chunk_lo: np.ndarray
     bc_nodes: np.ndarray
     bc_group: np.ndarray
@@ -229,7 +231,8 @@ def shape_derivatives(nodes: np.ndarray, elements: np.ndarray) -> tuple[np.ndarr
 def build_model(mesh: TetMesh, material: Material, groups: list[BoundaryGroup] | tuple = (),
                 contact: RigidContact | None = None, *, anp: bool = True, precision: str = "float64",
                 external_force_n: np.ndarray | None = None, external_time_s=(0.0,), external_scale=(1.0,),
-                n_chunks: int | None = None, reorder: bool | str = "auto") -> TLEDModel:
+                n_chunks: int | None = None, reorder: bool | str = "auto",
+                mass_scaling_step_s: float | None = None) -> TLEDModel:
     """Assemble the arrays of a TLED problem.
 
     Parameters
@@ -246,6 +249,11 @@ def build_model(mesh: TetMesh, material: Material, groups: list[BoundaryGroup] |
         the mean node-index span of the elements, :data:`REORDER_SPAN_GAIN`: a mesh in arbitrary order is
         renumbered, a structured or already renumbered one is kept). Node indices of ``groups``, ``contact`` and
         the rows of ``external_force_n`` are the caller's; the runs return the caller's order.
+    mass_scaling_step_s : selective mass scaling for explicit runs (None: none): every element whose own stable
+        step ``altitude / c_d`` is shorter than this gets the density that makes it this long,
+        ``rho (step c_d / altitude)^2``; the lumped masses include the added mass (``added_mass_fraction``) and
+        :func:`critical_time_step` follows. Only the smallest elements are affected; it changes the dynamics (not the
+        statics: dynamic relaxation has its own masses), see docs/fem_timing.md for its error.
     """
     dtype = np.dtype(precision)
     if dtype not in (np.float32, np.float64):
@@ -273,7 +281,13 @@ def build_model(mesh: TetMesh, material: Material, groups: list[BoundaryGroup] |
     vnode = np.bincount(elements.ravel(), weights=np.repeat(vol0, 4), minlength=nn)
     if np.any(vnode <= 0):
         raise ValueError("mesh has nodes not attached to any element")
-    mass = 0.25 * material.density_kg_m3 * vnode
+    c_d = np.sqrt(material.dilatational_modulus_pa / material.density_kg_m3)
+    rho_e = np.full(ne, material.density_kg_m3)
+    if mass_scaling_step_s is not None:
+        rho_e = rho_e * np.maximum(1.0, (float(mass_scaling_step_s) * c_d / alt) ** 2)
+    mass = np.bincount(elements.ravel(), weights=np.repeat(0.25 * rho_e * vol0, 4), minlength=nn)
+    stable_step = float(np.min(alt * np.sqrt(rho_e / material.density_kg_m3)) / c_d)
+    added_mass = float(np.sum((rho_e - material.density_kg_m3) * vol0) / np.sum(material.density_kg_m3 * vol0))
     # dynamic-relaxation mass: element density making the element's stable step 2 (lambda_max ~ 1)
     rho_dr = 4.0 * material.dilatational_modulus_pa / alt**2
     dr_mass = np.bincount(elements.ravel(), weights=np.repeat(0.25 * rho_dr * vol0, 4), minlength=nn)
@@ -345,6 +359,7 @@ def build_model(mesh: TetMesh, material: Material, groups: list[BoundaryGroup] |
         use_anp=bool(anp and material.kind != KIND_SVK), dtype=dtype,
         dndx=np.ascontiguousarray(dndx, dtype=dtype), vol0=np.ascontiguousarray(vol0, dtype=dtype),
         vnode=vnode, mass=mass, dr_mass=dr_mass, min_altitude_m=float(alt.min()), chunk_lo=chunk_lo,
+        stable_step_s=stable_step, added_mass_fraction=added_mass,
         bc_nodes=bc_nodes_a, bc_group=cat(bc_group, (0,), np.int64), bc_mask=bc_mask_a,
         bc_dir=cat(bc_dir, (0, 3), np.float64).reshape(-1, 3), bc_rotate=cat(bc_rotate, (0,), np.uint8),
         rot_center=rot_center, free=free, hist_time=hist_time, hist_vals=hist_vals,
@@ -359,9 +374,9 @@ REORDER_SPAN_GAIN = 2.0
 
 
 def critical_time_step(model: TLEDModel, safety: float = 0.7) -> float:
-    """``safety * min altitude / c_d`` with ``c_d = sqrt((kappa + 4 mu / 3) / rho)`` (s)."""
-    c_d = np.sqrt(model.material.dilatational_modulus_pa / model.material.density_kg_m3)
-    return float(safety * model.min_altitude_m / c_d)
+    """``safety * min altitude / c_d`` with ``c_d = sqrt((kappa + 4 mu / 3) / rho)`` (s); with mass scaling the
+    smallest element step ``altitude / c_d`` at each element's scaled density."""
+    return float(safety * model.stable_step_s)
 
 
 @dataclass(frozen=True)
