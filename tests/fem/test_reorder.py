@@ -118,7 +118,30 @@ def test_auto_threads_runs_small_meshes_on_one_thread():
     small = build_model(block_mesh((L, L, L), (2, 2, 2)), mat)
     large = build_model(block_mesh((L, L, L), (6, 6, 6)), mat)
     assert small.mesh.n_elements < AUTO_THREADS_MIN_ELEMENTS <= large.mesh.n_elements
-    assert resolve_threads(small, "auto") == 1 and resolve_threads(large, "auto") is None
+    assert resolve_threads(small, "auto") == 1
     assert resolve_threads(large, 2) == 2 and resolve_threads(large, None) is None
     with pytest.raises(ValueError, match="n_threads"):
         resolve_threads(small, "all")
+
+
+def test_auto_threads_leave_out_cpus_that_other_processes_keep_busy(monkeypatch):
+    import numba
+
+    from tissuemech.fem import tled
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("needs 2 numba threads")
+    large = build_model(block_mesh((L, L, L), (6, 6, 6)), make_material("neo_hookean", {"mu": 1000.0}, poisson_ratio=0.45))
+    monkeypatch.setattr(tled.os, "cpu_count", lambda: 2)
+    with tled.numba_threads(2):
+        monkeypatch.setattr(tled, "busy_cpus", lambda interval_s=0.05: 0.1)
+        assert tled.resolve_threads(large, "auto") is None  # both CPUs free: numba's 2 threads
+        monkeypatch.setattr(tled, "busy_cpus", lambda interval_s=0.05: 1.2)
+        assert tled.resolve_threads(large, "auto") == 1  # one CPU taken by another process
+        monkeypatch.setattr(tled, "busy_cpus", lambda interval_s=0.05: None)
+        assert tled.resolve_threads(large, "auto") is None  # no /proc/stat: numba's setting
+    with tled.numba_threads(1):
+        monkeypatch.setattr(tled, "busy_cpus", lambda interval_s=0.05: 0.0)
+        assert tled.resolve_threads(large, "auto") is None  # never more than numba's setting
+    busy = tled.busy_cpus(0.01)
+    assert busy is None or -0.1 <= busy <= 2.1

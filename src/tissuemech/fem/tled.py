@@ -33,6 +33,8 @@ double precision and stored in single precision (halves the memory traffic, whic
 """
 from __future__ import annotations
 
+import os
+import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
@@ -558,11 +560,40 @@ def numba_threads(n_threads: int | None):
 AUTO_THREADS_MIN_ELEMENTS = 1000
 
 
+def busy_cpus(interval_s: float = 0.02) -> float | None:
+    """CPUs kept busy by other processes, from ``/proc/stat`` over ``interval_s`` (this process sleeps meanwhile);
+    None where ``/proc/stat`` cannot be read."""
+    def sample():
+        with open("/proc/stat") as f:
+            vals = [int(v) for v in f.readline().split()[1:9]]
+        return sum(vals), vals[3] + vals[4]  # total, idle + iowait (jiffies)
+
+    try:
+        t0, i0 = sample()
+        time.sleep(interval_s)
+        t1, i1 = sample()
+    except (OSError, ValueError, IndexError):
+        return None
+    if t1 <= t0:
+        return None
+    return (os.cpu_count() or 1) * (1.0 - (i1 - i0) / (t1 - t0))
+
+
 def resolve_threads(model: TLEDModel, n_threads: int | str | None) -> int | None:
-    """The thread count a run uses: ``"auto"`` is 1 below :data:`AUTO_THREADS_MIN_ELEMENTS` elements, else numba's
-    current setting (None); an int or None is returned as given."""
+    """The thread count a run uses: ``"auto"`` is 1 below :data:`AUTO_THREADS_MIN_ELEMENTS` elements; above, numba's
+    current setting (None) unless other processes keep the CPUs busy (:func:`busy_cpus`, sampled once per run): then
+    only as many threads as CPUs are free, at least 1 (every parallel region waits for its slowest thread, and a
+    thread that shares its core with another process stalls each of the 3-5 regions of a step: on the 2-core VM at
+    load 3, 2 threads ran the brain at 8 Mupd/s, 1 thread at 23). An int or None is returned as given."""
     if n_threads == "auto":
-        return 1 if model.kernel_mesh.n_elements < AUTO_THREADS_MIN_ELEMENTS else None
+        if model.kernel_mesh.n_elements < AUTO_THREADS_MIN_ELEMENTS:
+            return 1
+        busy = busy_cpus()
+        wanted = numba.get_num_threads()
+        if busy is None or wanted <= 1:
+            return None
+        free = int(np.floor((os.cpu_count() or 1) - busy + 0.5))
+        return None if free >= wanted else max(1, free)
     if isinstance(n_threads, str):
         raise ValueError(f"n_threads must be an int, None or 'auto', not {n_threads!r}")
     return n_threads
