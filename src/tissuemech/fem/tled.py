@@ -16,6 +16,9 @@ Method (Miller, Joldes, Lance & Wittek 2007; Taylor, Cheng & Ourselin 2008; Nift
   element pressures ``kappa (J_e - 1)`` averaged to the nodes (reference-volume weighted) and back;
 * prescribed displacement / rotation-about-z histories on node groups (fixed nodes = zero history, flat
   punch = prescribed group), frictionless rigid sphere / cylinder contact by projection;
+* the mesh is renumbered for memory locality inside :func:`build_model` (reverse Cuthill-McKee; the runs take and
+  return the caller's numbering), optional selective mass scaling of the smallest elements, and
+  ``n_threads="auto"`` picks the thread count by mesh size and by the CPUs other processes leave free;
 * element inversion (``J <= 0``) or a non-finite state stops the run and raises
   :class:`ElementInversionError` with the element id, step and time.
 
