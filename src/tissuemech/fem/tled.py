@@ -591,9 +591,11 @@ def resolve_threads(model: TLEDModel, n_threads: int | str | None) -> int | None
     if n_threads == "auto":
         if model.kernel_mesh.n_elements < AUTO_THREADS_MIN_ELEMENTS:
             return 1
-        busy = busy_cpus()
         wanted = numba.get_num_threads()
-        if busy is None or wanted <= 1:
+        if wanted <= 1:
+            return None
+        busy = busy_cpus()
+        if busy is None:
             return None
         free = int(np.floor((os.cpu_count() or 1) - busy + 0.5))
         return None if free >= wanted else max(1, free)
