@@ -30,6 +30,7 @@ from pathlib import Path
 
 os.environ.setdefault("NUMBA_CACHE_DIR", str(Path(__file__).resolve().parents[1] / ".numba_cache"))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np  # noqa: E402
 
@@ -90,40 +91,19 @@ def machine() -> dict:
             "date_utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M")}
 
 
-def felupe_comparison(threads: int | None, cells=(8, 8, 4)) -> list[dict]:
+def felupe_comparison(threads: int | None, size: float = 1e3) -> list[dict]:
     """Wall time of the quasi-static square-punch indentation (10 % depth, neo-Hookean, nu = 0.45, plain
-    linear tets, 4 load steps) with FElupe and with TLED dynamic relaxation on the same mesh."""
-    import felupe as fem
+    linear tets, 4 load steps) with FElupe and with TLED dynamic relaxation on the same mesh (the ~1e3-tet case of
+    ``benchmarks/fem_felupe.py``, which compares 1e3-1e5 tets and several tolerances)."""
+    from fem_felupe import indentation_case, run_felupe, run_tled
 
-    from tissuemech.fem.tled import solve_quasistatic, translation_group
-
-    lx, lz, mu, nu, depth = 10e-3, 5e-3, 1000.0, 0.45, 0.5e-3
-    mesh = block_mesh((lx, lx, lz), cells)
-    x = mesh.nodes
-    punch = np.isclose(x[:, 2], lz) & (x[:, 0] <= 2.5e-3 + 1e-12) & (x[:, 1] <= 2.5e-3 + 1e-12)
-    bottom = np.isclose(x[:, 2], 0)
-    mat = make_material("neo_hookean", {"mu": mu}, poisson_ratio=nu)
-    t0 = time.perf_counter()
-    region = fem.RegionTetra(fem.Mesh(x.copy(), mesh.elements.astype(np.int64), "tetra"))
-    field = fem.FieldContainer([fem.Field(region, dim=3)])
-    bcs = {"bottom": fem.Boundary(field[0], mask=bottom), "punch": fem.Boundary(field[0], mask=punch, skip=(1, 1, 0))}
-    solid = fem.SolidBody(fem.NeoHooke(mu=mu, bulk=mat.bulk_modulus_pa), field)
-    step = fem.Step(items=[solid], ramp={bcs["punch"]: fem.math.linsteps([0, 1], num=4) * (-depth)}, boundaries=bcs)
-    fem.Job(steps=[step]).evaluate(verbose=0)
-    wall_fe = time.perf_counter() - t0
-    f_fe = solid.assemble.vector().toarray().reshape(-1, 3)[punch, 2].sum()
-    groups = [translation_group("punch", np.flatnonzero(punch), (0, 0, -1), [0, 1], [0, depth], dofs=(False, False, True)),
-              fixed_group("bottom", np.flatnonzero(bottom))]
-    model = build_model(mesh, mat, groups, anp=False)
-    with numba_threads(threads):
-        solve_quasistatic(model, [1.0])  # compile
-        t0 = time.perf_counter()
-        res = solve_quasistatic(model, [0.25, 0.5, 0.75, 1.0])
-        wall_tled = time.perf_counter() - t0
-    f_tled = res.reaction_force_n["punch"][-1, 2]
+    mesh, punch, bottom = indentation_case(size)
+    mat = make_material("neo_hookean", {"mu": 1000.0}, poisson_ratio=0.45)
+    wall_fe, _, f_fe = run_felupe(mesh, punch, bottom, mat.bulk_modulus_pa)
+    wall_tled, _, f_tled, iterations = run_tled(mesh, punch, bottom, mat, 1e-6, threads)
     return [{"solver": "FElupe 4 Newton load steps", "n_elements": mesh.n_elements, "wall_s": wall_fe, "force_n": f_fe},
             {"solver": "TLED dynamic relaxation, 4 increments", "n_elements": mesh.n_elements, "wall_s": wall_tled,
-             "force_n": f_tled, "dr_iterations": int(res.iterations.sum())}]
+             "force_n": f_tled, "dr_iterations": iterations}]
 
 
 def main(argv=None) -> None:

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from tissuemech.fem.mesh import (block_mesh, boundary_faces, cylinder_mesh, graded_layers, graded_ring_radii,
-                                 mesh_quality, read_mesh, reorder_for_locality, write_mesh)
+from tissuemech.fem.mesh import (block_mesh, boundary_faces, cylinder_mesh, element_volumes, graded_layers,
+                                 graded_ring_radii, mesh_quality, read_mesh, reorder_for_locality, write_mesh)
 
 
 def _face_area(nodes, faces):
@@ -93,3 +93,51 @@ def test_brain_mesh_from_wheel_data_is_sliver_free(tmp_path):
     assert 0.13 < extent[0] < 0.16 and 0.16 < extent[1] < 0.20  # left-right, anterior-posterior (m)
     again = fm.brain_mesh(cache_dir=tmp_path)  # from the VTU cache
     assert again.n_elements == mesh.n_elements and np.allclose(again.nodes, mesh.nodes)
+
+
+
+def _distorted_block(inner_shift_m, face_shift_m):
+    """A 3x3x3-cell block (1 mm cells) with the interior node at (1, 1, 1) mm and the surface node at (1, 1, 0) mm
+    (on the z = 0 face, not on an edge) shifted: thin elements around them."""
+    from tissuemech.fem.mesh import TetMesh
+
+    mesh = block_mesh((3e-3, 3e-3, 3e-3), (3, 3, 3))
+    x = mesh.nodes.copy()
+    inner = int(np.argmin(np.linalg.norm(x - 1e-3, axis=1)))
+    on_face = int(np.argmin(np.linalg.norm(x - np.array([1e-3, 1e-3, 0.0]), axis=1)))
+    x[inner] += inner_shift_m
+    x[on_face] += face_shift_m
+    assert element_volumes(x, mesh.elements).min() > 0
+    return TetMesh(x, mesh.elements), inner, on_face
+
+
+def test_improve_min_altitude_raises_the_worst_element_and_keeps_the_boundary():
+    from tissuemech.fem.mesh import boundary_nodes, element_min_altitudes, improve_min_altitude
+
+    regular = 1e-3 / np.sqrt(2.0)  # smallest altitude of the Kuhn tets of a 1 mm cell
+    # an interior node pushed towards a face of its star: interior moves alone repair it
+    mesh, inner, _ = _distorted_block(np.array([0.45e-3, 0.4e-3, 0.42e-3]), np.zeros(3))
+    bnodes = boundary_nodes(mesh.elements)
+    assert element_min_altitudes(mesh.nodes, mesh.elements).min() < 0.8 * regular
+    fixed = improve_min_altitude(mesh)
+    np.testing.assert_array_equal(fixed.nodes[bnodes], mesh.nodes[bnodes])
+    np.testing.assert_array_equal(fixed.elements, mesh.elements)
+    assert element_min_altitudes(fixed.nodes, fixed.elements).min() > 0.95 * regular
+    assert np.linalg.norm(fixed.nodes[inner] - mesh.nodes[inner]) > 0.1e-3
+    # a surface node pushed along its face almost onto an element edge: interior moves cannot repair that element,
+    # sliding the node within its face plane does, and the box stays the box
+    mesh, _, on_face = _distorted_block(np.zeros(3), np.array([0.8e-3, 0.75e-3, 0.0]))
+    before = element_min_altitudes(mesh.nodes, mesh.elements).min()
+    assert before < 0.3 * regular
+    assert element_min_altitudes(improve_min_altitude(mesh).nodes, mesh.elements).min() < 1.1 * before
+    slid = improve_min_altitude(mesh, boundary_slide_m=0.9e-3)
+    assert element_min_altitudes(slid.nodes, slid.elements).min() > 0.9 * regular
+    assert np.linalg.norm(slid.nodes[on_face] - mesh.nodes[on_face]) > 0.3e-3
+    assert np.linalg.norm(slid.nodes - mesh.nodes, axis=1)[bnodes].max() <= 0.9e-3 + 1e-15
+    x0, x1 = mesh.nodes[bnodes], slid.nodes[bnodes]
+    on_plane = np.isclose(x0, 0.0, atol=1e-15) | np.isclose(x0, 3e-3, rtol=1e-12)
+    np.testing.assert_array_equal(x1[on_plane], x0[on_plane])  # boundary nodes stay on their face planes
+    feature = on_plane.sum(axis=1) >= 2
+    np.testing.assert_array_equal(x1[feature], x0[feature])  # edge and corner nodes do not move
+    assert element_volumes(slid.nodes, slid.elements).sum() == pytest.approx(27e-9, rel=1e-12)
+    assert element_volumes(slid.nodes, slid.elements).min() > 0

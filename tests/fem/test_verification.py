@@ -120,7 +120,7 @@ def test_damped_loaded_dynamic_run_balances_energy(anp):
                         external_scale=[0, 1, 1])
     v0 = np.zeros_like(x)
     v0[:, 1] = 0.02 * x[:, 2] / L
-    ke0 = 0.5 * np.sum(model.mass * (v0**2).sum(1))
+    ke0 = 0.5 * np.sum(model.lumped_mass_kg * (v0**2).sum(1))
     dt = critical_time_step(model, 0.5)
     res = run_explicit(model, 0.03, dt_s=dt, damping_1_s=alpha, v0_m_s=v0, n_outputs=30)
     e = res.energy_j

@@ -36,6 +36,18 @@ KernelLoads = namedtuple("KernelLoads", "bc_nodes bc_group bc_mask bc_dir bc_rot
 KernelLoads.__doc__ = """Boundary groups and their histories, free dofs, external load, rigid contact."""
 
 
+@njit(cache=True, inline="always")
+def YES():
+    """``True`` typed as ``bool``, not as a literal (see :func:`_internal_forces`)."""
+    return np.bool_(True)
+
+
+@njit(cache=True, inline="always")
+def NO():
+    """``False`` typed as ``bool``, not as a literal (see :func:`_internal_forces`)."""
+    return np.bool_(False)
+
+
 # --------------------------------------------------------------------------------------------------
 # compiled passes
 # --------------------------------------------------------------------------------------------------
@@ -261,7 +273,7 @@ def _first_bad(bad):
 @njit(cache=True)
 def _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind, w1fn, w2fn,
                      wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f, h_state, s_prev, bfn, branch_params, w_prev, commit, bad,
-                     vec, reduce=True):
+                     vec, reduce):
     """One complete internal-force evaluation (optional ANP passes + element pass + optional reduction
     into ``fint``; without it the forces stay in ``fbuf`` for a fused node pass).
 
@@ -269,6 +281,10 @@ def _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_nod
     (:func:`.vectorised.internal_forces`, QLV states in the workspace) compute the forces instead and
     ``fbuf`` is not used; without ``reduce`` they stay as element forces in the workspace for
     :func:`_cd_node_pass`. Returns the id of an inverted element or -1.
+
+    The loops pass ``commit`` and ``reduce`` as :data:`NO`/:data:`YES` (typed ``bool``), never as literals: numba
+    compiles a separate specialisation of a function for every literal value of an argument, and of everything
+    it calls with it (with literals this stack was compiled three times, issue 17).
     """
     if vec[0]:
         return vectorised.internal_forces(u, vec[1], vec[2], vec[3], vec[4], vec[5], w1fn, w2fn, params,
@@ -501,7 +517,7 @@ def explicit_loop(mesh, mat, laws, loads, mass, h_state, s_prev, w_prev, dt, n_s
         t = step * dt
         bad_e = _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind,
                                  w1fn, w2fn, wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f, h_state,
-                                 s_prev, bfn, branch_params, w_prev, True, bad, vec, False)
+                                 s_prev, bfn, branch_params, w_prev, YES(), bad, vec, NO())
         if bad_e >= 0:
             return STATUS_INVERTED, bad_e, step, u, u_old, out_t[:k_out], out_force[:k_out], \
                 out_torque[:k_out], out_contact[:k_out], out_ke[:k_out], out_energy[:k_out]
@@ -561,6 +577,10 @@ def dynamic_relaxation_loop(mesh, mat, laws, loads, dr_mass, h_state, s_prev, w_
     viscoelastic states advance between consecutive times with ``dt = times[k] - times[k-1]`` and are
     committed after convergence. Returns status, failing increment, iterations used per increment and
     the reactions/torques/contact forces per increment.
+
+    Each increment starts from the linear extrapolation of the two previous equilibria in time (free dofs; the
+    unloaded reference state at ``t = 0`` counts as one when the run starts from it), so that only the nonlinear
+    part of the change is relaxed (issue 17: about half the iterations of the later increments).
     """
     # the unpacking and workspace below repeat the other time loop's: each loop is one compiled function, and a
     # helper returning some twenty arrays would be no clearer
@@ -592,8 +612,28 @@ def dynamic_relaxation_loop(mesh, mat, laws, loads, dr_mass, h_state, s_prev, w_
     prony_f = np.empty(nterm)
     lam_max = 1.0
     t_prev = 0.0
+    # the previous equilibrium before u (for the extrapolated start): the reference state at t = 0 when the run
+    # starts there, unloaded (zero displacement, zero histories at t = 0)
+    u_eq = u.copy()
+    t_eq = 0.0
+    lam_prev = lam_max
+    _history_values(0.0, hist_time, hist_vals, hv)
+    have_eq = times.size > 0 and np.all(u == 0.0) and np.all(hv[:2 * n_groups + 1] == 0.0) \
+        and (hv[2 * n_groups + 1] == 0.0 or np.all(fext_ref == 0.0))
     for k in range(nk):
         dt = times[k] - t_prev
+        if have_eq and t_prev > t_eq and dt > 0.0:
+            r = dt / (t_prev - t_eq)
+            for n in range(nn):
+                for i in range(3):
+                    du = u[n, i] - u_eq[n, i]
+                    u_eq[n, i] = u[n, i]
+                    if free[n, i]:
+                        u[n, i] += r * du
+        else:
+            u_eq[:] = u
+        t_eq = t_prev
+        have_eq = True
         for i in range(nterm):
             if dt > 0.0:
                 prony_e[i], prony_f[i] = relaxation_factors(dt, prony_tau[i])
@@ -614,7 +654,7 @@ def dynamic_relaxation_loop(mesh, mat, laws, loads, dr_mass, h_state, s_prev, w_
         while it < max_iter:
             bad_e = _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind,
                                      w1fn, w2fn, wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f,
-                                     h_state, s_prev, bfn, branch_params, w_prev, False, bad, vec)
+                                     h_state, s_prev, bfn, branch_params, w_prev, NO(), bad, vec, YES())
             if bad_e >= 0:
                 return STATUS_INVERTED, bad_e, k, u, iters, out_force, out_torque, out_contact
             if it > 0:
@@ -645,7 +685,9 @@ def dynamic_relaxation_loop(mesh, mat, laws, loads, dr_mass, h_state, s_prev, w_
                         dmax = d
             if not np.isfinite(dmax):
                 return STATUS_NOT_FINITE, -1, k, u, iters, out_force, out_torque, out_contact
-            sq = np.sqrt(lam_min / lam_max)
+            # the error bound takes the smaller of this increment's estimate and the previous increment's final one:
+            # from an extrapolated start the first Rayleigh quotients see only high modes and would stop too early
+            sq = np.sqrt(min(lam_min, lam_prev) / lam_max)
             rho = (1.0 - sq) / (1.0 + sq)
             err = rho / (1.0 - rho) * dmax
             fint_prev, fint = fint, fint_prev
@@ -659,12 +701,13 @@ def dynamic_relaxation_loop(mesh, mat, laws, loads, dr_mass, h_state, s_prev, w_
             else:
                 n_ok = 0
         iters[k] = it
+        lam_prev = lam_min
         if not converged:
             return STATUS_NOT_CONVERGED, -1, k, u, iters, out_force, out_torque, out_contact
         # commit viscoelastic states at the converged configuration and record reactions
         _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind, w1fn, w2fn,
-                         wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f, h_state, s_prev, bfn, branch_params, w_prev, True, bad,
-                         vec)
+                         wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f, h_state, s_prev, bfn, branch_params, w_prev, YES(), bad,
+                         vec, YES())
         _reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_g, torque_g)
         _contact_force(fint, contact_nodes, in_contact, cforce)
         out_force[k] = force_g

@@ -207,12 +207,12 @@ class DeviceRun:
         if np.any(model.fext_ref != 0):
             raise NotImplementedError("the CUDA kernel has no external nodal forces (use the CPU)")
         ft = model.dtype
-        nn, ne = model.mesh.n_nodes, model.mesh.n_elements
+        nn, ne = model.kernel_mesh.n_nodes, model.kernel_mesh.n_elements
         self.model, self.dt, self.k = model, float(dt_s), 0
         law = m.law
         self.kernel = _make_kernel(law.dw_di1.py_func, law.dw_di2.py_func, int(m.kind), bool(model.use_anp), ft.name)
         # node -> (element, corner) CSR; slot = 3 a ne + e addresses fel[3a, e] in a flat view
-        el = model.mesh.elements.astype(np.int64)
+        el = model.kernel_mesh.elements.astype(np.int64)
         corner = np.tile(np.arange(4), ne)
         elem = np.repeat(np.arange(ne), 4)
         order = np.argsort(el.ravel(), kind="stable")
@@ -232,19 +232,20 @@ class DeviceRun:
         times = self.dt * np.arange(n_steps_max + 2)
         bc_table = np.stack([np.interp(times, model.hist_time, row) for row in model.hist_vals[: 2 * ng]], axis=1)
         U = np.zeros((3, nn, 3), ft)
-        u0 = np.zeros((nn, 3)) if u0_m is None else np.asarray(u0_m, float)
+        # the model's kernel numbering (build_model may renumber the caller's mesh for locality)
+        u0 = np.zeros((nn, 3)) if u0_m is None else model.to_kernel_nodes(np.asarray(u0_m, float))
         U[0] = u0
-        U[2] = u0 if v0_m_s is None else u0 - self.dt * np.asarray(v0_m_s, float)
+        U[2] = u0 if v0_m_s is None else u0 - self.dt * model.to_kernel_nodes(np.asarray(v0_m_s, float))
         to = cuda.to_device
         self.d = dict(
-            U=to(U), elements=to(np.ascontiguousarray(model.mesh.elements)),
+            U=to(U), elements=to(np.ascontiguousarray(model.kernel_mesh.elements)),
             dndx=to(np.ascontiguousarray(model.dndx.T, dtype=ft)), vol0=to(model.vol0.astype(ft)),
             fel=cuda.device_array((12, ne), ft), p_elem=cuda.device_array(ne, ft), p_node=cuda.device_array(nn, ft),
             vnode=to(model.vnode.astype(ft)), node_ptr=to(node_ptr), node_slot=to(node_slot),
             coef_a=to(a.astype(ft)), coef_b=to(b.astype(ft)), coef_c=to(c.astype(ft)), free=to(model.free),
             bc_group=to(bc_group), bc_dir=to(bc_dir.astype(ft)), bc_rotate=to(bc_rotate),
             rot_center=to(model.rot_center.astype(ft)), bc_table=to(bc_table.astype(ft)),
-            X=to(model.mesh.nodes.astype(ft)), params=to(m.params.astype(np.float64)))
+            X=to(model.kernel_mesh.nodes.astype(ft)), params=to(m.params.astype(np.float64)))
         self.kappa = float(m.bulk_modulus_pa)
         self.threads = int(threads_per_block)
         self.blocks = max(1, (max(ne, nn) + self.threads - 1) // self.threads)
@@ -281,9 +282,10 @@ class DeviceRun:
         cuda.synchronize()
 
     def displacement(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(u, u_previous)`` at the current step (float64 copies)."""
+        """``(u, u_previous)`` at the current step (float64 copies, the caller's node order)."""
         U = self.d["U"].copy_to_host()
-        return U[self.k % 3].astype(float), U[(self.k + 2) % 3].astype(float)
+        return (self.model.to_caller_nodes(U[self.k % 3].astype(float)),
+                self.model.to_caller_nodes(U[(self.k + 2) % 3].astype(float)))
 
 
 def _is_simulator() -> bool:

@@ -68,7 +68,7 @@ def rheometer_sample_mesh(radius_m: float = RHEOMETER_RADIUS_M, gap_m: float = R
 def rheometer_torsion(card: Mapping, time_s, rim_strain, *, radius_m: float = RHEOMETER_RADIUS_M,
                       gap_m: float = RHEOMETER_GAP_M, element_size_m: float = 1.5e-3,
                       test: str = "torsion", anp: bool = True,
-                      vtu_path: str | Path | None = None, n_threads: int | None = None) -> xr.Dataset:
+                      vtu_path: str | Path | None = None, n_threads: int | str | None = "auto") -> xr.Dataset:
     """Torsion of the bonded cylindrical sample between parallel plates, driven by a rim-strain history.
 
     The lower plate is fixed, the upper plate rotates by ``theta = gamma_R gap / R`` at fixed gap. Torque is
@@ -83,7 +83,8 @@ def rheometer_torsion(card: Mapping, time_s, rim_strain, *, radius_m: float = RH
     radius_m, gap_m : sample geometry (default 25 mm plate, 2 mm gap)
     element_size_m : target element edge (m)
     vtu_path : optional VTU file for the final displacement field
-    n_threads : numba threads (None: numba's setting; 1 is faster on a loaded shared machine)
+    n_threads : numba threads (None: numba's setting; "auto": one for small meshes, see
+        :func:`tissuemech.fem.tled.resolve_threads`; 1 is faster on a loaded shared machine)
 
     Returns
     -------
@@ -117,7 +118,7 @@ def flat_punch_indentation(card: Mapping, punch_diameter_m: float = 8e-3, max_de
                            speed_m_s: float = 1e-4, *, sample_radius_m: float = 20e-3, sample_height_m: float = 10e-3,
                            element_size_m: float | None = None, growth: float = 1.3, bonded_punch: bool = False,
                            n_increments: int = 20, anp: bool = True,
-                           vtu_path: str | Path | None = None, n_threads: int | None = None) -> xr.Dataset:
+                           vtu_path: str | Path | None = None, n_threads: int | str | None = "auto") -> xr.Dataset:
     """Rigid flat cylindrical punch pressed at constant speed into a sample bonded to a rigid base.
 
     The sample is a cylinder (radius ``sample_radius_m``) so that the punch edge coincides with a node ring;
@@ -165,7 +166,7 @@ def brain_indentation(card: Mapping, punch_diameter_m: float = 8e-3, max_depth_m
                       speed_m_s: float = 1e-4, *, mesh: TetMesh | None = None, cache_dir: str | Path | None = None,
                       support_height_m: float = 25e-3, n_increments: int = 10,
                       anp: bool = True, vtu_path: str | Path | None = None,
-                      n_threads: int | None = None) -> xr.Dataset:
+                      n_threads: int | str | None = "auto") -> xr.Dataset:
     """Rigid flat cylindrical punch pressed vertically into the top of the MNI brain geometry.
 
     The punch (axis -z, frictionless, contact by projection) starts touching the highest surface node and

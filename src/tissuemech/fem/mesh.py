@@ -117,23 +117,168 @@ def boundary_nodes(elements: np.ndarray) -> np.ndarray:
     return np.unique(boundary_faces(elements))
 
 
+def locality_order(elements: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """Reverse Cuthill-McKee node order and the element order sorted by each element's smallest new node.
+
+    Returns
+    -------
+    node_order : (n_nodes,) old node index of every new node (``new nodes = nodes[node_order]``)
+    element_order : (n_elements,) old element index of every new element
+    """
+    e = np.asarray(elements, dtype=np.int64)
+    rows = np.repeat(e, 4, axis=1).ravel()
+    cols = np.tile(e, (1, 4)).ravel()
+    graph = coo_matrix((np.ones(rows.size, dtype=np.int8), (rows, cols)), shape=(n_nodes, n_nodes)).tocsr()
+    node_order = np.asarray(reverse_cuthill_mckee(graph, symmetric_mode=True), dtype=np.int64)
+    new_index = np.empty(n_nodes, dtype=np.int64)
+    new_index[node_order] = np.arange(n_nodes)
+    element_order = np.argsort(new_index[e].min(axis=1), kind="stable")
+    return node_order, element_order
+
+
+def mean_element_span(elements: np.ndarray) -> float:
+    """Mean over the elements of (largest - smallest node index): how far apart in memory the nodes that one
+    element gathers lie (the bandwidth that :func:`locality_order` reduces)."""
+    e = np.asarray(elements, dtype=np.int64)
+    return float(np.mean(e.max(axis=1) - e.min(axis=1))) if e.size else 0.0
+
+
 def reorder_for_locality(mesh: TetMesh) -> TetMesh:
-    """Renumber nodes by reverse Cuthill-McKee and sort elements by their smallest node.
+    """Renumber nodes by reverse Cuthill-McKee and sort elements by their smallest node
+    (:func:`locality_order`).
 
     Neighbouring elements then touch neighbouring memory, which is what the gather/scatter of the explicit
     element pass needs (cache reuse on CPUs, coalescing on GPUs). The geometry is unchanged.
     """
-    n = mesh.n_nodes
-    e = mesh.elements.astype(np.int64)
-    rows = np.repeat(e, 4, axis=1).ravel()
-    cols = np.tile(e, (1, 4)).ravel()
-    graph = coo_matrix((np.ones(rows.size, dtype=np.int8), (rows, cols)), shape=(n, n)).tocsr()
-    perm = reverse_cuthill_mckee(graph, symmetric_mode=True)
-    new_index = np.empty(n, dtype=np.int64)
-    new_index[perm] = np.arange(n)
-    elements = new_index[e]
-    elements = elements[np.argsort(elements.min(axis=1), kind="stable")]
-    return TetMesh(mesh.nodes[perm].copy(), elements.astype(np.int32))
+    node_order, element_order = locality_order(mesh.elements, mesh.n_nodes)
+    new_index = np.empty(mesh.n_nodes, dtype=np.int64)
+    new_index[node_order] = np.arange(mesh.n_nodes)
+    elements = new_index[mesh.elements.astype(np.int64)[element_order]]
+    return TetMesh(mesh.nodes[node_order].copy(), elements.astype(np.int32))
+
+
+def _star_min_altitudes(nodes: np.ndarray, star: np.ndarray, node: int,
+                        trials: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Smallest altitude (m, negative for an inverted element) and largest aspect (longest edge / smallest altitude)
+    of the elements ``star`` when ``node`` is moved to each of the ``trials`` positions ``(n_trials, 3)``."""
+    x = np.broadcast_to(nodes[star], (trials.shape[0], *star.shape, 3)).copy()
+    moved = star == node
+    x[:, moved] = np.repeat(trials, int(moved.sum()), axis=0).reshape(trials.shape[0], -1, 3)
+    d1, d2, d3 = x[..., 1, :] - x[..., 0, :], x[..., 2, :] - x[..., 0, :], x[..., 3, :] - x[..., 0, :]
+    vol = np.einsum("tki,tki->tk", d1, np.cross(d2, d3)) / 6.0
+    area = np.zeros(vol.shape)
+    for a, b, c in TET_FACES:
+        area = np.maximum(area, 0.5 * np.linalg.norm(np.cross(x[..., b, :] - x[..., a, :], x[..., c, :] - x[..., a, :]),
+                                                     axis=-1))
+    alt = 3.0 * vol / area
+    longest = np.zeros(vol.shape)
+    for i in range(4):
+        for j in range(i + 1, 4):
+            longest = np.maximum(longest, np.linalg.norm(x[..., i, :] - x[..., j, :], axis=-1))
+    return alt.min(axis=1), (longest / np.abs(alt)).max(axis=1)
+
+
+#: :func:`improve_min_altitude` slides a boundary node only where all its boundary faces are within this angle of
+#: its vertex normal (not on edges or corners)
+SLIDE_FEATURE_ANGLE_DEG = 44.0
+
+
+def improve_min_altitude(mesh: TetMesh, n_passes: int = 30, worst_fraction: float = 0.01,
+                         fixed_nodes: np.ndarray | None = None, boundary_slide_m: float = 0.0) -> TetMesh:
+    """Move the free nodes of the worst elements to raise the smallest element altitude (the explicit critical
+    step), keeping the boundary (or, with ``boundary_slide_m``, letting boundary nodes slide along it).
+
+    Optimisation-based smoothing (Freitag & Ollivier-Gooch 1997, here derivative-free): in each pass, every
+    interior node of the ``worst_fraction`` of elements with the smallest altitude (at least 20 elements) is moved
+    to the best of a set of trial positions -- along the normal of the face opposite it in the worst element of its
+    star (moving away from that face raises that element's altitude), towards the centroid of its neighbours and
+    along the coordinate axes, each at five step lengths -- when that raises the smallest altitude of the
+    elements around it, without making any element more elongated (longest edge / smallest altitude) than the
+    worst element of the input mesh. Boundary nodes (and ``fixed_nodes``) do not move, so the surface is unchanged; no element
+    inverts (a move must keep every altitude of the star above its current smallest). Connectivity is unchanged.
+
+    Once interior moves are exhausted the smallest altitude is usually that of a thin surface triangle (an element
+    with three nodes on the boundary cannot be taller than its boundary face is wide). With ``boundary_slide_m > 0``
+    a boundary node of a worst element (not on a feature edge or corner, :data:`SLIDE_FEATURE_ANGLE_DEG`) may also
+    move, within the tangent plane of the original surface at that
+    node (area-weighted normal of its boundary faces), by at most ``boundary_slide_m`` from its original position:
+    the surface then moves off the original triangulation by about ``slide^2 / (2 R)`` for a local radius of
+    curvature ``R`` (second order), plus the change of its piecewise-linear chords.
+
+    Returns a mesh with the same elements and moved nodes (m).
+    """
+    nodes = mesh.nodes.copy()
+    el = mesh.elements.astype(np.int64)
+    frozen = np.zeros(mesh.n_nodes, bool)
+    frozen[boundary_nodes(el)] = True
+    if fixed_nodes is not None:
+        frozen[np.asarray(fixed_nodes, np.int64)] = True
+    boundary = frozen.copy()
+    if fixed_nodes is not None:
+        boundary[np.asarray(fixed_nodes, np.int64)] = False
+    slide = float(boundary_slide_m)
+    origin = mesh.nodes
+    if slide > 0:
+        faces = boundary_faces(el)
+        fn = np.cross(origin[faces[:, 1]] - origin[faces[:, 0]], origin[faces[:, 2]] - origin[faces[:, 0]])
+        vnormal = np.zeros_like(origin)
+        for k in range(3):
+            np.add.at(vnormal, faces[:, k], fn)
+        vnormal /= np.maximum(np.linalg.norm(vnormal, axis=1), 1e-300)[:, None]
+        # a node on a feature (edge, corner: a face normal more than SLIDE_FEATURE_ANGLE from the vertex normal)
+        # stays where it is: sliding it would cut the feature
+        fn /= np.maximum(np.linalg.norm(fn, axis=1), 1e-300)[:, None]
+        cos_min = np.ones(mesh.n_nodes)
+        for k in range(3):
+            np.minimum.at(cos_min, faces[:, k], np.einsum("ij,ij->i", fn, vnormal[faces[:, k]]))
+        smooth = boundary & (cos_min > np.cos(np.radians(SLIDE_FEATURE_ANGLE_DEG)))
+        frozen = frozen & ~smooth  # fixed_nodes and feature nodes stay where they are
+    order = np.argsort(el.ravel(), kind="stable")
+    ptr = np.concatenate([[0], np.cumsum(np.bincount(el.ravel(), minlength=mesh.n_nodes))])
+    n_worst = max(20, int(worst_fraction * mesh.n_elements))
+    aspect_limit = mesh_quality(mesh)["max_aspect"]
+    steps = np.array([1.0, 0.5, 0.25, 0.1, 0.03])
+    axes = np.vstack([np.eye(3), -np.eye(3)])
+    for _ in range(n_passes):
+        alt = element_min_altitudes(nodes, el)
+        worst = np.argsort(alt)[:n_worst]
+        candidates = np.unique(el[worst].ravel())
+        candidates = candidates[~frozen[candidates]]
+        moved = 0
+        for n in candidates[np.argsort([alt[order[ptr[c]:ptr[c + 1]] // 4].min() for c in candidates])]:
+            star = el[order[ptr[n]:ptr[n + 1]] // 4]
+            current, current_aspect = (v[0] for v in _star_min_altitudes(nodes, star, n, nodes[n][None]))
+            # the worst element of the star: the normal of the face opposite n, pointing at n
+            xs = nodes[star]
+            d1, d2, d3 = xs[:, 1] - xs[:, 0], xs[:, 2] - xs[:, 0], xs[:, 3] - xs[:, 0]
+            k = int(np.argmin(element_min_altitudes(nodes, star)))
+            face = [v for v in star[k] if v != n]
+            normal = np.cross(nodes[face[1]] - nodes[face[0]], nodes[face[2]] - nodes[face[0]])
+            normal /= np.linalg.norm(normal)
+            if np.dot(nodes[n] - nodes[face[0]], normal) < 0:
+                normal = -normal
+            centroid = nodes[np.unique(star)].mean(axis=0) - nodes[n]
+            scale = float(np.cbrt(np.abs(np.einsum("ki,ki->k", d1, np.cross(d2, d3))).mean()))
+            dirs = np.vstack([normal, centroid / max(np.linalg.norm(centroid), 1e-300), axes])
+            trials = nodes[n] + (0.3 * scale * steps[:, None, None] * dirs[None]).reshape(-1, 3)
+            if boundary[n]:
+                # tangent plane of the original surface, within boundary_slide_m of the original position
+                nv = vnormal[n]
+                off = trials - origin[n]
+                off -= np.outer(off @ nv, nv)
+                length = np.linalg.norm(off, axis=1)
+                off *= np.minimum(1.0, slide / np.maximum(length, 1e-300))[:, None]
+                trials = origin[n] + off
+            values, aspects = _star_min_altitudes(nodes, star, n, trials)
+            # no element may become more elongated than the worst one of the mesh before (accuracy)
+            values[aspects > max(aspect_limit, current_aspect)] = -np.inf
+            best = int(np.argmax(values))
+            if values[best] > current * (1.0 + 1e-9):
+                nodes[n] = trials[best]
+                moved += 1
+        if moved == 0:
+            break
+    return TetMesh(nodes, mesh.elements.copy())
 
 
 # --------------------------------------------------------------------------------------------------
@@ -350,7 +495,7 @@ def _altitude_to_edge_ratio(mesh: TetMesh) -> float:
 
 def brain_mesh(edge_length_fac: float = 0.21, smoothing_voxels: float = 4.0, decimate: float = 0.975,
                epsilon: float = 3.5e-3, stop_energy: float = 8.0, cache_dir: str | Path | None = None,
-               num_threads: int = 1) -> TetMesh:
+               num_threads: int = 1, boundary_slide_m: float | None = 0.5e-3) -> TetMesh:
     """Whole-brain tetrahedral mesh (MNI ICBM152-2009 space, metres) from data shipped in the nilearn wheel.
 
     Pipeline: (GM + WM probability) > 0.5 -> fill holes -> largest connected component -> pad 6 voxels ->
@@ -366,9 +511,15 @@ def brain_mesh(edge_length_fac: float = 0.21, smoothing_voxels: float = 4.0, dec
     ``cache_dir`` when given.
     Needs ``nibabel``, ``pyvista``, ``pytetwild`` and the nilearn wheel (the ``mesh`` extra; nilearn itself
     is not imported, its bundled template is read from the installed distribution, no network).
+
+    The fTetWild mesh is then improved by :func:`improve_min_altitude` (``boundary_slide_m``; None: not at all):
+    its worst elements are thin surface elements, so interior moves alone raise the smallest altitude by ~20 %,
+    and sliding surface nodes by at most 0.5 mm within their tangent planes gives ~1.8x (issue 17, one mesh: 1.09 ->
+    1.30 mm interior only, -> 1.96 mm with 0.5 mm slides; nodes then lie within 0.31 mm of the fTetWild surface,
+    below the template's 1 mm voxel and fTetWild's own envelope of ~0.9 mm; largest aspect unchanged; ~10 CPU s).
     """
-    key = hashlib.sha1(f"{edge_length_fac}-{smoothing_voxels}-{decimate}-{epsilon}-{stop_energy}".encode()
-                       ).hexdigest()[:10]
+    key = hashlib.sha1(f"{edge_length_fac}-{smoothing_voxels}-{decimate}-{epsilon}-{stop_energy}-{boundary_slide_m}"
+                       .encode()).hexdigest()[:10]
     if cache_dir is not None:
         cached = Path(cache_dir) / f"brain_mni_{key}.vtu"
         if cached.is_file():
@@ -418,6 +569,8 @@ def brain_mesh(edge_length_fac: float = 0.21, smoothing_voxels: float = 4.0, dec
             best, best_ratio = candidate, ratio
         if ratio >= SLIVER_FREE_ALTITUDE_RATIO:
             break
+    if boundary_slide_m is not None:
+        best = improve_min_altitude(best, boundary_slide_m=boundary_slide_m)
     mesh = reorder_for_locality(best)
     if cache_dir is not None:
         write_mesh(Path(cache_dir) / f"brain_mni_{key}.vtu", mesh)

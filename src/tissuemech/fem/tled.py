@@ -16,6 +16,9 @@ Method (Miller, Joldes, Lance & Wittek 2007; Taylor, Cheng & Ourselin 2008; Nift
   element pressures ``kappa (J_e - 1)`` averaged to the nodes (reference-volume weighted) and back;
 * prescribed displacement / rotation-about-z histories on node groups (fixed nodes = zero history, flat
   punch = prescribed group), frictionless rigid sphere / cylinder contact by projection;
+* the mesh is renumbered for memory locality inside :func:`build_model` (reverse Cuthill-McKee; the runs take and
+  return the caller's numbering), optional selective mass scaling of the smallest elements, and
+  ``n_threads="auto"`` picks the thread count by mesh size and by the CPUs other processes leave free;
 * element inversion (``J <= 0``) or a non-finite state stops the run and raises
   :class:`ElementInversionError` with the element id, step and time.
 
@@ -33,6 +36,8 @@ double precision and stored in single precision (halves the memory traffic, whic
 """
 from __future__ import annotations
 
+import os
+import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
@@ -43,7 +48,7 @@ from . import vectorised
 from ._kernels import (STATUS_INVERTED, STATUS_NOT_CONVERGED, STATUS_NOT_FINITE, KernelLaws, KernelLoads, KernelMaterial,
                        KernelMesh, dynamic_relaxation_loop, explicit_loop)
 from .materials import KIND_INVARIANT, KIND_INVARIANT_I1, KIND_SVK, Material, constant_invariant_derivatives
-from .mesh import TetMesh, boundary_nodes, element_min_altitudes, element_volumes
+from .mesh import TetMesh, boundary_nodes, element_min_altitudes, element_volumes, locality_order, mean_element_span
 
 #: cumulative energy terms of an explicit run (``RunResult.energy_j``)
 ENERGY_TERMS = ("internal_work", "external_work", "damping_work", "constraint_work")
@@ -143,9 +148,19 @@ class RigidContact:
 
 @dataclass(frozen=True)
 class TLEDModel:
-    """Precomputed arrays of a TLED problem (build with :func:`build_model`)."""
+    """Precomputed arrays of a TLED problem (build with :func:`build_model`).
+
+    ``mesh`` is the caller's mesh; the solver works on ``kernel_mesh``, the same mesh renumbered for memory
+    locality (``kernel_mesh.nodes = mesh.nodes[node_order]``, its element ``k`` is the caller's element
+    ``element_order[k]``). Every per-node and per-element array of the model (``mass``, ``dndx``, ``bc_nodes``...)
+    is in the kernel order; :func:`run_explicit` and :func:`solve_quasistatic` take and return displacements,
+    viscoelastic states and element ids in the caller's order.
+    """
 
     mesh: TetMesh
+    kernel_mesh: TetMesh
+    node_order: np.ndarray
+    element_order: np.ndarray
     material: Material
     groups: tuple[BoundaryGroup, ...]
     contact: RigidContact | None
@@ -157,6 +172,8 @@ class TLEDModel:
     mass: np.ndarray
     dr_mass: np.ndarray
     min_altitude_m: float
+    stable_step_s: float
+    added_mass_fraction: float
     chunk_lo: np.ndarray
     bc_nodes: np.ndarray
     bc_group: np.ndarray
@@ -175,6 +192,27 @@ class TLEDModel:
     @property
     def group_names(self) -> list[str]:
         return [g.name for g in self.groups]
+
+    @property
+    def reordered(self) -> bool:
+        """Whether the kernel numbering differs from the caller's."""
+        return not (np.array_equal(self.node_order, np.arange(self.node_order.size))
+                    and np.array_equal(self.element_order, np.arange(self.element_order.size)))
+
+    def to_kernel_nodes(self, a: np.ndarray) -> np.ndarray:
+        """A per-node array (first axis = nodes) from the caller's node order to the kernel's."""
+        return np.asarray(a)[self.node_order]
+
+    def to_caller_nodes(self, a: np.ndarray) -> np.ndarray:
+        """A per-node array from the kernel's node order back to the caller's."""
+        out = np.empty_like(a)
+        out[self.node_order] = a
+        return out
+
+    @property
+    def lumped_mass_kg(self) -> np.ndarray:
+        """Lumped nodal masses (kg) in the caller's node order."""
+        return self.to_caller_nodes(self.mass)
 
 
 def shape_derivatives(nodes: np.ndarray, elements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -198,7 +236,8 @@ def shape_derivatives(nodes: np.ndarray, elements: np.ndarray) -> tuple[np.ndarr
 def build_model(mesh: TetMesh, material: Material, groups: list[BoundaryGroup] | tuple = (),
                 contact: RigidContact | None = None, *, anp: bool = True, precision: str = "float64",
                 external_force_n: np.ndarray | None = None, external_time_s=(0.0,), external_scale=(1.0,),
-                n_chunks: int | None = None) -> TLEDModel:
+                n_chunks: int | None = None, reorder: bool | str = "auto",
+                mass_scaling_step_s: float | None = None) -> TLEDModel:
     """Assemble the arrays of a TLED problem.
 
     Parameters
@@ -210,12 +249,35 @@ def build_model(mesh: TetMesh, material: Material, groups: list[BoundaryGroup] |
     precision : ``"float64"`` or ``"float32"`` storage of displacements, forces and element data
     external_force_n : optional (n_nodes, 3) nodal forces (N) scaled by ``external_scale(external_time_s)``
     n_chunks : element chunks with private force buffers (default: numba threads)
+    reorder : renumber nodes (reverse Cuthill-McKee) and elements (by smallest node) for memory locality
+        (:func:`tissuemech.fem.mesh.locality_order`): ``True``, ``False`` or ``"auto"`` (when it at least halves
+        the mean node-index span of the elements, :data:`REORDER_SPAN_GAIN`: a mesh in arbitrary order is
+        renumbered, a structured or already renumbered one is kept). Node indices of ``groups``, ``contact`` and
+        the rows of ``external_force_n`` are the caller's; the runs return the caller's order.
+    mass_scaling_step_s : selective mass scaling for explicit runs (None: none): every element whose own stable
+        step ``altitude / c_d`` is shorter than this gets the density that makes it this long,
+        ``rho (step c_d / altitude)^2``; the lumped masses include the added mass (``added_mass_fraction``) and
+        :func:`critical_time_step` follows. Only the smallest elements are affected; it changes the dynamics (not the
+        statics: dynamic relaxation has its own masses), see docs/fem_timing.md for its error.
     """
     dtype = np.dtype(precision)
     if dtype not in (np.float32, np.float64):
         raise ValueError("precision must be 'float32' or 'float64'")
-    nodes, elements = mesh.nodes, np.ascontiguousarray(mesh.elements, dtype=np.int32)
+    if reorder not in (True, False, "auto"):
+        raise ValueError(f"reorder must be True, False or 'auto', not {reorder!r}")
+    caller_mesh = mesh
     nn, ne = mesh.n_nodes, mesh.n_elements
+    node_order, element_order = np.arange(nn), np.arange(ne)
+    new_index = node_order
+    if reorder and ne > 0:
+        n_order, e_order = locality_order(mesh.elements, nn)
+        n_index = np.empty(nn, dtype=np.int64)
+        n_index[n_order] = np.arange(nn)
+        renumbered = n_index[mesh.elements.astype(np.int64)[e_order]]
+        if reorder is True or mean_element_span(renumbered) * REORDER_SPAN_GAIN <= mean_element_span(mesh.elements):
+            node_order, element_order, new_index = n_order, e_order, n_index
+            mesh = TetMesh(caller_mesh.nodes[node_order], renumbered.astype(np.int32))
+    nodes, elements = mesh.nodes, np.ascontiguousarray(mesh.elements, dtype=np.int32)
     dndx, vol0 = shape_derivatives(nodes, elements)
     if np.any(vol0 <= 0):
         raise ValueError(f"mesh has {int((vol0 <= 0).sum())} elements with non-positive volume "
@@ -224,7 +286,13 @@ def build_model(mesh: TetMesh, material: Material, groups: list[BoundaryGroup] |
     vnode = np.bincount(elements.ravel(), weights=np.repeat(vol0, 4), minlength=nn)
     if np.any(vnode <= 0):
         raise ValueError("mesh has nodes not attached to any element")
-    mass = 0.25 * material.density_kg_m3 * vnode
+    c_d = np.sqrt(material.dilatational_modulus_pa / material.density_kg_m3)
+    rho_e = np.full(ne, material.density_kg_m3)
+    if mass_scaling_step_s is not None:
+        rho_e = rho_e * np.maximum(1.0, (float(mass_scaling_step_s) * c_d / alt) ** 2)
+    mass = np.bincount(elements.ravel(), weights=np.repeat(0.25 * rho_e * vol0, 4), minlength=nn)
+    stable_step = float(np.min(alt * np.sqrt(rho_e / material.density_kg_m3)) / c_d)
+    added_mass = float(np.sum((rho_e - material.density_kg_m3) * vol0) / np.sum(material.density_kg_m3 * vol0))
     # dynamic-relaxation mass: element density making the element's stable step 2 (lambda_max ~ 1)
     rho_dr = 4.0 * material.dilatational_modulus_pa / alt**2
     dr_mass = np.bincount(elements.ravel(), weights=np.repeat(0.25 * rho_dr * vol0, 4), minlength=nn)
@@ -236,7 +304,7 @@ def build_model(mesh: TetMesh, material: Material, groups: list[BoundaryGroup] |
     rot_center = np.zeros((ng, 2))
     times = [np.zeros(1)]
     for gi, g in enumerate(groups):
-        nodes_g = np.asarray(g.nodes, np.int64)
+        nodes_g = new_index[np.asarray(g.nodes, np.int64)]
         if nodes_g.size == 0:
             raise ValueError(f"boundary group {g.name!r} has no nodes")
         if np.any(seen[nodes_g]):
@@ -281,7 +349,7 @@ def build_model(mesh: TetMesh, material: Material, groups: list[BoundaryGroup] |
         d = np.asarray(contact.direction, float)
         a = np.asarray(contact.axis, float)
         cparams = np.concatenate([contact.center_m, d / np.linalg.norm(d), [contact.radius_m], a / np.linalg.norm(a)])
-        cnodes = boundary_nodes(elements) if contact.nodes is None else np.asarray(contact.nodes)
+        cnodes = boundary_nodes(elements) if contact.nodes is None else new_index[np.asarray(contact.nodes, np.int64)]
         cnodes = cnodes[free[cnodes].all(axis=1)]
     else:
         kind, cparams, cnodes = 0, np.zeros(10), np.zeros(0, np.int64)
@@ -289,12 +357,14 @@ def build_model(mesh: TetMesh, material: Material, groups: list[BoundaryGroup] |
     nchunk = int(n_chunks or numba.get_num_threads())
     nchunk = max(1, min(nchunk, ne))
     chunk_lo = np.linspace(0, ne, nchunk + 1).round().astype(np.int64)
-    fext = np.zeros((nn, 3)) if external_force_n is None else np.asarray(external_force_n, float)
+    fext = np.zeros((nn, 3)) if external_force_n is None else np.asarray(external_force_n, float)[node_order]
     return TLEDModel(
-        mesh=mesh, material=material, groups=groups, contact=contact,
+        mesh=caller_mesh, kernel_mesh=mesh, node_order=np.asarray(node_order, np.int64),
+        element_order=np.asarray(element_order, np.int64), material=material, groups=groups, contact=contact,
         use_anp=bool(anp and material.kind != KIND_SVK), dtype=dtype,
         dndx=np.ascontiguousarray(dndx, dtype=dtype), vol0=np.ascontiguousarray(vol0, dtype=dtype),
         vnode=vnode, mass=mass, dr_mass=dr_mass, min_altitude_m=float(alt.min()), chunk_lo=chunk_lo,
+        stable_step_s=stable_step, added_mass_fraction=added_mass,
         bc_nodes=bc_nodes_a, bc_group=cat(bc_group, (0,), np.int64), bc_mask=bc_mask_a,
         bc_dir=cat(bc_dir, (0, 3), np.float64).reshape(-1, 3), bc_rotate=cat(bc_rotate, (0,), np.uint8),
         rot_center=rot_center, free=free, hist_time=hist_time, hist_vals=hist_vals,
@@ -302,10 +372,16 @@ def build_model(mesh: TetMesh, material: Material, groups: list[BoundaryGroup] |
         contact_nodes=np.ascontiguousarray(cnodes, np.int64))
 
 
+#: ``build_model(reorder="auto")`` renumbers a mesh when that divides its mean element node span by at least this
+#: (docs/fem_timing.md, issue 17: a shuffled 1e5-tet cube 5.4 -> 10.6 Mupd/s; the lexicographic block mesh, whose
+#: span RCM cuts only 1.4x, runs faster in its own order, 14 vs 10-12)
+REORDER_SPAN_GAIN = 2.0
+
+
 def critical_time_step(model: TLEDModel, safety: float = 0.7) -> float:
-    """``safety * min altitude / c_d`` with ``c_d = sqrt((kappa + 4 mu / 3) / rho)`` (s)."""
-    c_d = np.sqrt(model.material.dilatational_modulus_pa / model.material.density_kg_m3)
-    return float(safety * model.min_altitude_m / c_d)
+    """``safety * min altitude / c_d`` with ``c_d = sqrt((kappa + 4 mu / 3) / rho)`` (s); with mass scaling the
+    smallest element step ``altitude / c_d`` at each element's scaled density."""
+    return float(safety * model.stable_step_s)
 
 
 @dataclass(frozen=True)
@@ -348,11 +424,24 @@ class RunResult:
 
 
 def _state(model: TLEDModel, state: tuple | None):
-    """Viscoelastic element states ``(h_state, s_prev, w_prev)``: virgin or copies of a previous run's."""
+    """Viscoelastic element states ``(h_state, s_prev, w_prev)`` in the kernel's element order: virgin or copies of
+    a previous run's (given in the caller's element order)."""
     nt, ne = model.material.prony_g.size, model.mesh.n_elements
     if state is None:
         return np.zeros((ne, nt, 6), model.dtype), np.zeros((ne, 6), model.dtype), np.zeros((ne, nt), model.dtype)
-    return state[0].copy(), state[1].copy(), state[2].copy()
+    eo = model.element_order
+    return (np.ascontiguousarray(state[0][eo], dtype=model.dtype), np.ascontiguousarray(state[1][eo], dtype=model.dtype),
+            np.ascontiguousarray(state[2][eo], dtype=model.dtype))
+
+
+def _caller_state(model: TLEDModel, h_state, s_prev, w_prev) -> tuple:
+    """The states of a run back in the caller's element order."""
+    out = []
+    for a in (h_state, s_prev, w_prev):
+        b = np.empty_like(a)
+        b[model.element_order] = a
+        out.append(b)
+    return tuple(out)
 
 
 KERNELS = ("auto", "vectorised", "generic")
@@ -401,8 +490,8 @@ def _vector_setup(model: TLEDModel, kernel: str, h_state, s_prev):
                          f"{model.material.law_key!r} ({model.material.prony_g.size} terms) runs on the generic "
                          f"kernel")
     enabled = law is not None
-    el = model.mesh.elements
-    ne, nn = (el.shape[0], model.mesh.n_nodes) if enabled else (0, 0)
+    el = model.kernel_mesh.elements
+    ne, nn = (el.shape[0], model.kernel_mesh.n_nodes) if enabled else (0, 0)
     nt = vectorised.MAX_PRONY_TERMS if enabled and model.material.prony_g.size else 0
     dt = model.dtype
     nchunk = model.chunk_lo.size - 1
@@ -437,8 +526,8 @@ def _vector_setup(model: TLEDModel, kernel: str, h_state, s_prev):
     ws = ws + (np.full(ne, w1), np.full(ne, w2))
     vec = (enabled, ws, svk, constant, float(w1), float(w2))
     nbuf = 0 if enabled else nchunk
-    fbuf = np.zeros((nbuf, model.mesh.n_nodes, 3), model.dtype)
-    pbuf = np.zeros((nbuf, model.mesh.n_nodes))
+    fbuf = np.zeros((nbuf, model.kernel_mesh.n_nodes, 3), model.dtype)
+    pbuf = np.zeros((nbuf, model.kernel_mesh.n_nodes))
     return vec, fbuf, pbuf
 
 
@@ -468,8 +557,56 @@ def numba_threads(n_threads: int | None):
         numba.set_num_threads(old)
 
 
-def _check_status(status, bad, where, time_s):
+#: ``n_threads="auto"`` runs meshes with fewer elements than this on one thread (a parallel region costs a few
+#: microseconds of fork/join, and each step has 3-5; docs/fem_timing.md, issue 17: 2 threads were 0.96-1.25x the
+#: 1-thread rate at 384 tets and 1.2-1.4x at 1,296 tets on the 2-core VM)
+AUTO_THREADS_MIN_ELEMENTS = 1000
+
+
+def busy_cpus(interval_s: float = 0.02) -> float | None:
+    """CPUs kept busy by other processes, from ``/proc/stat`` over ``interval_s`` (this process sleeps meanwhile);
+    None where ``/proc/stat`` cannot be read."""
+    def sample():
+        with open("/proc/stat") as f:
+            vals = [int(v) for v in f.readline().split()[1:9]]
+        return sum(vals), vals[3] + vals[4]  # total, idle + iowait (jiffies)
+
+    try:
+        t0, i0 = sample()
+        time.sleep(interval_s)
+        t1, i1 = sample()
+    except (OSError, ValueError, IndexError):
+        return None
+    if t1 <= t0:
+        return None
+    return (os.cpu_count() or 1) * (1.0 - (i1 - i0) / (t1 - t0))
+
+
+def resolve_threads(model: TLEDModel, n_threads: int | str | None) -> int | None:
+    """The thread count a run uses: ``"auto"`` is 1 below :data:`AUTO_THREADS_MIN_ELEMENTS` elements; above, numba's
+    current setting (None) unless other processes keep the CPUs busy (:func:`busy_cpus`, sampled once per run): then
+    only as many threads as CPUs are free, at least 1 (every parallel region waits for its slowest thread, and a
+    thread that shares its core with another process stalls each of the 3-5 regions of a step: on the 2-core VM at
+    load 3, 2 threads ran the brain at 8 Mupd/s, 1 thread at 23). An int or None is returned as given."""
+    if n_threads == "auto":
+        if model.kernel_mesh.n_elements < AUTO_THREADS_MIN_ELEMENTS:
+            return 1
+        wanted = numba.get_num_threads()
+        if wanted <= 1:
+            return None
+        busy = busy_cpus()
+        if busy is None:
+            return None
+        free = int(np.floor((os.cpu_count() or 1) - busy + 0.5))
+        return None if free >= wanted else max(1, free)
+    if isinstance(n_threads, str):
+        raise ValueError(f"n_threads must be an int, None or 'auto', not {n_threads!r}")
+    return n_threads
+
+
+def _check_status(model, status, bad, where, time_s):
     if status == STATUS_INVERTED:
+        bad = int(model.element_order[bad])
         raise ElementInversionError(f"element {bad} inverted (J <= 0) at {where}, t = {time_s:.6g} s", bad,
                                     int(where.split()[-1]), time_s)
     if status == STATUS_NOT_FINITE:
@@ -480,7 +617,7 @@ def _check_status(status, bad, where, time_s):
 def _kernel_arguments(model: TLEDModel) -> tuple[KernelMesh, KernelMaterial, KernelLaws, KernelLoads]:
     """The model's arrays grouped as the compiled loops take them."""
     m = model.material
-    mesh = KernelMesh(model.mesh.nodes, model.mesh.elements, model.dndx, model.vol0, model.chunk_lo, model.vnode)
+    mesh = KernelMesh(model.kernel_mesh.nodes, model.kernel_mesh.elements, model.dndx, model.vol0, model.chunk_lo, model.vnode)
     mat = KernelMaterial(m.kind, m.params, m.bulk_modulus_pa, model.use_anp, m.prony_g, m.prony_tau_s, m.branch_params)
     laws = KernelLaws(*m.functions(), m.branch_function())
     loads = KernelLoads(model.bc_nodes, model.bc_group, model.bc_mask, model.bc_dir, model.bc_rotate, model.rot_center,
@@ -492,7 +629,7 @@ def _kernel_arguments(model: TLEDModel) -> tuple[KernelMesh, KernelMaterial, Ker
 def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None, safety: float = 0.7,
                  damping_1_s: float = 0.0, n_outputs: int = 100, u0_m: np.ndarray | None = None,
                  v0_m_s: np.ndarray | None = None, state: tuple | None = None,
-                 n_threads: int | None = None, track_energy: bool = True, kernel: str = "auto") -> RunResult:
+                 n_threads: int | str | None = "auto", track_energy: bool = True, kernel: str = "auto") -> RunResult:
     """Explicit dynamic run from ``t = 0`` to ``t_end_s``.
 
     Parameters
@@ -502,7 +639,8 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
     n_outputs : approximate number of recorded outputs
     u0_m, v0_m_s : initial displacement (m) and velocity (m/s) fields
     state : viscoelastic ``RunResult.state`` to start from (default virgin)
-    n_threads : numba threads for this run (None: numba's current setting)
+    n_threads : numba threads for this run (None: numba's current setting; ``"auto"``: :func:`resolve_threads`, one
+        thread for small meshes)
     track_energy : accumulate the energy balance (``RunResult.energy_j``; a serial pass over the nodes per
         step, a few % of the step time)
     kernel : ``"auto"`` (the vectorised kernels of :mod:`.vectorised` for SVK and invariant laws, with or
@@ -512,26 +650,28 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
     dt = critical_time_step(model, safety) if dt_s is None else float(dt_s)
     n_steps = max(1, int(np.ceil(t_end_s / dt - 1e-9)))
     out_every = max(1, n_steps // max(1, n_outputs))
-    u = np.zeros((model.mesh.n_nodes, 3), model.dtype) if u0_m is None else np.array(u0_m, dtype=model.dtype)
-    u_old = u.copy() if v0_m_s is None else (u - dt * np.asarray(v0_m_s)).astype(model.dtype)
+    u = np.zeros((model.mesh.n_nodes, 3), model.dtype) if u0_m is None else \
+        np.array(model.to_kernel_nodes(u0_m), dtype=model.dtype)
+    u_old = u.copy() if v0_m_s is None else (u - dt * model.to_kernel_nodes(v0_m_s)).astype(model.dtype)
     h_state, s_prev, w_prev = _state(model, state)
     vec, fbuf, pbuf = _vector_setup(model, kernel, h_state, s_prev)
-    with numba_threads(n_threads):
+    with numba_threads(resolve_threads(model, n_threads)):
         res = explicit_loop(*_kernel_arguments(model), model.mass, h_state, s_prev, w_prev, dt, n_steps, damping_1_s,
                             out_every, u, u_old, fbuf, pbuf, bool(track_energy), vec)
     _vector_state_back(vec, h_state, s_prev)
     status, bad, step, u, u_old, t, force, torque, cforce, ke, energy = res
-    _check_status(status, bad, f"step {step}", step * dt)
+    _check_status(model, status, bad, f"step {step}", step * dt)
     names = model.group_names
     return RunResult(t, {n: force[:, i] for i, n in enumerate(names)}, {n: torque[:, i] for i, n in enumerate(names)},
-                     cforce, ke, u, u_old, dt, np.zeros(0, np.int64), (h_state, s_prev, w_prev),
+                     cforce, ke, model.to_caller_nodes(u), model.to_caller_nodes(u_old), dt, np.zeros(0, np.int64),
+                     _caller_state(model, h_state, s_prev, w_prev),
                      {k: energy[:, i] for i, k in enumerate(ENERGY_TERMS)} if track_energy else {},
                      "vectorised" if vec[0] else "generic")
 
 
 def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, min_iter: int = 20,
                       max_iter: int = 200_000, u0_m: np.ndarray | None = None, state: tuple | None = None,
-                      n_threads: int | None = None, kernel: str = "auto") -> RunResult:
+                      n_threads: int | str | None = "auto", kernel: str = "auto") -> RunResult:
     """Static equilibrium by dynamic relaxation at each time of ``times_s`` (loads from the histories).
 
     Parameters
@@ -540,17 +680,18 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
         advance between them (quasi-static viscoelasticity: inertia neglected)
     tol_m : displacement error bound for the Joldes termination criterion (default 1e-6 of the smallest
         element altitude)
-    n_threads : numba threads for this run (None: numba's current setting)
+    n_threads : numba threads for this run (None: numba's current setting; ``"auto"``: see :func:`run_explicit`)
     kernel : ``"auto"``, ``"vectorised"`` or ``"generic"`` (see :func:`run_explicit`)
     """
     times = np.atleast_1d(np.asarray(times_s, float))
     if np.any(np.diff(times) < 0):
         raise ValueError("times_s must be non-decreasing")
     tol = 1e-6 * model.min_altitude_m if tol_m is None else float(tol_m)
-    u = np.zeros((model.mesh.n_nodes, 3), model.dtype) if u0_m is None else np.array(u0_m, dtype=model.dtype)
+    u = np.zeros((model.mesh.n_nodes, 3), model.dtype) if u0_m is None else \
+        np.array(model.to_kernel_nodes(u0_m), dtype=model.dtype)
     h_state, s_prev, w_prev = _state(model, state)
     vec, fbuf, pbuf = _vector_setup(model, kernel, h_state, s_prev)
-    with numba_threads(n_threads):
+    with numba_threads(resolve_threads(model, n_threads)):
         res = dynamic_relaxation_loop(*_kernel_arguments(model), model.dr_mass, h_state, s_prev, w_prev, times, tol,
                                       min_iter, max_iter, u, fbuf, pbuf, vec)
     _vector_state_back(vec, h_state, s_prev)
@@ -558,8 +699,10 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
     if status == STATUS_NOT_CONVERGED:
         raise DynamicRelaxationError(f"dynamic relaxation did not converge in {max_iter} iterations at "
                                      f"increment {k} (t = {times[k]:.6g} s)")
-    _check_status(status, bad, f"increment {k}", float(times[min(k, times.size - 1)]))
+    _check_status(model, status, bad, f"increment {k}", float(times[min(k, times.size - 1)]))
     names = model.group_names
+    u = model.to_caller_nodes(u)
     return RunResult(times, {n: force[:, i] for i, n in enumerate(names)}, {n: torque[:, i] for i, n in enumerate(names)},
-                     cforce, np.full(times.size, np.nan), u, u.copy(), float("nan"), iters, (h_state, s_prev, w_prev), {},
+                     cforce, np.full(times.size, np.nan), u, u.copy(), float("nan"), iters,
+                     _caller_state(model, h_state, s_prev, w_prev), {},
                      "vectorised" if vec[0] else "generic")

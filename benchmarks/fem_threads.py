@@ -1,0 +1,77 @@
+"""1 versus 2 numba threads for the TLED explicit step, by mesh size: where does the second thread start to pay?
+
+For each cube size (and the brain mesh with ``--brain-mesh``) the same model runs ``--updates`` element updates on
+1 and on 2 threads, alternating, ``--repeats`` times; the table gives the best wall time of each, the ratio
+``wall(1 thread) / wall(2 threads)`` (> 1: two threads are faster) and the 1-minute load average before each case.
+``tled.AUTO_THREADS_MIN_ELEMENTS`` (``n_threads="auto"``) is set from this crossover. Usage::
+
+    python benchmarks/fem_threads.py --brain-mesh results/fem/brain_mesh.vtu
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("NUMBA_CACHE_DIR", str(Path(__file__).resolve().parents[1] / ".numba_cache"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import numpy as np  # noqa: E402
+from fem_timing import cube_with_n_elements, machine, setup  # noqa: E402
+
+from tissuemech.fem.tled import critical_time_step, numba_threads, run_explicit  # noqa: E402
+
+
+def best_walls(model, v0, n_steps: int, repeats: int) -> tuple[float, float]:
+    """Best wall seconds of ``n_steps`` explicit steps on 1 and on 2 threads, measured alternately."""
+    dt = critical_time_step(model, 0.7)
+    walls = {1: [], 2: []}
+    for threads in (1, 2):  # warm-up (and compile)
+        run_explicit(model, 3 * dt, dt_s=dt, v0_m_s=v0, n_outputs=1, track_energy=False, n_threads=threads)
+    for _ in range(repeats):
+        for threads in (1, 2):
+            t0 = time.perf_counter()
+            run_explicit(model, n_steps * dt, dt_s=dt, v0_m_s=v0, n_outputs=1, track_energy=False, n_threads=threads)
+            walls[threads].append(time.perf_counter() - t0)
+    return min(walls[1]), min(walls[2])
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sizes", default="300,1e3,3e3,1e4,3e4,1e5")
+    ap.add_argument("--laws", default="NH,QLV4-NH")
+    ap.add_argument("--precisions", default="float64,float32")
+    ap.add_argument("--updates", type=float, default=1e7, help="element updates per measurement")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--brain-mesh", default=None)
+    args = ap.parse_args(argv)
+    info = machine()
+    print(f"# {info['date_utc']} UTC, CPU {info['cpu']}, {info['logical_cpus']} logical CPUs")
+    with numba_threads(2):
+        meshes = [("cube", cube_with_n_elements(float(s))) for s in args.sizes.split(",")]
+        if args.brain_mesh:
+            from tissuemech.fem.mesh import read_mesh
+
+            meshes.append(("brain", read_mesh(args.brain_mesh)[0]))
+        print(f"{'mesh':>6} {'tets':>7} {'law':>8} {'prec':>8} {'steps':>6} {'1 thr s':>8} {'2 thr s':>8} "
+              f"{'Mupd/s 1':>8} {'Mupd/s 2':>8} {'ratio':>6} {'load1':>5}")
+        for name, mesh in meshes:
+            for law in args.laws.split(","):
+                for precision in args.precisions.split(","):
+                    load = os.getloadavg()[0]
+                    model, v0 = setup(mesh, law, precision, True)  # 2 element chunks (built under 2 threads)
+                    n_steps = max(20, int(args.updates / mesh.n_elements))
+                    w1, w2 = best_walls(model, v0, n_steps, args.repeats)
+                    ne = mesh.n_elements
+                    print(f"{name:>6} {ne:>7d} {law:>8} {precision:>8} {n_steps:>6d} {w1:>8.3f} {w2:>8.3f} "
+                          f"{ne * n_steps / w1 / 1e6:>8.1f} {ne * n_steps / w2 / 1e6:>8.1f} {w1 / w2:>6.2f} "
+                          f"{load:>5.2f}", flush=True)
+    print(f"# load average after: {os.getloadavg()}")
+
+
+if __name__ == "__main__":
+    np.seterr(all="ignore")
+    main()
