@@ -39,8 +39,8 @@ TARGETS = [
     f"results/{DATASET}/lve.csv",
     *(f"results/{DATASET}/ranking/{scope}.csv" for scope in FIT_MODELS),
 ]
-#: workflow/scripts of the rules that produce TARGETS (ingest, average, lve, fit_scope)
-JOB_SCRIPTS = {"ingest.py", "average.py", "lve.py", "fit_scope.py"}
+#: workflow/scripts of the rules that produce TARGETS (ingest, average with the LVE limits, fit_scope)
+JOB_SCRIPTS = {"ingest.py", "average.py", "fit_scope.py"}
 RUN_TIMEOUT_S = 540
 #: ClusterName written by start_local_slurm.sh
 LOCAL_CLUSTER = "tissuemech-ci"
@@ -229,7 +229,6 @@ def test_slurm_run_matches_local_run(local_slurm, tmp_path):
     submitted = {
         "ingest": sorted((logs / "rule_ingest" / DATASET).glob("*.log")),
         "average": sorted((logs / "rule_average" / DATASET).glob("*.log")),
-        "lve": sorted((logs / "rule_lve" / DATASET).glob("*.log")),
         "fits": sorted((logs / "group_fits_fit_scope").glob("*.log")),
     }
     assert {name: len(paths) for name, paths in submitted.items()} == dict.fromkeys(submitted, 1), submitted
@@ -241,7 +240,6 @@ def test_slurm_run_matches_local_run(local_slurm, tmp_path):
     expected = {
         "ingest": (f"rule_ingest_wildcards_{DATASET}", 1, profile["default-resources"]["mem_mb"]),
         "average": (f"rule_average_wildcards_{DATASET}", 1, profile["set-resources"]["average"]["mem_mb"]),
-        "lve": (f"rule_lve_wildcards_{DATASET}", 1, profile["default-resources"]["mem_mb"]),
         # independent members of a group run side by side: their CPUs and memory add up
         "fits": ("rule_fits_fit_scope", len(FIT_MODELS), len(FIT_MODELS) * fit_mem_mb),
     }
@@ -249,5 +247,5 @@ def test_slurm_run_matches_local_run(local_slurm, tmp_path):
         job_id = submitted[name][0].stem
         assert jobs[job_id] == {"state": "COMPLETED", "comment": comment, "cpus": cpus, "mem_mb": mem_mb}, name
     console = (slurm / "snakemake_console.log").read_text()
-    assert console.count("has been submitted with SLURM jobid") == 4
+    assert console.count("has been submitted with SLURM jobid") == 3
     assert not (local / ".snakemake" / "slurm_logs").exists()
