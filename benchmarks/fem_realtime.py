@@ -27,7 +27,7 @@ import numpy as np  # noqa: E402
 from fem_timing import cube_with_n_elements, machine, setup  # noqa: E402
 
 from tissuemech.fem.mesh import mesh_quality, read_mesh  # noqa: E402
-from tissuemech.fem.tled import critical_time_step, numba_threads, run_explicit  # noqa: E402
+from tissuemech.fem.tled import build_model, critical_time_step, numba_threads, run_explicit  # noqa: E402
 
 
 def timed(model, v0, dt, n_steps, threads):
@@ -45,7 +45,7 @@ def mass_scaling_indentation(mesh, factor: float, law: str = "QLV4-NH", precisio
     the largest differences of the punch force history (relative to its peak) and of the final displacement
     (relative to its largest value)."""
     from tissuemech.fem.materials import make_material
-    from tissuemech.fem.tled import build_model, fixed_group, translation_group
+    from tissuemech.fem.tled import fixed_group, translation_group
 
     from fem_timing import LAWS
 
@@ -99,12 +99,16 @@ def main(argv=None) -> None:
     ap.add_argument("--laws", default="NH,QLV4-NH")
     ap.add_argument("--seconds", type=float, default=0.1, help="simulated seconds per measurement")
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--rt-mass-scaling", type=float, default=None,
+                    help="build the timed models with selective mass scaling to this multiple of the unscaled "
+                         "critical step (the table's RT then includes it)")
     ap.add_argument("--mass-scaling", type=float, default=None,
                     help="also an explicit brain indentation with selective mass scaling to this multiple of the "
                          "unscaled critical step, against the unscaled run (first brain mesh)")
     args = ap.parse_args(argv)
     info = machine()
-    print(f"# {info['date_utc']} UTC, CPU {info['cpu']}, {info['logical_cpus']} logical CPUs")
+    print(f"# {info['date_utc']} UTC, CPU {info['cpu']}, {info['logical_cpus']} logical CPUs; mass scaling "
+          f"{args.rt_mass_scaling or 'none'}")
     meshes = [(Path(p).stem, read_mesh(p)[0]) for p in args.brain_mesh]
     if args.cube:
         meshes.append(("cube", cube_with_n_elements(1e4)))
@@ -118,6 +122,9 @@ def main(argv=None) -> None:
                 for precision in ("float64", "float32"):
                     load = os.getloadavg()[0]
                     model, v0 = setup(mesh, law, precision, True)
+                    if args.rt_mass_scaling:
+                        model = build_model(mesh, model.material, model.groups, precision=precision,
+                                            mass_scaling_step_s=args.rt_mass_scaling * critical_time_step(model, 1.0))
                     dt = critical_time_step(model, 0.7)
                     n_steps = max(20, int(round(args.seconds / dt)))
                     timed(model, v0, dt, 3, 1)

@@ -14,7 +14,7 @@ BRAIN_FILES = {
     "brain_indentation": "results/fem/brain_indentation.nc",
 }
 # every TLED job waits for rule fem_compile, which fills numba's cache once (a cold process compiles the loops
-# for ~2 CPU minutes; FEM jobs that started together each did)
+# for ~1.5 CPU minutes, ~90 CPU s; FEM jobs that started together each did)
 NUMBA_COMPILED = "results/fem/numba_compiled.json"
 
 

@@ -224,8 +224,8 @@ def _provenance(card: Mapping, material: Material, mesh: TetMesh, iterations: np
 def precompile_kernels(n_threads: int | None = 1) -> dict[str, float]:
     """Compile the TLED time loops the pipeline's FEM jobs and its timing rule run, into numba's cache.
 
-    numba compiles the loops anew in every process whose cache is cold (~85-110 CPU s each on the 2-core VM,
-    against ~1.5 s to load them from the cache); jobs that start together each compile them. This runs dynamic
+    numba compiles the loops anew in every process whose cache is cold (~85-90 CPU s each on the 2-core VM since
+    issue 17, 140 before, against ~1.5 s to load them from the cache); jobs that start together each compile them. This runs dynamic
     relaxation (with and without rigid contact) and explicit steps, with both internal-force kernels, on a
     one-cell block (neo-Hookean, ANP, float64, the types every experiment passes), once, before the jobs
     that need them. Returns the CPU seconds of each case.
