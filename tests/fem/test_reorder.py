@@ -116,7 +116,7 @@ def test_auto_threads_runs_small_meshes_on_one_thread():
 
     mat = make_material("neo_hookean", {"mu": 1000.0}, poisson_ratio=0.45)
     small = build_model(block_mesh((L, L, L), (2, 2, 2)), mat)
-    large = build_model(block_mesh((L, L, L), (6, 6, 6)), mat)
+    large = build_model(block_mesh((L, L, L), (8, 8, 8)), mat)
     assert small.mesh.n_elements < AUTO_THREADS_MIN_ELEMENTS <= large.mesh.n_elements
     assert resolve_threads(small, "auto") == 1
     assert resolve_threads(large, 2) == 2 and resolve_threads(large, None) is None
@@ -131,7 +131,7 @@ def test_auto_threads_leave_out_cpus_that_other_processes_keep_busy(monkeypatch)
 
     if numba.config.NUMBA_NUM_THREADS < 2:
         pytest.skip("needs 2 numba threads")
-    large = build_model(block_mesh((L, L, L), (6, 6, 6)), make_material("neo_hookean", {"mu": 1000.0}, poisson_ratio=0.45))
+    large = build_model(block_mesh((L, L, L), (8, 8, 8)), make_material("neo_hookean", {"mu": 1000.0}, poisson_ratio=0.45))
     monkeypatch.setattr(tled.os, "cpu_count", lambda: 2)
     with tled.numba_threads(2):
         monkeypatch.setattr(tled, "busy_cpus", lambda interval_s=0.05: 0.1)

@@ -558,9 +558,9 @@ def numba_threads(n_threads: int | None):
 
 
 #: ``n_threads="auto"`` runs meshes with fewer elements than this on one thread (a parallel region costs a few
-#: microseconds of fork/join, and each step has 3-5; docs/fem_timing.md, issue 17: 2 threads were 0.96-1.25x the
-#: 1-thread rate at 384 tets and 1.2-1.4x at 1,296 tets on the 2-core VM)
-AUTO_THREADS_MIN_ELEMENTS = 1000
+#: microseconds of fork/join, and each step has 3-5; docs/fem_timing.md, issue 17, 2-core VM, two runs: 2 threads
+#: were 0.79-1.25x the 1-thread rate at 384 tets, 0.98-1.40x at 1,296 tets and 1.46-1.80x from 3,072 tets up)
+AUTO_THREADS_MIN_ELEMENTS = 2000
 
 
 def busy_cpus(interval_s: float = 0.02) -> float | None:
