@@ -325,3 +325,17 @@ def test_real_inertia_affected_sweep_is_flagged_against_a_clean_one():
         return float(np.median(gpp / booij_thoone(w, gp)))
 
     assert bt_ratio(*fungi) > 1.5 and abs(bt_ratio(*lims) - 1) < 0.3
+
+
+def test_spectra_of_a_dataset_without_sweeps_relaxations_or_creep_say_not_testable(tmp_path):
+    g = np.linspace(1e-3, 0.2, 12)
+    runs = [make_run_dataset({"shear_strain": g, "storage_modulus": np.full(g.size, 100.0 + k),
+                              "loss_modulus": np.full(g.size, 10.0)},
+                             {"test": "amplitude_sweep", "specimen": "A", "sample": f"s{k}", "run": f"as{k}",
+                              "frequency_hz": 1.0}) for k in range(2)]
+    avg_path = tmp_path / "averages.nc"
+    curves.write_averages(curves.average_runs(runs), avg_path)
+    ds = run_spectrum(avg_path, tmp_path / "spectrum.nc")
+    assert ds.sizes.get("curve", 0) == 0
+    assert read_netcdf(tmp_path / "spectrum.nc").attrs["not_testable"] == (
+        "no frequency sweep, relaxation or creep in the averages")

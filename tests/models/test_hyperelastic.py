@@ -232,3 +232,18 @@ def test_bulk_modulus_from_shear_modulus_and_poisson_ratio():
     for nu in (0.5, 0.6, -1.0):
         with pytest.raises(ValueError, match="poisson_ratio"):
             bulk_modulus(300.0, nu)
+
+
+def test_one_compiled_shear_and_uniaxial_kernel_serves_every_law():
+    # the laws reach the 1-D kernels as C function pointers: one signature (so one on-disk cache entry) for all
+    # invariant laws and one for all stretch laws; jitted-dispatcher arguments compiled a kernel per law per process
+    from tissuemech.models import hyperelastic as H
+
+    gamma, stretch = np.linspace(0.01, 0.4, 9), np.linspace(0.8, 1.2, 9)
+    for key in ("neo_hookean", "mooney_rivlin", "gent", "ogden1", "ogden2"):
+        model = get_model(key)
+        p = model.default_params()
+        assert np.all(np.isfinite(model.elastic_shear_stress(p, gamma)))
+        assert np.all(np.isfinite(model.uniaxial_nominal_stress(p, stretch)))
+    for kernel in (H._invariant_shear, H._invariant_uniaxial, H._stretch_shear, H._stretch_uniaxial):
+        assert len(kernel.signatures) == 1, kernel
