@@ -179,8 +179,8 @@ def run_fit_scope(averages_path, scope: str, spec: Mapping, target: str, seed: i
 
 def collect_scopes(ranking_paths: Sequence, ranking_out, figure_out=None) -> pd.DataFrame:
     """Merge the per-scope rankings into ``ranking.csv`` (and draw the ranking figure). The tidy ``fits.csv`` is
-    :func:`write_fits_table`'s (rule ``fits_table``, after the posteriors, so that it carries their credible
-    intervals)."""
+    :func:`write_fits_table`'s (the same rank job, after the dataset's posteriors, so that it carries their
+    credible intervals)."""
     tables = [pd.read_csv(p) for p in ranking_paths if Path(p).stat().st_size > 0]
     ranking = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
     if not ranking.empty:
