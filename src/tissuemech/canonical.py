@@ -142,9 +142,15 @@ def atomic_write(path: str | os.PathLike, writer) -> Path:
     return path
 
 
+#: xarray engine of every netCDF file the package writes and reads: netCDF4-python (the C library) writes and reads
+#: our many small files 7-9x faster than h5netcdf (65 vs 10 ms written, 72 vs 8 ms read for a 15-variable run
+#: file, issue 17); the files are the same netCDF4/HDF5 format either way
+NETCDF_ENGINE = "netcdf4"
+
+
 def write_netcdf(ds: xr.Dataset, path: str | os.PathLike) -> Path:
-    """Atomically write a dataset as netCDF4/HDF5 through h5netcdf."""
-    return atomic_write(path, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf"))
+    """Atomically write a dataset as netCDF4/HDF5 (engine :data:`NETCDF_ENGINE`)."""
+    return atomic_write(path, lambda tmp: ds.to_netcdf(tmp, engine=NETCDF_ENGINE))
 
 
 def write_text(text: str, path: str | os.PathLike) -> Path:
@@ -194,5 +200,5 @@ def write_json(obj, path: str | os.PathLike, *, indent: int | None = 2, sort_key
 
 def read_netcdf(path: str | os.PathLike) -> xr.Dataset:
     """Read a netCDF file fully into memory and close it (never keep an output path open lazily)."""
-    with xr.open_dataset(path, engine="h5netcdf") as ds:
+    with xr.open_dataset(path, engine=NETCDF_ENGINE) as ds:
         return ds.load()

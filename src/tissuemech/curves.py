@@ -587,7 +587,7 @@ def _to_dataset(curves: list[dict], members: list[dict]) -> xr.Dataset:
 
 
 def write_averages(averages: xr.Dataset, path: str | Path) -> Path:
-    """Atomically write the output of :func:`average_runs` as netCDF (h5netcdf)."""
+    """Atomically write the output of :func:`average_runs` as netCDF (:func:`tissuemech.canonical.write_netcdf`)."""
     return write_netcdf(averages, path)
 
 

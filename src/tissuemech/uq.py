@@ -16,7 +16,7 @@ Outputs, one pair per sampled fit (config ``posterior.models``; empty: every mod
 the beyond-QLV fits of the joint scope both, and always the recommended one): ``posterior/<scope>/<model>.nc`` in
 ArviZ's InferenceData group layout (groups ``posterior`` with one variable per parameter in natural units, dims
 ``chain``/``draw``, ``sample_stats`` with ``lp``, ``posterior_predictive`` with the model responses of 64 draws at
-the fitted points and ``observed_data``; written with xarray and h5netcdf) whose ``posterior`` attributes carry
+the fitted points and ``observed_data``; written with xarray and netCDF4) whose ``posterior`` attributes carry
 R-hat, ESS, acceptance, the warnings, priors and likelihood; ``posterior/<scope>/<model>.csv``: per parameter the
 lmfit value and standard error next to the 5/50/95 % posterior quantiles and the ratio of the 90 % credible width
 to the lmfit interval. The sampling does not read the ranking, so ``fits.csv`` (written after the posteriors by
@@ -66,7 +66,7 @@ from . import fitting as F
 from . import posterior as P
 from . import ranking as R
 from .cards import fitted_strain_max, material_fields, prony_from_step_response
-from .canonical import atomic_write, read_netcdf, write_json, write_netcdf, write_text
+from .canonical import NETCDF_ENGINE, atomic_write, read_netcdf, write_json, write_netcdf, write_text
 from .curves import drop_flagged, select_average
 from .models.base import initial_shear_modulus
 from .fem.experiments import flat_punch_indentation, rheometer_torsion
@@ -223,16 +223,16 @@ def write_inference_data(groups: Mapping[str, xr.Dataset], path) -> Path:
         mode = "w"
         for name in IDATA_GROUPS:
             if name in groups:
-                groups[name].to_netcdf(tmp, group=name, mode=mode, engine="h5netcdf")
+                groups[name].to_netcdf(tmp, group=name, mode=mode, engine=NETCDF_ENGINE)
                 mode = "a"
         if mode == "w":  # nothing sampled: an empty file that still states why (root attributes)
-            xr.Dataset(attrs=dict(groups.get("", xr.Dataset()).attrs)).to_netcdf(tmp, mode="w", engine="h5netcdf")
+            xr.Dataset(attrs=dict(groups.get("", xr.Dataset()).attrs)).to_netcdf(tmp, mode="w", engine=NETCDF_ENGINE)
     return atomic_write(path, writer)
 
 
 def read_inference_group(path, group: str = "posterior") -> xr.Dataset:
     """One group of an InferenceData netCDF file, loaded into memory."""
-    with xr.open_dataset(path, group=group, engine="h5netcdf") as ds:
+    with xr.open_dataset(path, group=group, engine=NETCDF_ENGINE) as ds:
         return ds.load()
 
 
