@@ -22,6 +22,7 @@ import pandas as pd
 import xarray as xr
 from matplotlib.colors import TwoSlopeNorm
 from matplotlib.figure import Figure
+from matplotlib.ticker import LogFormatter, LogFormatterSciNotation
 
 from .canonical import CANONICAL_VARIABLES, atomic_write
 from .curves import QUALITY_FLAG_VARIABLE, select_average, unflagged_points
@@ -50,6 +51,40 @@ AXIS_LABELS: dict[str, str] = {
 
 _FORMATS = ("png", "svg")
 
+_SUPERSCRIPT = str.maketrans("-0123456789", "\u207b\u2070\u00b9\u00b2\u00b3\u2074\u2075\u2076\u2077\u2078\u2079")
+
+
+class PowerOfTenFormatter(LogFormatter):
+    """Log-axis tick labels as plain Unicode text: ``10⁻³``, ``2×10⁻³``.
+
+    matplotlib's default log labels are mathtext (``$\\mathdefault{10^{-3}}$``); parsing them (pyparsing) and
+    laying them out took a third of the time of drawing our figures (26 average figures: 12.7 -> 8.9 CPU s,
+    issue 17). Which ticks get a label is :class:`matplotlib.ticker.LogFormatter`'s choice, unchanged.
+    """
+
+    def _num_to_string(self, x, vmin, vmax):
+        if self._base != 10:
+            return super()._num_to_string(x, vmin, vmax)
+        exponent = math.floor(math.log10(x) + 1e-10)
+        coefficient = x / 10.0 ** exponent
+        if not math.isclose(coefficient, round(coefficient), rel_tol=1e-6):
+            return f"{x:.3g}"
+        power = "10" + str(exponent).translate(_SUPERSCRIPT)
+        return power if round(coefficient) == 1 else f"{round(coefficient)}×{power}"
+
+
+def plain_text_log_ticks(fig: Figure) -> None:
+    """Replace matplotlib's default (mathtext) log-axis formatters of ``fig`` by :class:`PowerOfTenFormatter`."""
+    for ax in fig.axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            if axis.get_scale() != "log":
+                continue
+            if type(axis.get_major_formatter()) is LogFormatterSciNotation:
+                axis.set_major_formatter(PowerOfTenFormatter(axis.get_transform().base))
+            minor = axis.get_minor_formatter()
+            if type(minor) is LogFormatterSciNotation:
+                axis.set_minor_formatter(PowerOfTenFormatter(axis.get_transform().base, labelOnlyBase=minor.labelOnlyBase))
+
 
 def axis_label(name: str) -> str:
     """Axis label of a canonical variable (falls back to its long name and units)."""
@@ -66,6 +101,7 @@ def save_figure(fig: Figure, path: str | Path, dpi: int = 150) -> list[Path]:
     base = Path(path)
     base = base.with_suffix("") if base.suffix.lower() in (".png", ".svg", ".pdf") else base
     written = []
+    plain_text_log_ticks(fig)
     with matplotlib.rc_context({"svg.hashsalt": "tissuemech", "svg.fonttype": "none"}):
         for fmt in _FORMATS:
             target = base.parent / f"{base.name}.{fmt}"

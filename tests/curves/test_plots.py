@@ -136,3 +136,18 @@ def test_stage_figure_sets(tmp_path):
     assert sorted(p.name for p in written) == sorted(
         f"lve__{src}__{name}.{ext}" for src, name in (("run", "as0"), ("run", "as1"), ("average", "frequency_hz-1"))
         for ext in ("png", "svg"))
+
+
+@pytest.mark.parametrize("value, label", [(1e-3, "10⁻³"), (1.0, "10⁰"), (100.0, "10²"), (2e-3, "2×10⁻³"),
+                                          (5e4, "5×10⁴"), (0.25, "0.25")])
+def test_log_ticks_are_plain_unicode_powers_of_ten(value, label):
+    assert plots.PowerOfTenFormatter(10)._num_to_string(value, 1e-4, 1e5) == label
+
+
+def test_log_axes_of_saved_figures_carry_unicode_tick_labels(tmp_path):
+    runs = _relaxation_runs()
+    curve = curves.select_average(curves.average_runs(runs), "stress_relaxation")
+    svg = _check_files(plots.plot_average(curve, "relaxation_modulus", tmp_path / "avg", runs), tmp_path, "avg")
+    # time axis 0.01..100 s: its decade labels are text, not mathtext glyph paths
+    for label in ("10⁻²", "10⁰", "10²"):
+        assert f">{label}<" in svg
