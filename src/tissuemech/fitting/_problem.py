@@ -10,7 +10,7 @@ import lmfit
 import numpy as np
 
 from ..models.base import ConstitutiveModel, ParamSpec, ResponseNotSupported
-from ..models.plate import forward_plate, rabinowitsch_rim_stress
+from ..models.plate import PlateHistories, forward_plate, forward_plate_batch, rabinowitsch_rim_stress
 from ._data import Curve
 
 PLATE_TARGETS: tuple[str, ...] = ("thesis", "apparent_stress", "corrected_stress", "torque", "none")
@@ -231,6 +231,15 @@ class FitProblem:
             obs, sd = target_observations(c, self.target)
             sig = {k: self.noise.sigma(k, v, sd.get(k)) for k, v in obs.items()}
             self.observations.append((obs, sig))
+        # the plate-torsion histories are predicted in one compiled pass when the model takes concatenated
+        # histories: per curve, the Python layers around the kernels cost more than the kernels (issue 17)
+        self._plate_curves = [i for i, c in enumerate(self.curves)
+                              if c.response == "shear_history" and c.is_plate and self.target in ("torque", "apparent_stress")]
+        self._plate_histories = None
+        if self.model.concatenated_histories and len(self._plate_curves) > 1:
+            self._plate_histories = PlateHistories.of(
+                [(self.curves[i].inputs["time"], self.curves[i].inputs["shear_strain"], self.curves[i].radius_m)
+                 for i in self._plate_curves])
 
     # --- parameters -------------------------------------------------------------------------------
     def spec(self, name: str) -> ParamSpec:
@@ -278,9 +287,16 @@ class FitProblem:
     # --- residuals --------------------------------------------------------------------------------
     def curve_terms(self, p: Mapping[str, float]) -> list[dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]]:
         """Per curve and observable: (observed, predicted, weighted residual)."""
+        batched = {}
+        if self._plate_histories is not None:
+            key = "torque" if self.target == "torque" else "shear_stress"
+            full = forward_plate_batch(self.model, p, self._plate_histories, target=self.target)
+            for i, f in zip(self._plate_curves, full):
+                idx = self.curves[i].obs_index
+                batched[i] = {key: f if idx is None else f[idx]}
         out = []
-        for c, (obs, sig) in zip(self.curves, self.observations):
-            pred = predict(self.model, p, c, self.target)
+        for i, (c, (obs, sig)) in enumerate(zip(self.curves, self.observations)):
+            pred = batched[i] if i in batched else predict(self.model, p, c, self.target)
             terms = {}
             for k, y in obs.items():
                 f = np.asarray(pred[k], float)

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
@@ -72,6 +73,9 @@ class ConstitutiveModel:
     responses: frozenset[str] = frozenset()
     #: extra structural settings recorded with every fit/card (e.g. fixed taus)
     structure: dict = field(default_factory=dict)
+    #: ``shear_stress_histories(p, time_s, strain, restart)`` takes concatenated histories (``restart`` marks
+    #: where each starts), so several measurements are evaluated in one compiled pass
+    concatenated_histories: ClassVar[bool] = False
 
     # --- helpers -----------------------------------------------------------------------------------
     @property

@@ -29,7 +29,7 @@ from .base import ConstitutiveModel, InstantaneousLawModel, ParamSpec, Params, i
 from .qlv import (available_instantaneous_tags, check_param_names, default_taus,
                   elastic_stress_nd, instantaneous_law, prony_ratio_specs,
                   stress_controlled_strain, stress_controlled_strain_by_history, sub_params, tau_specs)
-from .recursion import prony_branch_sum_batch
+from .recursion import history_starts, prony_branch_sum_batch, relaxation_factors
 
 __all__ = ["PipkinRogersModel", "SchaperyModel", "MaxwellBranchModel", "StrainRelaxingBranchModel", "MODELS",
            "ogden_shear_stress"]
@@ -42,6 +42,61 @@ def _prony_params(model, p: Params) -> tuple[np.ndarray, np.ndarray]:
     taus = (np.array([float(p[f"tau_{i + 1}"]) for i in range(model.n_prony)]) if model.free_taus
             else model._taus.copy())
     return beta, taus
+
+
+@njit(cache=True)
+def _pipkin_rogers_weights_at(gamma2, beta, kappa, gamma_s2, g_out):
+    """The weight law of :class:`PipkinRogersModel` at one squared strain: ``g_i`` into ``g_out``, returns ``g_inf``."""
+    s = gamma2 / (gamma2 + gamma_s2)
+    total = 0.0
+    for i in range(beta.size):
+        g_out[i] = beta[i] * (1.0 + kappa[i] * s)
+        total += g_out[i]
+    denom = 1.0 + total
+    for i in range(beta.size):
+        g_out[i] /= denom
+    return 1.0 / denom
+
+
+@njit(cache=True)
+def _pipkin_rogers_weights(strain, beta, kappa, gamma_s2):
+    g = np.empty((beta.size, strain.size))
+    g_inf = np.empty(strain.size)
+    point = np.empty(beta.size)
+    for k in range(strain.size):
+        g_inf[k] = _pipkin_rogers_weights_at(strain[k] * strain[k], beta, kappa, gamma_s2, point)
+        g[:, k] = point
+    return g_inf, g
+
+
+@njit(cache=True)
+def _pipkin_rogers_stress_kernel(time_s, strain, elastic, beta, kappa, gamma_s2, taus, restart):
+    # R_inf + sum h_i with h_i the exact recursion driven by R_i = g_i(gamma) sigma_e, without storing the drives
+    k_hist, n = strain.shape
+    m = beta.size
+    out = np.empty((k_hist, n))
+    h = np.empty((k_hist, m))
+    previous = np.empty((k_hist, m))
+    g = np.empty(m)
+    e = np.empty(m)
+    f = np.empty(m)
+    for k in range(n):
+        if not restart[k]:
+            for i in range(m):
+                e[i], f[i] = relaxation_factors(time_s[k] - time_s[k - 1], taus[i])
+        for j in range(k_hist):
+            g_inf = _pipkin_rogers_weights_at(strain[j, k] * strain[j, k], beta, kappa, gamma_s2, g)
+            acc = 0.0
+            for i in range(m):
+                drive = g[i] * elastic[j, k]
+                if restart[k]:
+                    h[j, i] = drive
+                else:
+                    h[j, i] = e[i] * h[j, i] + f[i] * (drive - previous[j, i])
+                previous[j, i] = drive
+                acc += h[j, i]
+            out[j, k] = g_inf * elastic[j, k] + acc
+    return out
 
 
 def _fixed_or_free_taus(n: int, taus_s, free_taus: bool):
@@ -94,6 +149,8 @@ class PipkinRogersModel(InstantaneousLawModel):
     ``kappa_1..kappa_n``. At ``kappa = 0`` ``gamma_s`` is not identifiable (profile it or test the nested QLV).
     """
 
+    concatenated_histories = True
+
     def __init__(self, instantaneous: ConstitutiveModel, n_prony: int = 4, taus_s: Sequence[float] | None = None,
                  free_taus: bool = False, per_branch: bool = False, name: str | None = None):
         if not instantaneous.supports("elastic_shear"):
@@ -130,16 +187,17 @@ class PipkinRogersModel(InstantaneousLawModel):
         """Instantaneous law sigma_e(gamma) = R(gamma, 0) (Pa)."""
         return elastic_stress_nd(self.instantaneous, self.instantaneous_params(p), strain)
 
+    def _weight_params(self, p: Params) -> tuple[np.ndarray, np.ndarray, float]:
+        """``(beta, kappa, gamma_s^2)`` with one ``kappa`` per branch."""
+        beta, _ = _prony_params(self, p)
+        kappa = np.broadcast_to(np.array([float(p[k]) for k in self._kappa_names]), beta.shape)
+        return beta, np.ascontiguousarray(kappa, dtype=float), float(p["gamma_s"]) ** 2
+
     def weights(self, p: Params, strain: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(g_inf(gamma), g(gamma))`` with shapes ``strain.shape`` and ``(n_prony, *strain.shape)``."""
-        beta, _ = _prony_params(self, p)
-        gam2 = np.asarray(strain, float) ** 2
-        s = gam2 / (gam2 + float(p["gamma_s"]) ** 2)
-        kappa = np.array([float(p[k]) for k in self._kappa_names])
-        kappa = np.broadcast_to(kappa, (self.n_prony,)).reshape((self.n_prony,) + (1,) * s.ndim)
-        scaled = beta.reshape(kappa.shape) * (1.0 + kappa * s[None])
-        denom = 1.0 + scaled.sum(axis=0)
-        return 1.0 / denom, scaled / denom
+        strain = np.asarray(strain, float)
+        g_inf, g = _pipkin_rogers_weights(np.ascontiguousarray(strain.ravel()), *self._weight_params(p))
+        return g_inf.reshape(strain.shape), g.reshape((self.n_prony,) + strain.shape)
 
     def branch_elastic_functions(self, p: Params, strain: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(R_inf(gamma), R_i(gamma))`` in Pa (shapes as :meth:`weights`)."""
@@ -149,18 +207,15 @@ class PipkinRogersModel(InstantaneousLawModel):
 
     def branch_drives(self, p: Params):
         """``(gamma -> (R_inf, R_i), taus)`` for :func:`tissuemech.models.qlv.stress_controlled_strain`."""
-        beta, taus = _prony_params(self, p)
-        kappa = np.broadcast_to(np.array([float(p[k]) for k in self._kappa_names]), beta.shape)[:, None]
-        beta = beta[:, None]
-        gs2 = float(p["gamma_s"]) ** 2
+        _, taus = _prony_params(self, p)
+        weight_params = self._weight_params(p)
         law, law_p = self.instantaneous, self.instantaneous_params(p)
 
         def drives(gamma):          # called per solver iteration: parameters unpacked once, above
+            gamma = np.asarray(gamma, float)
             se = np.asarray(law.elastic_shear_stress(law_p, gamma), float)
-            gam2 = gamma * gamma
-            scaled = beta * (1.0 + kappa * (gam2 / (gam2 + gs2)))
-            r_inf = se / (1.0 + scaled.sum(axis=0))
-            return r_inf, scaled * r_inf
+            g_inf, g = _pipkin_rogers_weights(np.ascontiguousarray(gamma.ravel()), *weight_params)
+            return g_inf.reshape(gamma.shape) * se, g.reshape((self.n_prony,) + gamma.shape) * se
         return drives, taus
 
     def creep_strain(self, p: Params, time_s: np.ndarray, stress_pa: np.ndarray) -> np.ndarray:
@@ -168,13 +223,15 @@ class PipkinRogersModel(InstantaneousLawModel):
         drives, taus = self.branch_drives(p)
         return stress_controlled_strain(drives, taus, time_s, stress_pa)
 
-    def shear_stress_histories(self, p: Params, time_s: np.ndarray, strain: np.ndarray) -> np.ndarray:
-        """Stress (Pa) for strain histories (k, n) on the time grid (n,)."""
+    def shear_stress_histories(self, p: Params, time_s: np.ndarray, strain: np.ndarray,
+                               restart: np.ndarray | None = None) -> np.ndarray:
+        """Stress (Pa) for strain histories (k, n) on the time grid (n,); ``restart`` (n,) marks where
+        concatenated histories start (:func:`.recursion.history_starts`)."""
         _, taus = _prony_params(self, p)
-        strain = np.atleast_2d(np.asarray(strain, float))
-        r_inf, r_i = self.branch_elastic_functions(p, strain)           # (k, n), (m, k, n)
-        drive = np.ascontiguousarray(np.moveaxis(r_i, 0, 1))            # (k, m, n)
-        return r_inf + prony_branch_sum_batch(np.ascontiguousarray(time_s, dtype=float), drive, taus)
+        strain = np.ascontiguousarray(np.atleast_2d(np.asarray(strain, float)))
+        elastic = np.ascontiguousarray(self.elastic_shear_stress(p, strain))
+        return _pipkin_rogers_stress_kernel(np.ascontiguousarray(time_s, dtype=float), strain, elastic,
+                                            *self._weight_params(p), taus, history_starts(strain.shape[1], restart))
 
     def shear_stress_history(self, p: Params, time_s: np.ndarray, strain: np.ndarray) -> np.ndarray:
         return self.shear_stress_histories(p, time_s, np.asarray(strain, float)[None, :])[0]

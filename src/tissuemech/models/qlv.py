@@ -295,6 +295,8 @@ class QLVModel(InstantaneousLawModel):
     (instantaneous N1, N2; their QLV histories via :meth:`normal_stress_difference_histories`).
     """
 
+    concatenated_histories = True
+
     def __init__(self, instantaneous: ConstitutiveModel, n_prony: int = 4, taus_s: Sequence[float] | None = None,
                  free_taus: bool = False, name: str | None = None):
         if not instantaneous.supports("elastic_shear"):
@@ -354,11 +356,15 @@ class QLVModel(InstantaneousLawModel):
             return g_inf * se, g * se
         return drives, taus
 
-    def shear_stress_histories(self, p: Params, time_s: np.ndarray, strain: np.ndarray) -> np.ndarray:
-        """QLV stress (Pa) of a batch of strain histories ``strain`` (k, n) on one time grid ``time_s`` (n,)."""
+    def shear_stress_histories(self, p: Params, time_s: np.ndarray, strain: np.ndarray,
+                               restart: np.ndarray | None = None) -> np.ndarray:
+        """QLV stress (Pa) of a batch of strain histories ``strain`` (k, n) on one time grid ``time_s`` (n,).
+
+        ``restart`` (n,) marks where concatenated histories start (:func:`.recursion.history_starts`).
+        """
         _, g, taus = self.prony_weights(p)
         strain = np.atleast_2d(np.asarray(strain, float))
-        return qlv_stress_batch(time_s, self.elastic_shear_stress(p, strain), g, taus)
+        return qlv_stress_batch(time_s, self.elastic_shear_stress(p, strain), g, taus, restart)
 
     def shear_stress_history(self, p: Params, time_s: np.ndarray, strain: np.ndarray) -> np.ndarray:
         return self.shear_stress_histories(p, time_s, np.asarray(strain, float)[None, :])[0]
