@@ -157,6 +157,14 @@ def reorder_for_locality(mesh: TetMesh) -> TetMesh:
     return TetMesh(mesh.nodes[node_order].copy(), elements.astype(np.int32))
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross`` of ``(..., 3)`` arrays, the same products in the same order; on the few-element stars of
+    :func:`improve_min_altitude` np.cross's axis bookkeeping cost more than the arithmetic (issue 17)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
 def _star_min_altitudes(nodes: np.ndarray, star: np.ndarray, node: int,
                         trials: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Smallest altitude (m, negative for an inverted element) and largest aspect (longest edge / smallest altitude)
@@ -165,10 +173,10 @@ def _star_min_altitudes(nodes: np.ndarray, star: np.ndarray, node: int,
     moved = star == node
     x[:, moved] = np.repeat(trials, int(moved.sum()), axis=0).reshape(trials.shape[0], -1, 3)
     d1, d2, d3 = x[..., 1, :] - x[..., 0, :], x[..., 2, :] - x[..., 0, :], x[..., 3, :] - x[..., 0, :]
-    vol = np.einsum("tki,tki->tk", d1, np.cross(d2, d3)) / 6.0
+    vol = np.einsum("tki,tki->tk", d1, _cross(d2, d3)) / 6.0
     area = np.zeros(vol.shape)
     for a, b, c in TET_FACES:
-        area = np.maximum(area, 0.5 * np.linalg.norm(np.cross(x[..., b, :] - x[..., a, :], x[..., c, :] - x[..., a, :]),
+        area = np.maximum(area, 0.5 * np.linalg.norm(_cross(x[..., b, :] - x[..., a, :], x[..., c, :] - x[..., a, :]),
                                                      axis=-1))
     alt = 3.0 * vol / area
     longest = np.zeros(vol.shape)
@@ -220,7 +228,7 @@ def improve_min_altitude(mesh: TetMesh, n_passes: int = 30, worst_fraction: floa
     origin = mesh.nodes
     if slide > 0:
         faces = boundary_faces(el)
-        fn = np.cross(origin[faces[:, 1]] - origin[faces[:, 0]], origin[faces[:, 2]] - origin[faces[:, 0]])
+        fn = _cross(origin[faces[:, 1]] - origin[faces[:, 0]], origin[faces[:, 2]] - origin[faces[:, 0]])
         vnormal = np.zeros_like(origin)
         for k in range(3):
             np.add.at(vnormal, faces[:, k], fn)
@@ -253,12 +261,12 @@ def improve_min_altitude(mesh: TetMesh, n_passes: int = 30, worst_fraction: floa
             d1, d2, d3 = xs[:, 1] - xs[:, 0], xs[:, 2] - xs[:, 0], xs[:, 3] - xs[:, 0]
             k = int(np.argmin(element_min_altitudes(nodes, star)))
             face = [v for v in star[k] if v != n]
-            normal = np.cross(nodes[face[1]] - nodes[face[0]], nodes[face[2]] - nodes[face[0]])
+            normal = _cross(nodes[face[1]] - nodes[face[0]], nodes[face[2]] - nodes[face[0]])
             normal /= np.linalg.norm(normal)
             if np.dot(nodes[n] - nodes[face[0]], normal) < 0:
                 normal = -normal
             centroid = nodes[np.unique(star)].mean(axis=0) - nodes[n]
-            scale = float(np.cbrt(np.abs(np.einsum("ki,ki->k", d1, np.cross(d2, d3))).mean()))
+            scale = float(np.cbrt(np.abs(np.einsum("ki,ki->k", d1, _cross(d2, d3))).mean()))
             dirs = np.vstack([normal, centroid / max(np.linalg.norm(centroid), 1e-300), axes])
             trials = nodes[n] + (0.3 * scale * steps[:, None, None] * dirs[None]).reshape(-1, 3)
             if boundary[n]:
