@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import logging
+import resource
 import sys
 import time
 from collections.abc import Iterable, Iterator
@@ -12,6 +13,15 @@ from typing import TypeVar
 import xarray as xr
 
 from .canonical import read_netcdf
+
+
+def job_cost() -> str:
+    """CPU seconds (user + system) of this process since it started -- imports included -- and of its finished
+    children, and its peak resident memory: exact figures, where Snakemake's ``benchmark`` samples (issue 17)."""
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (f"cpu_s={own.ru_utime + own.ru_stime:.2f} children_cpu_s={children.ru_utime + children.ru_stime:.2f} "
+            f"max_rss_mb={own.ru_maxrss / 1024:.0f}")
 
 
 @contextmanager
@@ -51,6 +61,7 @@ def job_log(log_path: str | Path):
             package.exception("job failed")
             raise
         finally:
+            package.info("job cost: %s", job_cost())
             package.setLevel(old_level)
             sys.stderr = old_stderr
             root.removeHandler(handler)

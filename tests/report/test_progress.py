@@ -51,3 +51,17 @@ def test_failed_job_leaves_its_traceback_in_the_log(tmp_path):
             raise ValueError("bad curve")
     text = log_file.read_text()
     assert "job failed" in text and "ValueError: bad curve" in text
+
+
+def test_job_log_ends_with_the_jobs_cpu_seconds_and_memory(tmp_path):
+    import re
+    import time
+
+    log_file = tmp_path / "job.log"
+    with job_log(log_file):
+        end = time.process_time() + 0.3
+        while time.process_time() < end:      # burn 0.3 CPU s
+            pass
+    match = re.search(r"job cost: cpu_s=([0-9.]+) children_cpu_s=([0-9.]+) max_rss_mb=([0-9]+)", log_file.read_text())
+    assert match, log_file.read_text()
+    assert float(match.group(1)) >= 0.3 and int(match.group(3)) > 10
