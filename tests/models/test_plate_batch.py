@@ -98,3 +98,31 @@ def test_fit_residual_with_batched_plate_curves_equals_the_per_curve_prediction(
     for curve, term in zip(curves, terms):
         (key, (_, predicted, _)), = term.items()
         np.testing.assert_allclose(predicted, predict(model, p, curve, target)[key], rtol=1e-13)
+
+
+def _linear_models():
+    from tissuemech.models.registry import available_models
+    return sorted(k for k in available_models() if get_model(k).linear_in_strain and get_model(k).supports("shear_history"))
+
+
+def test_linear_models_are_the_linear_viscoelastic_and_fractional_families():
+    keys = _linear_models()
+    assert "prony4" in keys and "fractional_zener" in keys and "maxwell" in keys
+    assert {get_model(k).family for k in keys} == {"linear_viscoelastic", "fractional"}
+
+
+@pytest.mark.parametrize("key", _linear_models())
+def test_models_declared_linear_are_linear_and_their_torque_is_the_full_quadrature(key):
+    from tissuemech.models.plate import gauss_radii, stress_histories, torque_from_history
+
+    model = get_model(key)
+    p = model.default_params()
+    t, rim, radius = _histories(seed=8, n_curves=1)[0]
+    once = stress_histories(model, p, t, rim[None, :])[0]
+    np.testing.assert_allclose(stress_histories(model, p, t, 2.5 * rim[None, :])[0], 2.5 * once,
+                               rtol=1e-12, atol=1e-12 * np.abs(once).max())
+    r, w = gauss_radii(8, radius)
+    every_radius = stress_histories(model, p, t, (r / radius)[:, None] * rim[None, :])
+    full = 2.0 * np.pi * np.sum((w * r * r)[:, None] * every_radius, axis=0)
+    np.testing.assert_allclose(torque_from_history(model, p, t, rim, radius), full, rtol=1e-12,
+                               atol=1e-12 * np.abs(full).max())

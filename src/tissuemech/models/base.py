@@ -76,6 +76,9 @@ class ConstitutiveModel:
     #: ``shear_stress_histories(p, time_s, strain, restart)`` takes concatenated histories (``restart`` marks
     #: where each starts), so several measurements are evaluated in one compiled pass
     concatenated_histories: ClassVar[bool] = False
+    #: the stress is linear in the strain history (linear viscoelastic and fractional models): a history scaled by
+    #: x gives the stress scaled by x, so the plate quadrature needs the rim history only
+    linear_in_strain: ClassVar[bool] = False
 
     # --- helpers -----------------------------------------------------------------------------------
     @property

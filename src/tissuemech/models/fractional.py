@@ -294,6 +294,7 @@ class FractionalModel(ConstitutiveModel):
     [Pa s], ``creep_fn`` J(t) [1/Pa], ``creep_integral_fn`` int_0^t J [s/Pa]; ``gstar_fn(p, omega)`` G* [Pa].
     """
 
+    linear_in_strain = True
     family: str = "fractional"
     responses: frozenset[str] = field(default_factory=lambda: frozenset({"oscillation", "shear_history", "creep"}))
     gstar_fn: Callable | None = None

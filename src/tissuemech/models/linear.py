@@ -106,6 +106,7 @@ def refine_time_grid(time_s: np.ndarray, substeps: int = 12) -> tuple[np.ndarray
 class SpectrumModel(ConstitutiveModel):
     """A linear viscoelastic model given by ``spectrum(p) -> (G_inf, G_i, tau_i, eta_inf)``."""
 
+    linear_in_strain = True
     family: str = "linear_viscoelastic"
     responses: frozenset[str] = field(default_factory=lambda: _RESPONSES)
     spectrum_fn: Callable[[Params], tuple[float, np.ndarray, np.ndarray, float]] | None = None

@@ -86,7 +86,11 @@ def torque_from_history(model: ConstitutiveModel, p: Params, time_s: np.ndarray,
     """Torque M(t) in N m for a rim-strain history ``gamma_R(t)`` (each radius with its own history)."""
     r, w = gauss_radii(n_gauss, radius_m)
     rim = np.asarray(rim_strain, float)
-    sigma = stress_histories(model, p, np.asarray(time_s, float), (r / radius_m)[:, None] * rim[None, :])
+    if model.linear_in_strain:
+        # sigma(x gamma_R) = x sigma(gamma_R): one history serves every radius (and M = pi R^3 sigma(gamma_R) / 2)
+        sigma = (r / radius_m)[:, None] * stress_histories(model, p, np.asarray(time_s, float), rim[None, :])
+    else:
+        sigma = stress_histories(model, p, np.asarray(time_s, float), (r / radius_m)[:, None] * rim[None, :])
     return 2.0 * np.pi * np.sum((w * r * r)[:, None] * sigma, axis=0)
 
 
