@@ -103,14 +103,20 @@ def save_figure(fig: Figure, path: str | Path, dpi: int = 150) -> list[Path]:
     written = []
     plain_text_log_ticks(fig)
     with matplotlib.rc_context({"svg.hashsalt": "tissuemech", "svg.fonttype": "none"}):
+        if fig.get_layout_engine() is not None:
+            # lay the figure out once (a draw without rendering), then drop the engine: with an engine attached,
+            # even a placeholder one, every savefig draws the figure twice (layout pass + output)
+            fig.set_dpi(dpi)      # text extents (hence the layout) as in the PNG
+            fig.draw_without_rendering()
+            fig.set_layout_engine(None)
+            if fig.get_layout_engine() is not None:  # rcParams ask for a default engine: keep the layout frozen
+                fig.set_layout_engine("none")
         for fmt in _FORMATS:
             target = base.parent / f"{base.name}.{fmt}"
             metadata = {"Date": None} if fmt == "svg" else {"Software": None}
             written.append(atomic_write(
                 target, lambda tmp, fmt=fmt, metadata=metadata: fig.savefig(tmp, format=fmt, dpi=dpi,
                                                                             metadata=metadata)))
-            # the layout (in inches) is settled by the first save; freezing it halves the cost of the second
-            fig.set_layout_engine("none")
     return written
 
 
