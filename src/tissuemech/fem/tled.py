@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from . import vectorised
+from . import fused, vectorised
 from ._kernels import (STATUS_INVERTED, STATUS_NOT_CONVERGED, STATUS_NOT_FINITE, KernelLaws, KernelLoads, KernelMaterial,
                        KernelMesh, dynamic_relaxation_loop, explicit_loop)
 from .materials import KIND_INVARIANT, KIND_INVARIANT_I1, KIND_SVK, Material, constant_invariant_derivatives
@@ -444,7 +444,7 @@ def _caller_state(model: TLEDModel, h_state, s_prev, w_prev) -> tuple:
     return tuple(out)
 
 
-KERNELS = ("auto", "vectorised", "generic")
+KERNELS = ("auto", "fused", "vectorised", "generic")
 
 #: above this many elements ``kernel="auto"`` keeps float64 runs on the generic kernel: the vectorised passes
 #: move ~3x the bytes per element (stored F, element forces), which costs more than vectorisation gains once
@@ -467,6 +467,25 @@ def vectorised_law(material: Material) -> tuple[bool, bool, float, float] | None
         return None
     w = constant_invariant_derivatives(material)
     return (False, False, 0.0, 0.0) if w is None else (False, True, w[0], w[1])
+
+
+def _fused_law(model: TLEDModel, kernel: str) -> tuple[bool, bool, float, float] | None:
+    """The :func:`vectorised_law` of an explicit run on the fused one-region-per-step kernel (:mod:`.fused`), or
+    None when the run takes another kernel: ``kernel="fused"`` requires an invariant law (SVK and the generic
+    kernel's laws raise); ``"auto"`` takes it wherever it takes the vectorised kernel, except SVK."""
+    if kernel not in KERNELS:
+        raise ValueError(f"kernel must be one of {KERNELS}, not {kernel!r}")
+    if kernel not in ("auto", "fused"):
+        return None
+    law = vectorised_law(model.material)
+    if kernel == "fused" and (law is None or law[0]):
+        raise ValueError(f"the fused kernel needs an invariant law with at most {vectorised.MAX_PRONY_TERMS} Prony "
+                         f"terms and no branch energies; {model.material.law_key!r} "
+                         f"({model.material.prony_g.size} terms) runs on the vectorised or generic kernel")
+    if kernel == "auto" and (law is None or law[0] or (model.dtype == np.float64 and model.mesh.n_elements
+                                                       > AUTO_VECTORISED_MAX_FLOAT64_ELEMENTS)):
+        return None
+    return law
 
 
 def _vector_setup(model: TLEDModel, kernel: str, h_state, s_prev):
@@ -654,19 +673,28 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
         np.array(model.to_kernel_nodes(u0_m), dtype=model.dtype)
     u_old = u.copy() if v0_m_s is None else (u - dt * model.to_kernel_nodes(v0_m_s)).astype(model.dtype)
     h_state, s_prev, w_prev = _state(model, state)
-    vec, fbuf, pbuf = _vector_setup(model, kernel, h_state, s_prev)
+    law = _fused_law(model, kernel)
     with numba_threads(resolve_threads(model, n_threads)):
-        res = explicit_loop(*_kernel_arguments(model), model.mass, h_state, s_prev, w_prev, dt, n_steps, damping_1_s,
-                            out_every, u, u_old, fbuf, pbuf, bool(track_energy), vec)
-    _vector_state_back(vec, h_state, s_prev)
+        if law is not None:
+            # one parallel region per step over numba.get_num_threads() overlapping parts (fem.fused)
+            fz, layout = fused.fused_workspace(model, law, numba.get_num_threads(), h_state, s_prev)
+            res = fused.fused_explicit_loop(*_kernel_arguments(model), model.mass, dt, n_steps, damping_1_s,
+                                            out_every, u, u_old, bool(track_energy), fz)
+            fused.fused_state_back(fz, layout, h_state, s_prev)
+            ran = "fused"
+        else:
+            vec, fbuf, pbuf = _vector_setup(model, kernel, h_state, s_prev)
+            res = explicit_loop(*_kernel_arguments(model), model.mass, h_state, s_prev, w_prev, dt, n_steps,
+                                damping_1_s, out_every, u, u_old, fbuf, pbuf, bool(track_energy), vec)
+            _vector_state_back(vec, h_state, s_prev)
+            ran = "vectorised" if vec[0] else "generic"
     status, bad, step, u, u_old, t, force, torque, cforce, ke, energy = res
     _check_status(model, status, bad, f"step {step}", step * dt)
     names = model.group_names
     return RunResult(t, {n: force[:, i] for i, n in enumerate(names)}, {n: torque[:, i] for i, n in enumerate(names)},
                      cforce, ke, model.to_caller_nodes(u), model.to_caller_nodes(u_old), dt, np.zeros(0, np.int64),
                      _caller_state(model, h_state, s_prev, w_prev),
-                     {k: energy[:, i] for i, k in enumerate(ENERGY_TERMS)} if track_energy else {},
-                     "vectorised" if vec[0] else "generic")
+                     {k: energy[:, i] for i, k in enumerate(ENERGY_TERMS)} if track_energy else {}, ran)
 
 
 def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, min_iter: int = 20,
@@ -690,7 +718,8 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
     u = np.zeros((model.mesh.n_nodes, 3), model.dtype) if u0_m is None else \
         np.array(model.to_kernel_nodes(u0_m), dtype=model.dtype)
     h_state, s_prev, w_prev = _state(model, state)
-    vec, fbuf, pbuf = _vector_setup(model, kernel, h_state, s_prev)
+    # dynamic relaxation has no fused loop: "fused" runs the vectorised passes
+    vec, fbuf, pbuf = _vector_setup(model, "vectorised" if kernel == "fused" else kernel, h_state, s_prev)
     with numba_threads(resolve_threads(model, n_threads)):
         res = dynamic_relaxation_loop(*_kernel_arguments(model), model.dr_mass, h_state, s_prev, w_prev, times, tol,
                                       min_iter, max_iter, u, fbuf, pbuf, vec)
