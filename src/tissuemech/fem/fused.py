@@ -7,8 +7,9 @@ several microseconds and a descheduled thread stalls every region, against ~200 
 10k-tet mesh (docs/fem_timing.md, issue 17). numba's CPU ``prange`` has no barrier inside a region, so the
 passes are made independent between threads instead:
 
-* the nodes are split into ``P`` parts (``P`` = threads; contiguous ranges of the kernel node order, which
-  :func:`.tled.build_model` makes a reverse Cuthill-McKee order, balanced by incident-element count);
+* the nodes are split into ``P`` parts (``P`` = threads; balanced by incident-element count, cut across the
+  kernel node order, which :func:`.tled.build_model` makes a reverse Cuthill-McKee order, or across a coordinate,
+  whichever duplicates the least work: :func:`halo_layout`);
 * part ``p`` owns its nodes ``O_p`` and computes every element that its owned nodes' forces need: the elements
   ``E1_p`` incident to ``O_p`` (stress and forces), and with average nodal pressure (ANP) also the elements
   ``E2_p`` incident to the nodes of ``E1_p`` (the pressure of a node averages its incident elements, the
@@ -18,8 +19,8 @@ passes are made independent between threads instead:
   ("extended" numbering), so each part's passes are the existing loops over one contiguous range, in the
   same structure-of-arrays layout; the viscoelastic states of an element computed by two parts are kept twice
   and advanced by both from identical inputs;
-* :func:`fused_step` is one ``prange(P)`` region: each part runs kinematics, the serial ``J^(-2/3)`` fix-up,
-  the law pass, the nodal pressures of its ``E1_p`` nodes, stress and forces of ``E1_p``, then gathers the
+* :func:`fused_step` is one ``prange(P)`` region: each part runs kinematics of ``E1_p`` (of the halo only ``J``
+  for the element pressure), the rare ``J^(-2/3)`` fix-up, the law pass, the nodal pressures of its ``E1_p`` nodes, stress and forces of ``E1_p``, then gathers the
   forces of its owned nodes and advances their central difference. The end of the region (the join) is the
   only synchronisation per step: the next step's kinematics read the neighbours' new displacements.
 
@@ -49,14 +50,20 @@ from .vectorised import (JM23_NEWTON_MAX, JM23_NEWTON_MIN, MAX_PRONY_TERMS, _ele
 
 _REGION = dict(parallel=True, cache=True, fastmath=FASTMATH, error_model="numpy")
 
-HaloLayout = namedtuple("HaloLayout", "n_parts glob ebeg emid eend node_lo pnode pptr pinc plo gptr gel first")
+#: the arrays of :func:`fused_explicit_loop` (see :func:`fused_workspace`)
+FusedWorkspace = namedtuple("FusedWorkspace", "conn_g d9_g ebeg emid eend onode olo pnode pptr pinc plo gptr gel conn "
+                                              "d9 vol0 grad pe jm23a w1a w2a sprev hstate s_relaxed fe p_flat inv_vnode "
+                                              "n_bad n_far constant i2_dependent")
+
+HaloLayout = namedtuple("HaloLayout", "n_parts glob ebeg emid eend onode olo pnode pptr pinc plo gptr gel first")
 HaloLayout.__doc__ = """Overlapping node partition of :func:`halo_layout` (all index arrays unsigned).
 
 n_parts : number of parts ``P``
 glob : (n_ext,) global element id of every extended element
 ebeg, emid, eend : (P,) uint64; part ``p``'s extended elements are ``[ebeg, eend)``, of which ``[ebeg, emid)``
     are ``E1_p`` (stress and forces) and ``[emid, eend)`` the pressure halo
-node_lo : (P + 1,) uint64 bounds of the owned node ranges
+onode, olo : the owned nodes (uint32, part after part, ascending within a part) and the (P + 1,) uint64 bounds
+    of each part's
 pnode, pptr, pinc : the nodes whose average pressure each part computes (global ids, part after part) and their
     incident extended elements ``pinc[pptr[k]:pptr[k + 1]]`` (CSR; empty without ANP)
 plo : (P + 1,) uint64; part ``p``'s pressure nodes are ``pnode[plo[p]:plo[p + 1]]``
@@ -66,9 +73,16 @@ first : (n_elements,) an extended index of every global element in some ``E1_p``
 """
 
 
-def halo_layout(elements: np.ndarray, n_nodes: int, n_parts: int, anp: bool) -> HaloLayout:
-    """Split the nodes into ``n_parts`` contiguous ranges of equal incident-element count and collect each part's
-    elements with the halo that its owned nodes' forces need (depth 1, or 2 with average nodal pressure).
+def halo_layout(elements: np.ndarray, n_nodes: int, n_parts: int, anp: bool,
+                nodes_m: np.ndarray | None = None) -> HaloLayout:
+    """Split the nodes into ``n_parts`` parts and collect each part's elements with the halo that its owned nodes'
+    forces need (depth 1, or 2 with average nodal pressure).
+
+    The parts are contiguous ranges, of equal incident-element count, of the nodes sorted by a key: the kernel
+    node order (reverse Cuthill-McKee levels) or, with ``nodes_m``, a coordinate or the principal axis of the
+    node cloud (a cut across the longest extent of a brain has the smallest cross-section). The key whose slowest
+    part has the least work (elements of ``E1`` plus 0.4 x the pressure-halo elements, which need ``J`` only) is
+    kept.
 
     Parameters
     ----------
@@ -76,19 +90,48 @@ def halo_layout(elements: np.ndarray, n_nodes: int, n_parts: int, anp: bool) -> 
     n_nodes : number of nodes
     n_parts : parts (threads)
     anp : average nodal pressure (adds the depth-2 pressure halo)
+    nodes_m : (n_nodes, 3) node coordinates (m), for the coordinate cuts; None: the node order only
 
     Returns
     -------
     :class:`HaloLayout`
     """
     el = np.asarray(elements, np.int64)
-    ne = el.shape[0]
     n_parts = max(1, min(int(n_parts), n_nodes))
+    keys = [np.arange(n_nodes, dtype=float)]
+    if nodes_m is not None and n_parts > 1:
+        x = np.asarray(nodes_m, float)
+        xc = x - x.mean(axis=0)
+        axis = np.linalg.svd(xc, full_matrices=False)[2][0]
+        keys += [x[:, 0], x[:, 1], x[:, 2], xc @ axis]
+    best = None
+    for key in keys:
+        layout = _halo_layout_of_owner(el, n_nodes, n_parts, anp, _owner_by_key(el, n_nodes, n_parts, key))
+        e1 = (layout.emid - layout.ebeg).astype(float)
+        halo = (layout.eend - layout.emid).astype(float)
+        cost = float(np.max(e1 + 0.4 * halo))
+        if best is None or cost < best[0]:
+            best = (cost, layout)
+    return best[1]
+
+
+def _owner_by_key(el: np.ndarray, n_nodes: int, n_parts: int, key: np.ndarray) -> np.ndarray:
+    """Part of every node: contiguous ranges of equal incident-element count in the order of ``key``."""
     deg = np.bincount(el.ravel(), minlength=n_nodes)
-    cum = np.cumsum(deg)
+    order = np.argsort(key, kind="stable")
+    cum = np.cumsum(deg[order])
     cuts = np.searchsorted(cum, cum[-1] * np.arange(1, n_parts) / n_parts, side="right")
-    node_lo = np.concatenate([[0], cuts, [n_nodes]]).astype(np.int64)
-    owner = np.repeat(np.arange(n_parts), np.diff(node_lo))
+    owner = np.empty(n_nodes, np.int64)
+    owner[order] = np.repeat(np.arange(n_parts), np.diff(np.concatenate([[0], cuts, [n_nodes]])))
+    return owner
+
+
+def _halo_layout_of_owner(el: np.ndarray, n_nodes: int, n_parts: int, anp: bool, owner: np.ndarray) -> HaloLayout:
+    """:class:`HaloLayout` of a given node ownership (``owner``: part of every node)."""
+    ne = el.shape[0]
+    deg = np.bincount(el.ravel(), minlength=n_nodes)
+    onode = np.argsort(owner, kind="stable")
+    olo = np.concatenate([[0], np.cumsum(np.bincount(owner, minlength=n_parts))])
     # global node -> element incidence (CSR, elements ascending)
     flat = el.ravel()
     order = np.argsort(flat, kind="stable")
@@ -157,7 +200,7 @@ def halo_layout(elements: np.ndarray, n_nodes: int, n_parts: int, anp: bool) -> 
         raise ValueError("the fused kernel indexes with uint32: too many elements")
     u32, u64 = np.uint32, np.uint64
     layout = HaloLayout(n_parts, glob, np.asarray(ebeg, u64), np.asarray(emid, u64), np.asarray(eend, u64),
-                        node_lo.astype(u64), pnode.astype(u32), pptr.astype(u32), pinc.astype(u32),
+                        onode.astype(u32), olo.astype(u64), pnode.astype(u32), pptr.astype(u32), pinc.astype(u32),
                         plo.astype(u64), gptr.astype(u32), gel.astype(u32), first)
     return layout
 
@@ -165,7 +208,7 @@ def halo_layout(elements: np.ndarray, n_nodes: int, n_parts: int, anp: bool) -> 
 @njit(**_REGION)
 def fused_step(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, free,
                conn, d9, vol0, kappa, anp_weight, use_anp, constant, i2_dependent, w1fn, w2fn, params,
-               ebeg, emid, eend, node_lo, pnode, pptr, pinc, plo, inv_vnode, p_flat, n_nodes, gptr, gel,
+               ebeg, emid, eend, onode, olo, pnode, pptr, pinc, plo, inv_vnode, p_flat, n_nodes, gptr, gel,
                g0, g1, g2, g3, g4, g5, g6, g7, g8, pe, jm23a, w1a, w2a,
                qlv, g_inf, da, db, dc, dd, ga, gb, gc, gd, sp0, sp1, sp2, sp3, sp4, sp5,
                ha0, ha1, ha2, ha3, ha4, ha5, hb0, hb1, hb2, hb3, hb4, hb5,
@@ -185,10 +228,10 @@ def fused_step(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, f
     """
     for c in prange(ebeg.size):
         e_lo, e_mid, e_hi = ebeg[c], emid[c], eend[c]
-        # 1. kinematics (as vectorised.kinematics_pass), over E1 and the pressure halo
+        # kinematics (as vectorised.kinematics_pass) of E1; the pressure halo needs J only (below)
         bad = 0
         far = 0
-        for e in range(e_lo, e_hi):
+        for e in range(e_lo, e_mid):
             f11, f12, f13, f21, f22, f23, f31, f32, f33 = _gathered_deformation_gradient(u, conn, d9, e)
             J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
             pe[e] = kappa * (J - 1.0) * vol0[e]
@@ -204,12 +247,17 @@ def fused_step(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, f
             g8[e] = f33 - 1.0
             bad += 0 if J > 0.0 else 1
             far += 0 if (J > JM23_NEWTON_MIN) & (J < JM23_NEWTON_MAX) else 1
+        for e in range(e_mid, e_hi):
+            f11, f12, f13, f21, f22, f23, f31, f32, f33 = _gathered_deformation_gradient(u, conn, d9, e)
+            J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
+            pe[e] = kappa * (J - 1.0) * vol0[e]
+        # (a halo element is in another part's E1, which counts it)
         n_bad[c] = bad
         n_far[c] = far
         if bad == 0:
             if far > 0:
                 # (as vectorised.exact_far_jm23) the rare elements outside the branch-free range, with cbrt
-                for e in range(e_lo, e_hi):
+                for e in range(e_lo, e_mid):
                     f11, f12, f13 = 1.0 + g0[e], g1[e], g2[e]
                     f21, f22, f23 = g3[e], 1.0 + g4[e], g5[e]
                     f31, f32, f33 = g6[e], g7[e], 1.0 + g8[e]
@@ -311,7 +359,8 @@ def fused_step(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, f
                     _store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
                                         fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11)
             # (as vectorised.node_force + _kernels._cd_node_pass) owned nodes: gather, central difference
-            for n in range(node_lo[c], node_lo[c + 1]):
+            for m in range(olo[c], olo[c + 1]):
+                n = onode[m]
                 k = np.uint64(4) * n
                 fx = 0.0
                 fy = 0.0
@@ -357,7 +406,7 @@ def fused_explicit_loop(mesh, mat, laws, loads, mass, dt, n_steps, damping, out_
     w1fn, w2fn, wlfn, bfn = laws
     (bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, n_groups, free, hist_time, hist_vals, fext_ref,
      contact_kind, cparams, contact_nodes) = loads
-    (conn_g, d9_g, ebeg, emid, eend, node_lo, pnode, pptr, pinc, plo, gptr, gel, conn, d9, vol0, grad, pe, jm23a,
+    (conn_g, d9_g, ebeg, emid, eend, onode, olo, pnode, pptr, pinc, plo, gptr, gel, conn, d9, vol0, grad, pe, jm23a,
      w1a, w2a, sp, hs, srel, fe, p_flat, inv_vnode, n_bad, n_far, constant, i2_dependent) = fz
     nn = X.shape[0]
     n_out = n_steps // out_every + 2
@@ -401,7 +450,7 @@ def fused_explicit_loop(mesh, mat, laws, loads, mass, dt, n_steps, damping, out_
         s_ext = hv[2 * n_groups + 1]
         fused_step(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, free,
                    conn, d9, vol0, kappa, anp_weight, use_anp, constant, i2_dependent, w1fn, w2fn, params,
-                   ebeg, emid, eend, node_lo, pnode, pptr, pinc, plo, inv_vnode, p_flat, nn, gptr, gel,
+                   ebeg, emid, eend, onode, olo, pnode, pptr, pinc, plo, inv_vnode, p_flat, nn, gptr, gel,
                    grad[0], grad[1], grad[2], grad[3], grad[4], grad[5], grad[6], grad[7], grad[8], pe, jm23a, w1a, w2a,
                    qlv, g_inf, decay[0], decay[1], decay[2], decay[3], gain[0], gain[1], gain[2], gain[3],
                    sp[0], sp[1], sp[2], sp[3], sp[4], sp[5],
@@ -467,7 +516,7 @@ def fused_workspace(model, law, n_parts: int, h_state: np.ndarray, s_prev: np.nd
     if nt:
         sp[:] = s_prev[glob].T
         hs[:nt] = h_state[glob].transpose(1, 2, 0)
-    fz = (conn_g, d9_g, layout.ebeg, layout.emid, layout.eend, layout.node_lo, layout.pnode, layout.pptr,
+    fz = FusedWorkspace(conn_g, d9_g, layout.ebeg, layout.emid, layout.eend, layout.onode, layout.olo, layout.pnode, layout.pptr,
           layout.pinc, layout.plo, layout.gptr, layout.gel, np.ascontiguousarray(conn_g[:, glob]),
           np.ascontiguousarray(d9_g[:, glob]), np.ascontiguousarray(model.vol0[glob]), np.zeros((9, n_ext), dt),
           np.zeros(n_ext, dt), np.zeros(n_ext), np.full(n_ext, float(w1)), np.full(n_ext, float(w2)), sp, hs,
@@ -482,8 +531,8 @@ def fused_state_back(fz, layout, h_state: np.ndarray, s_prev: np.ndarray) -> Non
     ``E1`` copy of every element; the copies agree)."""
     nt = h_state.shape[1]
     if nt:
-        s_prev[:] = fz[20][:, layout.first].T
-        h_state[:] = fz[21][:nt][:, :, layout.first].transpose(2, 0, 1)
+        s_prev[:] = fz.sprev[:, layout.first].T
+        h_state[:] = fz.hstate[:nt][:, :, layout.first].transpose(2, 0, 1)
 
 
 #: layouts of recent models, by ``id(model)`` (a weak reference checks that the model is the same object)
@@ -499,7 +548,8 @@ def _cached_layout(model, n_parts: int) -> HaloLayout:
     hit = _LAYOUTS.get(key)
     if hit is not None and hit[0]() is model:
         return hit[1]
-    layout = halo_layout(model.kernel_mesh.elements, model.kernel_mesh.n_nodes, n_parts, model.use_anp)
+    layout = halo_layout(model.kernel_mesh.elements, model.kernel_mesh.n_nodes, n_parts, model.use_anp,
+                         model.kernel_mesh.nodes)
     for k in [k for k, v in _LAYOUTS.items() if v[0]() is None]:
         del _LAYOUTS[k]
     _LAYOUTS[key] = (weakref.ref(model), layout)
