@@ -106,7 +106,8 @@ def halo_layout(elements: np.ndarray, n_nodes: int, n_parts: int, anp: bool,
         keys += [x[:, 0], x[:, 1], x[:, 2], xc @ axis]
     best = None
     for key in keys:
-        layout = _halo_layout_of_owner(el, n_nodes, n_parts, anp, _owner_by_key(el, n_nodes, n_parts, key))
+        owner = _owner_by_key(el, n_nodes, n_parts, key)
+        layout = _halo_layout_of_owner(el, n_nodes, n_parts, anp, owner)
         e1 = (layout.emid - layout.ebeg).astype(float)
         halo = (layout.eend - layout.emid).astype(float)
         cost = float(np.max(e1 + 0.4 * halo))
@@ -495,14 +496,13 @@ def fused_explicit_loop(mesh, mat, laws, loads, mass, dt, n_steps, damping, out_
         out_contact[:k_out], out_ke[:k_out], out_energy[:k_out]
 
 
-def fused_workspace(model, law, n_parts: int, h_state: np.ndarray, s_prev: np.ndarray):
-    """The ``fz`` argument of :func:`fused_explicit_loop` for ``model`` (a :class:`.tled.TLEDModel`) on ``n_parts``
-    parts, with the QLV states ``h_state`` (n_elements, n_terms, 6) and ``s_prev`` (n_elements, 6) copied into
-    every extended element; ``law`` = ``(svk, constant, dW/dI1, dW/dI2)`` of :func:`.tled.vectorised_law`
-    (not SVK). Returns ``(fz, layout)``."""
+def fused_workspace(model, layout: HaloLayout, law, h_state: np.ndarray, s_prev: np.ndarray) -> FusedWorkspace:
+    """The ``fz`` argument of :func:`fused_explicit_loop` for ``model`` (a :class:`.tled.TLEDModel`, numbered by
+    part: :func:`model_for_parts`) and its ``layout``, with the QLV states ``h_state`` (n_elements, n_terms, 6) and
+    ``s_prev`` (n_elements, 6) copied into every extended element; ``law`` = ``(svk, constant, dW/dI1, dW/dI2)`` of
+    :func:`.tled.vectorised_law` (not SVK)."""
     el = model.kernel_mesh.elements
     nn = model.kernel_mesh.n_nodes
-    layout = _cached_layout(model, n_parts)
     glob = layout.glob
     n_ext = glob.size
     dt = model.dtype
@@ -523,7 +523,7 @@ def fused_workspace(model, law, n_parts: int, h_state: np.ndarray, s_prev: np.nd
           np.zeros((6, ne_q), dt), np.zeros((12, n_ext), dt), np.zeros(layout.n_parts * nn), 1.0 / model.vnode,
           np.zeros(layout.n_parts, np.int64), np.zeros(layout.n_parts, np.int64), bool(constant),
           bool(model.material.kind == KIND_INVARIANT))
-    return fz, layout
+    return fz
 
 
 def fused_state_back(fz, layout, h_state: np.ndarray, s_prev: np.ndarray) -> None:
@@ -535,22 +535,51 @@ def fused_state_back(fz, layout, h_state: np.ndarray, s_prev: np.ndarray) -> Non
         h_state[:] = fz.hstate[:nt][:, :, layout.first].transpose(2, 0, 1)
 
 
-#: layouts of recent models, by ``id(model)`` (a weak reference checks that the model is the same object)
+def renumbered_by_part(model, layout: HaloLayout):
+    """``model`` (a :class:`.tled.TLEDModel`) with its kernel nodes renumbered part after part (the order within a
+    part kept), and the layout in the new numbering.
+
+    Without it the owned nodes of two parts cut across a coordinate interleave in the kernel order, and the two
+    threads write the same cache lines of the new displacements and forces (false sharing). Only node numbering
+    changes (``node_order``, the per-node arrays, the node ids of the elements, groups and contact); elements keep
+    their order, so element states and ids are unaffected, and runs take and return the caller's numbering as
+    before.
+    """
+    import dataclasses
+
+    from .mesh import TetMesh
+
+    perm = layout.onode.astype(np.int64)  # new node k = old kernel node perm[k]
+    inv = np.empty_like(perm)
+    inv[perm] = np.arange(perm.size)
+    km = model.kernel_mesh
+    el = inv[km.elements].astype(km.elements.dtype)
+    new = dataclasses.replace(
+        model, kernel_mesh=TetMesh(np.ascontiguousarray(km.nodes[perm]), el), node_order=model.node_order[perm],
+        vnode=model.vnode[perm], mass=model.mass[perm], dr_mass=model.dr_mass[perm],
+        free=np.ascontiguousarray(model.free[perm]), fext_ref=np.ascontiguousarray(model.fext_ref[perm]),
+        bc_nodes=inv[model.bc_nodes], contact_nodes=inv[model.contact_nodes])
+    owner = np.repeat(np.arange(layout.n_parts), np.diff(layout.olo.astype(np.int64)))
+    return new, _halo_layout_of_owner(el.astype(np.int64), perm.size, layout.n_parts, model.use_anp, owner)
+
+
+#: part-renumbered models and their layouts, by ``(id(model), parts)`` (a weak reference checks the model)
 _LAYOUTS: dict = {}
 
 
-def _cached_layout(model, n_parts: int) -> HaloLayout:
-    """:func:`halo_layout` of the model's kernel mesh, kept for the model's lifetime (a run of a 10k-tet model
-    builds it in ~10 ms, a 1e6-tet one in ~1 s)."""
+def model_for_parts(model, n_parts: int):
+    """``(part_model, layout)``: :func:`renumbered_by_part` of ``model`` on the :func:`halo_layout` of ``n_parts``
+    parts, kept for the model's lifetime (building it takes ~0.1 s for a 10k-tet model, ~1 s for 1e5 tets)."""
     import weakref
 
     key = (id(model), int(n_parts))
     hit = _LAYOUTS.get(key)
     if hit is not None and hit[0]() is model:
-        return hit[1]
+        return hit[1], hit[2]
     layout = halo_layout(model.kernel_mesh.elements, model.kernel_mesh.n_nodes, n_parts, model.use_anp,
                          model.kernel_mesh.nodes)
+    part_model, layout = renumbered_by_part(model, layout)
     for k in [k for k, v in _LAYOUTS.items() if v[0]() is None]:
         del _LAYOUTS[k]
-    _LAYOUTS[key] = (weakref.ref(model), layout)
-    return layout
+    _LAYOUTS[key] = (weakref.ref(model), part_model, layout)
+    return part_model, layout

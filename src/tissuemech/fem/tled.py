@@ -488,6 +488,13 @@ def _fused_law(model: TLEDModel, kernel: str) -> tuple[bool, bool, float, float]
     return law
 
 
+def _fused_parts(threads: int | None) -> int:
+    """Parts of the fused kernel's node partition: one per thread the run gets (``threads`` as from
+    :func:`resolve_threads`; None: numba's current setting)."""
+    with numba_threads(threads):
+        return numba.get_num_threads()
+
+
 def _vector_setup(model: TLEDModel, kernel: str, h_state, s_prev):
     """The ``vec`` argument of the compiled loops and the force buffers of the generic kernel.
 
@@ -669,15 +676,19 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
     dt = critical_time_step(model, safety) if dt_s is None else float(dt_s)
     n_steps = max(1, int(np.ceil(t_end_s / dt - 1e-9)))
     out_every = max(1, n_steps // max(1, n_outputs))
+    law = _fused_law(model, kernel)
+    threads = resolve_threads(model, n_threads)
+    if law is not None:
+        # the same problem with the kernel nodes numbered part after part (the caller's numbering is unchanged)
+        model, layout = fused.model_for_parts(model, _fused_parts(threads))
     u = np.zeros((model.mesh.n_nodes, 3), model.dtype) if u0_m is None else \
         np.array(model.to_kernel_nodes(u0_m), dtype=model.dtype)
     u_old = u.copy() if v0_m_s is None else (u - dt * model.to_kernel_nodes(v0_m_s)).astype(model.dtype)
     h_state, s_prev, w_prev = _state(model, state)
-    law = _fused_law(model, kernel)
-    with numba_threads(resolve_threads(model, n_threads)):
+    with numba_threads(threads):
         if law is not None:
             # one parallel region per step over numba.get_num_threads() overlapping parts (fem.fused)
-            fz, layout = fused.fused_workspace(model, law, numba.get_num_threads(), h_state, s_prev)
+            fz = fused.fused_workspace(model, layout, law, h_state, s_prev)
             res = fused.fused_explicit_loop(*_kernel_arguments(model), model.mass, dt, n_steps, damping_1_s,
                                             out_every, u, u_old, bool(track_energy), fz)
             fused.fused_state_back(fz, layout, h_state, s_prev)
