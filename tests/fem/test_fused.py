@@ -51,6 +51,12 @@ def parts(request, monkeypatch):
     return request.param
 
 
+@pytest.fixture(params=["fused", "fused2"])
+def kernel(request):
+    """One region per step (overlapping parts) or two (partitioned elements, then the node gather)."""
+    return request.param
+
+
 def _assert_same_run(a, b, rtol=1e-12, energy=True):
     for g in a.reaction_force_n:
         fa, fb = a.reaction_force_n[g], b.reaction_force_n[g]
@@ -68,27 +74,27 @@ def _assert_same_run(a, b, rtol=1e-12, energy=True):
 
 @pytest.mark.parametrize("name", sorted(MATERIALS))
 @pytest.mark.parametrize("anp", [True, False])
-def test_explicit_run_equals_vectorised_kernel(name, anp, parts):
+def test_explicit_run_equals_vectorised_kernel(name, anp, parts, kernel):
     """Displacements, reactions of fixed, moved and partly fixed groups, energies and QLV states over 400 steps."""
     model = _model(_material(name), anp=anp)
     vec = run_explicit(model, 0.02, damping_1_s=50.0, kernel="vectorised", n_outputs=20)
-    fus = run_explicit(model, 0.02, damping_1_s=50.0, kernel="fused", n_outputs=20)
-    assert (vec.kernel, fus.kernel) == ("vectorised", "fused")
+    fus = run_explicit(model, 0.02, damping_1_s=50.0, kernel=kernel, n_outputs=20)
+    assert (vec.kernel, fus.kernel) == ("vectorised", kernel)
     assert np.abs(vec.reaction_force_n["top"]).max() > 1e-4  # a real load
     assert np.abs(vec.reaction_force_n["side"][:, 1]).max() > 1e-6
     _assert_same_run(vec, fus)
 
 
 @pytest.mark.parametrize("threads", [1, 2])
-def test_threads_give_the_same_run(threads):
+def test_threads_give_the_same_run(threads, kernel):
     """Through the real thread count (2 threads: 2 parts in parallel, where the machine has 2 CPUs)."""
     model = _model(_material("qlv4_nh"))
     vec = run_explicit(model, 0.01, damping_1_s=50.0, kernel="vectorised", n_threads=threads)
-    fus = run_explicit(model, 0.01, damping_1_s=50.0, kernel="fused", n_threads=threads)
+    fus = run_explicit(model, 0.01, damping_1_s=50.0, kernel=kernel, n_threads=threads)
     _assert_same_run(vec, fus)
 
 
-def test_external_load_contact_renumbered_mesh_and_continued_state(parts):
+def test_external_load_contact_renumbered_mesh_and_continued_state(parts, kernel):
     """A shuffled mesh renumbered by build_model, an external nodal load, rigid sphere contact, a QLV run continued
     from its state and displacement."""
     mat = _material("qlv4_nh")
@@ -101,29 +107,29 @@ def test_external_load_contact_renumbered_mesh_and_continued_state(parts):
     model = build_model(mesh_model.mesh, mat, mesh_model.groups[:1], sphere, external_force_n=fext,
                         external_time_s=(0.0, 0.01), external_scale=(0.0, 1.0), reorder=True)
     runs = {}
-    for kernel in ("vectorised", "fused"):
-        first = run_explicit(model, 0.01, damping_1_s=50.0, kernel=kernel, n_outputs=10)
+    for k in ("vectorised", kernel):
+        first = run_explicit(model, 0.01, damping_1_s=50.0, kernel=k, n_outputs=10)
         dt = first.time_step_s
-        runs[kernel] = (first, run_explicit(model, 0.01, damping_1_s=50.0, kernel=kernel, n_outputs=10,
+        runs[k] = (first, run_explicit(model, 0.01, damping_1_s=50.0, kernel=k, n_outputs=10,
                                             u0_m=first.displacement_m,
                                             v0_m_s=(first.displacement_m - first.previous_displacement_m) / dt,
                                             state=first.state))
-    for a, b in zip(runs["vectorised"], runs["fused"]):
+    for a, b in zip(runs["vectorised"], runs[kernel]):
         assert np.abs(a.contact_force_n).max() > 0
         _assert_same_run(a, b)
         np.testing.assert_allclose(b.contact_force_n, a.contact_force_n, rtol=0,
                                    atol=1e-12 * np.abs(a.contact_force_n).max())
 
 
-def test_float32_storage_equals_vectorised_float32(parts):
+def test_float32_storage_equals_vectorised_float32(parts, kernel):
     model = _model(_material("qlv4_nh"), precision="float32")
     vec = run_explicit(model, 0.02, damping_1_s=50.0, kernel="vectorised")
-    fus = run_explicit(model, 0.02, damping_1_s=50.0, kernel="fused")
+    fus = run_explicit(model, 0.02, damping_1_s=50.0, kernel=kernel)
     _assert_same_run(vec, fus, rtol=1e-5)
 
 
 @pytest.mark.parametrize("name", ["neo_hookean", "qlv4_nh", "lp2"])
-def test_large_volume_changes_outside_the_newton_range(name, parts):
+def test_large_volume_changes_outside_the_newton_range(name, parts, kernel):
     """``u_z = c z^2``: elements on both sides of the branch-free ``J^(-2/3)`` range (the cbrt fix-up)."""
     mesh = block_mesh((L, L, L), (4, 4, 6))
     model = build_model(mesh, _material(name, nu=0.3),
@@ -136,11 +142,11 @@ def test_large_volume_changes_outside_the_newton_range(name, parts):
     kw = dict(dt_s=1e-6, u0_m=u0, v0_m_s=np.zeros_like(u0), n_outputs=3)
     # (not the energies: over three steps from rest they are differences of large forces times tiny increments)
     _assert_same_run(run_explicit(model, 3e-6, kernel="vectorised", **kw),
-                     run_explicit(model, 3e-6, kernel="fused", **kw), energy=False)
+                     run_explicit(model, 3e-6, kernel=kernel, **kw), energy=False)
 
 
 @pytest.mark.parametrize("anp", [True, False])
-def test_inverted_element_is_reported_by_id(anp, parts):
+def test_inverted_element_is_reported_by_id(anp, parts, kernel):
     model = _model(_material("neo_hookean"), anp=anp)
     x = model.mesh.nodes
     centre = int(np.argmin(np.linalg.norm(x - 0.5 * L, axis=1)))
@@ -150,17 +156,18 @@ def test_inverted_element_is_reported_by_id(anp, parts):
     inverted = set(np.flatnonzero(J <= 0).tolist())
     assert inverted
     with pytest.raises(ElementInversionError, match="inverted") as err:
-        run_explicit(model, 1e-5, dt_s=1e-6, u0_m=u0, kernel="fused")
+        run_explicit(model, 1e-5, dt_s=1e-6, u0_m=u0, kernel=kernel)
     assert err.value.element == min(inverted) and err.value.step == 0
 
 
 @pytest.mark.parametrize("anp", [True, False])
 @pytest.mark.parametrize("n_parts", [2, 3, 5])
-def test_halo_layout_covers_what_each_part_needs(anp, n_parts):
+@pytest.mark.parametrize("two_regions", [False, True])
+def test_halo_layout_covers_what_each_part_needs(anp, n_parts, two_regions):
     model = _model(_material("neo_hookean"), cells=(6, 5, 4))
     el = model.kernel_mesh.elements
     nn = model.kernel_mesh.n_nodes
-    lay = fused.halo_layout(el, nn, n_parts, anp, model.kernel_mesh.nodes)
+    lay = fused.halo_layout(el, nn, n_parts, anp, model.kernel_mesh.nodes, two_regions)
     owned = np.sort(lay.onode.astype(np.int64))
     np.testing.assert_array_equal(owned, np.arange(nn))  # every node owned by exactly one part
     for p in range(n_parts):
@@ -169,7 +176,10 @@ def test_halo_layout_covers_what_each_part_needs(anp, n_parts):
         e1 = set(lay.glob[lay.ebeg[p]:lay.emid[p]].tolist())
         assert len(ext) == len(set(ext.tolist()))  # no element twice within a part
         need1 = set(np.flatnonzero(np.isin(el, nodes_p).any(axis=1)).tolist())
-        assert e1 == need1
+        if two_regions:
+            need1 = e1  # the part's own elements (disjoint, checked below); pressure halo as for any element set
+        else:
+            assert e1 == need1
         if anp:
             n1 = np.unique(el[sorted(need1)])
             need2 = set(np.flatnonzero(np.isin(el, n1).any(axis=1)).tolist())
@@ -177,6 +187,9 @@ def test_halo_layout_covers_what_each_part_needs(anp, n_parts):
             assert set(lay.pnode[lay.plo[p]:lay.plo[p + 1]].tolist()) == set(n1.tolist())
         else:
             assert lay.eend[p] == lay.emid[p]
+    if two_regions:  # every element computed once
+        e1_all = np.concatenate([lay.glob[lay.ebeg[p]:lay.emid[p]] for p in range(n_parts)])
+        np.testing.assert_array_equal(np.sort(e1_all), np.arange(el.shape[0]))
     # every element's states are read back from an E1 copy
     assert np.all(lay.glob[lay.first] == np.arange(el.shape[0]))
     ext_part = np.searchsorted(lay.ebeg, lay.first, side="right") - 1
@@ -191,5 +204,6 @@ def test_kernel_choice():
     ogden = _model(make_material("ogden1", {"mu1": 1000.0, "alpha1": -5.0}, poisson_ratio=0.45), cells=(2, 2, 2))
     assert run_explicit(ogden, 1e-4, kernel="auto").kernel == "generic"
     for model in (svk, ogden):
-        with pytest.raises(ValueError, match="fused kernel needs"):
-            run_explicit(model, 1e-4, kernel="fused")
+        for kernel in ("fused", "fused2"):
+            with pytest.raises(ValueError, match="fused kernel needs"):
+                run_explicit(model, 1e-4, kernel=kernel)

@@ -444,7 +444,7 @@ def _caller_state(model: TLEDModel, h_state, s_prev, w_prev) -> tuple:
     return tuple(out)
 
 
-KERNELS = ("auto", "fused", "vectorised", "generic")
+KERNELS = ("auto", "fused", "fused2", "vectorised", "generic")
 
 #: above this many elements ``kernel="auto"`` keeps float64 runs on the generic kernel: the vectorised passes
 #: move ~3x the bytes per element (stored F, element forces), which costs more than vectorisation gains once
@@ -475,10 +475,10 @@ def _fused_law(model: TLEDModel, kernel: str) -> tuple[bool, bool, float, float]
     kernel's laws raise); ``"auto"`` takes it wherever it takes the vectorised kernel, except SVK."""
     if kernel not in KERNELS:
         raise ValueError(f"kernel must be one of {KERNELS}, not {kernel!r}")
-    if kernel not in ("auto", "fused"):
+    if kernel not in ("auto", "fused", "fused2"):
         return None
     law = vectorised_law(model.material)
-    if kernel == "fused" and (law is None or law[0]):
+    if kernel in ("fused", "fused2") and (law is None or law[0]):
         raise ValueError(f"the fused kernel needs an invariant law with at most {vectorised.MAX_PRONY_TERMS} Prony "
                          f"terms and no branch energies; {model.material.law_key!r} "
                          f"({model.material.prony_g.size} terms) runs on the vectorised or generic kernel")
@@ -680,7 +680,7 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
     threads = resolve_threads(model, n_threads)
     if law is not None:
         # the same problem with the kernel nodes numbered part after part (the caller's numbering is unchanged)
-        model, layout = fused.model_for_parts(model, _fused_parts(threads))
+        model, layout = fused.model_for_parts(model, _fused_parts(threads), kernel == "fused2")
     u = np.zeros((model.mesh.n_nodes, 3), model.dtype) if u0_m is None else \
         np.array(model.to_kernel_nodes(u0_m), dtype=model.dtype)
     u_old = u.copy() if v0_m_s is None else (u - dt * model.to_kernel_nodes(v0_m_s)).astype(model.dtype)
@@ -692,7 +692,7 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
             res = fused.fused_explicit_loop(*_kernel_arguments(model), model.mass, dt, n_steps, damping_1_s,
                                             out_every, u, u_old, bool(track_energy), fz)
             fused.fused_state_back(fz, layout, h_state, s_prev)
-            ran = "fused"
+            ran = "fused2" if layout.two_regions else "fused"
         else:
             vec, fbuf, pbuf = _vector_setup(model, kernel, h_state, s_prev)
             res = explicit_loop(*_kernel_arguments(model), model.mass, h_state, s_prev, w_prev, dt, n_steps,
@@ -730,7 +730,7 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
         np.array(model.to_kernel_nodes(u0_m), dtype=model.dtype)
     h_state, s_prev, w_prev = _state(model, state)
     # dynamic relaxation has no fused loop: "fused" runs the vectorised passes
-    vec, fbuf, pbuf = _vector_setup(model, "vectorised" if kernel == "fused" else kernel, h_state, s_prev)
+    vec, fbuf, pbuf = _vector_setup(model, "vectorised" if kernel.startswith("fused") else kernel, h_state, s_prev)
     with numba_threads(resolve_threads(model, n_threads)):
         res = dynamic_relaxation_loop(*_kernel_arguments(model), model.dr_mass, h_state, s_prev, w_prev, times, tol,
                                       min_iter, max_iter, u, fbuf, pbuf, vec)
