@@ -26,6 +26,37 @@ from fem_timing import cube_with_n_elements, machine, setup  # noqa: E402
 from tissuemech.fem.tled import critical_time_step, numba_threads, run_explicit  # noqa: E402
 
 
+def region_cost_us(n_regions: int = 20000, repeats: int = 5) -> dict:
+    """Median microseconds of one empty ``prange(2)`` region (fork, a store per thread, join) called back to back from
+    compiled code, on 1 and 2 threads: what one parallel region per explicit step costs in itself."""
+    import numba
+    from numba import njit, prange
+
+    @njit(parallel=True)
+    def region(a):
+        for c in prange(2):
+            a[16 * c] += 1.0
+
+    @njit
+    def regions(a, n):
+        for _ in range(n):
+            region(a)
+
+    a = np.zeros(64)
+    out = {}
+    for threads in (1, 2):
+        with numba_threads(threads):
+            regions(a, 100)
+            walls = []
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                regions(a, n_regions)
+                walls.append((time.perf_counter() - t0) / n_regions * 1e6)
+        out[threads] = (float(np.median(walls)), float(min(walls)), float(max(walls)))
+    del numba
+    return out
+
+
 def median_walls(model, v0, n_steps: int, repeats: int, kernels=("auto",)) -> dict:
     """Median wall seconds of ``n_steps`` explicit steps per ``(kernel, threads)`` for 1 and 2 threads, all measured
     alternately within each repeat (A/B under the same load)."""
@@ -54,9 +85,14 @@ def main(argv=None) -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--brain-mesh", default=None)
     ap.add_argument("--kernels", default="auto", help="kernels timed side by side (e.g. vectorised,fused)")
+    ap.add_argument("--region-cost", action="store_true", help="also time an empty parallel region on 1 and 2 threads")
     args = ap.parse_args(argv)
     info = machine()
     print(f"# {info['date_utc']} UTC, CPU {info['cpu']}, {info['logical_cpus']} logical CPUs")
+    if args.region_cost:
+        for threads, (med, lo, hi) in region_cost_us().items():
+            print(f"# empty prange(2) region, {threads} thread(s): {med:.2f} us (median of 5; {lo:.2f}-{hi:.2f}), "
+                  f"load {os.getloadavg()[0]:.2f}", flush=True)
     with numba_threads(2):
         meshes = [("cube", cube_with_n_elements(float(s))) for s in args.sizes.split(",")]
         if args.brain_mesh:
