@@ -24,7 +24,8 @@ Method (Miller, Joldes, Lance & Wittek 2007; Taylor, Cheng & Ourselin 2008; Nift
 
 Two kernels compute the internal forces (``kernel=`` of :func:`run_explicit` / :func:`solve_quasistatic`):
 the generic one below (any law) and the vectorised structure-of-arrays passes of :mod:`.vectorised` (SVK
-and invariant laws, with up to four Prony terms; chosen by ``"auto"``), which agree to rounding.
+and invariant laws, with up to four Prony terms; chosen by ``"auto"``), which agree to rounding. Explicit runs
+of invariant laws can run those passes fused into one parallel region per step (:mod:`.fused`, ``"fused"``).
 
 The whole time loop runs inside one compiled function (no Python per step); the compiled passes and loops are
 in :mod:`._kernels` (this module assembles the model and dispatches). The element stress of
@@ -671,7 +672,11 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
         step, a few % of the step time)
     kernel : ``"auto"`` (the vectorised kernels of :mod:`.vectorised` for SVK and invariant laws, with or
         without up to four QLV terms, except float64 meshes above :data:`AUTO_VECTORISED_MAX_FLOAT64_ELEMENTS`
-        elements; the generic kernel for stretch-based laws and beyond-QLV), ``"vectorised"`` or ``"generic"``
+        elements, for invariant laws in their one-region-per-step form ``"fused"``; the generic kernel for
+        stretch-based laws and beyond-QLV), ``"fused"`` (:mod:`.fused`: the vectorised passes of an invariant law
+        in one parallel region per step over overlapping node parts, one part per thread), ``"fused2"`` (the
+        same with the elements partitioned, each computed once, and the node update in a second region),
+        ``"vectorised"`` or ``"generic"``; all agree to rounding
     """
     dt = critical_time_step(model, safety) if dt_s is None else float(dt_s)
     n_steps = max(1, int(np.ceil(t_end_s / dt - 1e-9)))
@@ -720,7 +725,8 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
     tol_m : displacement error bound for the Joldes termination criterion (default 1e-6 of the smallest
         element altitude)
     n_threads : numba threads for this run (None: numba's current setting; ``"auto"``: see :func:`run_explicit`)
-    kernel : ``"auto"``, ``"vectorised"`` or ``"generic"`` (see :func:`run_explicit`)
+    kernel : ``"auto"``, ``"vectorised"`` or ``"generic"`` (see :func:`run_explicit`; dynamic relaxation has no
+        fused loop: ``"fused"``/``"fused2"`` run the vectorised passes)
     """
     times = np.atleast_1d(np.asarray(times_s, float))
     if np.any(np.diff(times) < 0):
