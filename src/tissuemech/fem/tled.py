@@ -473,7 +473,9 @@ def vectorised_law(material: Material) -> tuple[bool, bool, float, float] | None
 def _fused_law(model: TLEDModel, kernel: str) -> tuple[bool, bool, float, float] | None:
     """The :func:`vectorised_law` of an explicit run on the fused one-region-per-step kernel (:mod:`.fused`), or
     None when the run takes another kernel: ``kernel="fused"`` requires an invariant law (SVK and the generic
-    kernel's laws raise); ``"auto"`` takes it wherever it takes the vectorised kernel, except SVK."""
+    kernel's laws raise); ``"auto"`` takes it wherever it takes the vectorised kernel, except SVK and
+    constant-derivative laws (neo-Hookean, Mooney-Rivlin) on plain tets without QLV, whose single vectorised
+    element pass is faster."""
     if kernel not in KERNELS:
         raise ValueError(f"kernel must be one of {KERNELS}, not {kernel!r}")
     if kernel not in ("auto", "fused", "fused2"):
@@ -485,6 +487,10 @@ def _fused_law(model: TLEDModel, kernel: str) -> tuple[bool, bool, float, float]
                          f"({model.material.prony_g.size} terms) runs on the vectorised or generic kernel")
     if kernel == "auto" and (law is None or law[0] or (model.dtype == np.float64 and model.mesh.n_elements
                                                        > AUTO_VECTORISED_MAX_FLOAT64_ELEMENTS)):
+        return None
+    if kernel == "auto" and law[1] and not model.use_anp and model.material.prony_g.size == 0:
+        # plain tets, constant-derivative law: the vectorised kernel's single fused element pass (F not stored) is
+        # faster than the fused step's kinematics + force passes (docs/fem_timing.md: 0.86-0.92x on 1 thread)
         return None
     return law
 
@@ -672,7 +678,8 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
         step, a few % of the step time)
     kernel : ``"auto"`` (the vectorised kernels of :mod:`.vectorised` for SVK and invariant laws, with or
         without up to four QLV terms, except float64 meshes above :data:`AUTO_VECTORISED_MAX_FLOAT64_ELEMENTS`
-        elements, for invariant laws in their one-region-per-step form ``"fused"``; the generic kernel for
+        elements, for invariant laws in their one-region-per-step form ``"fused"`` except neo-Hookean and
+        Mooney-Rivlin on plain tets without QLV (one vectorised element pass); the generic kernel for
         stretch-based laws and beyond-QLV), ``"fused"`` (:mod:`.fused`: the vectorised passes of an invariant law
         in one parallel region per step over overlapping node parts, one part per thread), ``"fused2"`` (the
         same with the elements partitioned, each computed once, and the node update in a second region),
