@@ -1,36 +1,43 @@
 """One parallel region per explicit step: the vectorised passes fused over an overlapping (halo) node partition.
 
 The vectorised kernel of :mod:`.vectorised` runs every explicit step as 4-5 ``prange`` regions (kinematics,
-nodal pressure, stress/forces, and the node gather + central-difference update), each a fork/join with a
-barrier: every pass needs the previous one complete over the whole mesh. On the 2-core VM a barrier costs
-several microseconds and a descheduled thread stalls every region, against ~200 us of work per step of a
-10k-tet mesh (docs/fem_timing.md, issue 17). numba's CPU ``prange`` has no barrier inside a region, so the
-passes are made independent between threads instead:
+nodal pressure, stress/forces, and the node gather + central-difference update), each a fork/join: every pass
+needs the previous one complete over the whole mesh. numba's CPU ``prange`` has no barrier inside a region, so
+here the passes are made independent between threads instead (issue 17):
 
 * the nodes are split into ``P`` parts (``P`` = threads; balanced by incident-element count, cut across the
   kernel node order, which :func:`.tled.build_model` makes a reverse Cuthill-McKee order, or across a coordinate,
-  whichever duplicates the least work: :func:`halo_layout`);
+  whichever duplicates the least work: :func:`halo_layout`), and for the run the kernel nodes are renumbered part
+  after part (:func:`model_for_parts`), so that two threads never write the same cache line of the node arrays;
 * part ``p`` owns its nodes ``O_p`` and computes every element that its owned nodes' forces need: the elements
-  ``E1_p`` incident to ``O_p`` (stress and forces), and with average nodal pressure (ANP) also the elements
-  ``E2_p`` incident to the nodes of ``E1_p`` (the pressure of a node averages its incident elements, the
-  pressure of an element averages its four nodes: a halo of depth 2). Elements near the part boundary are
-  computed by both parts (redundant work: a few % of the elements for ``P = 2``);
-* the element data are stored per part, ``E1_p`` first then ``E2_p - E1_p``, concatenated over the parts
-  ("extended" numbering), so each part's passes are the existing loops over one contiguous range, in the
-  same structure-of-arrays layout; the viscoelastic states of an element computed by two parts are kept twice
-  and advanced by both from identical inputs;
-* :func:`fused_step` is one ``prange(P)`` region: each part runs kinematics of ``E1_p`` (of the halo only ``J``
-  for the element pressure), the rare ``J^(-2/3)`` fix-up, the law pass, the nodal pressures of its ``E1_p`` nodes, stress and forces of ``E1_p``, then gathers the
-  forces of its owned nodes and advances their central difference. The end of the region (the join) is the
-  only synchronisation per step: the next step's kinematics read the neighbours' new displacements.
+  ``E1_p`` incident to ``O_p`` (stress and forces), and with average nodal pressure (ANP) the elements incident to
+  the nodes of ``E1_p`` (the pressure of a node averages its incident elements, the pressure of an element
+  averages its four nodes: a halo of depth 2, of which only ``J`` is needed). Elements near the part boundary are
+  computed by both parts (for ``P = 2``: 4-9 % of the elements, plus the ``J`` of an 8-18 % halo);
+* the element data are stored per part, ``E1_p`` first then the halo, concatenated over the parts ("extended"
+  numbering), so each part's passes are the existing loops over one contiguous range, in the same
+  structure-of-arrays layout; the viscoelastic states of an element computed by two parts are kept twice and
+  advanced by both from identical inputs;
+* :func:`fused_step` is one ``prange(P)`` region: each part runs kinematics of ``E1_p`` (of the halo ``J`` only),
+  the rare ``J^(-2/3)`` fix-up, the law pass, the nodal pressures of the nodes of ``E1_p``, stress and forces of
+  ``E1_p``, then gathers the forces of its owned nodes and advances their central difference. The end of the
+  region (the join) is the only synchronisation per step: the next step's kinematics read the neighbours' new
+  displacements.
+
+``kernel="fused2"`` (``two_regions``) partitions the elements instead (each computed once) and gathers in a second
+region (:func:`fused_node_pass`), to measure the duplicated work against a region. Measured on the 2-core VM
+(docs/fem_timing.md, "Issue 17, fused step"): a region costs ~1.3 us while the second core is free, so on a quiet
+machine the fused step runs at the rate of the separate passes (the duplicated work costs what the regions saved),
+faster on small meshes, and it is much less slowed down when another process takes CPU time.
 
 The element formulas are the inline functions of :mod:`.vectorised` (one definition each); the loops repeat
 the passes' loop bodies (numba refuses an inlined helper that takes the arrays and calls other inlined helpers
 inside a parfor). All arrays are separate arguments of :func:`fused_step` and no view is made inside the region,
-so numba's parfor lowering marks them ``noalias`` and LLVM vectorises the element loops as in the passes.
+so numba's parfor lowering marks them ``noalias`` (``NUMBA_DEBUG_ARRAY_OPT``: "No aliases found") and LLVM
+vectorises the element loops as in the passes.
 
 Results equal the vectorised kernel's to rounding (the node sums add the element forces in another order);
-``tests/fem/test_fused.py`` checks displacements, reactions, energies and states against it.
+``tests/fem/test_fused.py`` checks displacements, reactions, energies and states against it (1e-12).
 """
 from __future__ import annotations
 
@@ -51,9 +58,9 @@ from .vectorised import (JM23_NEWTON_MAX, JM23_NEWTON_MIN, MAX_PRONY_TERMS, _ele
 _REGION = dict(parallel=True, cache=True, fastmath=FASTMATH, error_model="numpy")
 
 #: the arrays of :func:`fused_explicit_loop` (see :func:`fused_workspace`)
-FusedWorkspace = namedtuple("FusedWorkspace", "conn_g d9_g ebeg emid eend onode olo pnode pptr pinc plo gptr gel conn "
-                                              "d9 vol0 grad pe jm23a w1a w2a sprev hstate s_relaxed fe p_flat inv_vnode "
-                                              "n_bad n_far constant i2_dependent two_regions")
+FusedWorkspace = namedtuple("FusedWorkspace", "conn_g d9_g ebeg emid eend onode olo pnode pptr pinc plo gptr gel "
+                                              "conn d9 vol0 grad pe jm23a w1a w2a sprev hstate s_relaxed fe p_flat "
+                                              "inv_vnode n_bad n_far constant i2_dependent two_regions")
 
 HaloLayout = namedtuple("HaloLayout", "n_parts two_regions glob ebeg emid eend onode olo pnode pptr pinc plo gptr "
                                        "gel first")
@@ -66,7 +73,7 @@ glob : (n_ext,) global element id of every extended element
 ebeg, emid, eend : (P,) uint64; part ``p``'s extended elements are ``[ebeg, eend)``, of which ``[ebeg, emid)``
     are ``E1_p`` (stress and forces) and ``[emid, eend)`` the pressure halo
 onode, olo : the owned nodes (uint32, part after part, ascending within a part) and the (P + 1,) uint64 bounds
-    of each part's
+    of each part's owned nodes in ``onode``
 pnode, pptr, pinc : the nodes whose average pressure each part computes (global ids, part after part) and their
     incident extended elements ``pinc[pptr[k]:pptr[k + 1]]`` (CSR; empty without ANP)
 plo : (P + 1,) uint64; part ``p``'s pressure nodes are ``pnode[plo[p]:plo[p + 1]]``
@@ -209,9 +216,9 @@ def _halo_layout_of_owner(el: np.ndarray, n_nodes: int, n_parts: int, anp: bool,
     if glob.size >= 2**32 or pinc.size >= 2**32:
         raise ValueError("the fused kernel indexes with uint32: too many elements")
     u32, u64 = np.uint32, np.uint64
-    layout = HaloLayout(n_parts, bool(two_regions), glob, np.asarray(ebeg, u64), np.asarray(emid, u64), np.asarray(eend, u64),
-                        onode.astype(u32), olo.astype(u64), pnode.astype(u32), pptr.astype(u32), pinc.astype(u32),
-                        plo.astype(u64), gptr.astype(u32), gel.astype(u32), first)
+    layout = HaloLayout(n_parts, bool(two_regions), glob, np.asarray(ebeg, u64), np.asarray(emid, u64),
+                        np.asarray(eend, u64), onode.astype(u32), olo.astype(u64), pnode.astype(u32),
+                        pptr.astype(u32), pinc.astype(u32), plo.astype(u64), gptr.astype(u32), gel.astype(u32), first)
     return layout
 
 
@@ -550,13 +557,14 @@ def fused_workspace(model, layout: HaloLayout, law, h_state: np.ndarray, s_prev:
     if nt:
         sp[:] = s_prev[glob].T
         hs[:nt] = h_state[glob].transpose(1, 2, 0)
-    fz = FusedWorkspace(conn_g, d9_g, layout.ebeg, layout.emid, layout.eend, layout.onode, layout.olo, layout.pnode, layout.pptr,
-          layout.pinc, layout.plo, layout.gptr, layout.gel, np.ascontiguousarray(conn_g[:, glob]),
-          np.ascontiguousarray(d9_g[:, glob]), np.ascontiguousarray(model.vol0[glob]), np.zeros((9, n_ext), dt),
-          np.zeros(n_ext, dt), np.zeros(n_ext), np.full(n_ext, float(w1)), np.full(n_ext, float(w2)), sp, hs,
-          np.zeros((6, ne_q), dt), np.zeros((12, n_ext), dt), np.zeros(layout.n_parts * nn), 1.0 / model.vnode,
-          np.zeros(layout.n_parts, np.int64), np.zeros(layout.n_parts, np.int64), bool(constant),
-          bool(model.material.kind == KIND_INVARIANT), layout.two_regions)
+    fz = FusedWorkspace(
+        conn_g, d9_g, layout.ebeg, layout.emid, layout.eend, layout.onode, layout.olo, layout.pnode, layout.pptr,
+        layout.pinc, layout.plo, layout.gptr, layout.gel, np.ascontiguousarray(conn_g[:, glob]),
+        np.ascontiguousarray(d9_g[:, glob]), np.ascontiguousarray(model.vol0[glob]), np.zeros((9, n_ext), dt),
+        np.zeros(n_ext, dt), np.zeros(n_ext), np.full(n_ext, float(w1)), np.full(n_ext, float(w2)), sp, hs,
+        np.zeros((6, ne_q), dt), np.zeros((12, n_ext), dt), np.zeros(layout.n_parts * nn), 1.0 / model.vnode,
+        np.zeros(layout.n_parts, np.int64), np.zeros(layout.n_parts, np.int64), bool(constant),
+        bool(model.material.kind == KIND_INVARIANT), layout.two_regions)
     return fz
 
 
