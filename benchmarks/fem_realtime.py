@@ -3,9 +3,10 @@
 For each brain mesh given (e.g. the fTetWild mesh as meshed and after ``mesh.improve_min_altitude``) and each law
 (neo-Hookean, QLV with 4 Prony terms on neo-Hookean; mu = 1 kPa, nu = 0.49, rho = 1040 kg/m^3, ANP, the lowest
 5 % of the brain fixed, an initial shear-velocity field), the explicit step runs at the critical step
-``0.7 min altitude / c_d`` on 1 and 2 threads (alternating, ``--repeats`` times, best kept) in float64 and float32
-storage. Printed: element updates per wall second, the real-time factor (simulated / wall seconds), the 1-minute
-load before the case, and the float32 - float64 difference of the displacement field and of the support reaction
+``0.7 min altitude / c_d`` on 1 and 2 threads (alternating, ``--repeats`` times, median kept) in float64 and float32
+storage. Printed: element updates per wall second (median of the repeats), the real-time factor (simulated / wall
+seconds), the 1-minute load before and after the case, with ``--kernels`` the speed ratio of each kernel to the first
+(all kernels and thread counts interleaved within each repeat), and the float32 - float64 difference of the displacement field and of the support reaction
 after the timed steps (relative to their float64 maxima). ``--cube`` adds a ~10k-tet cube (the 8e7 updates/s
 target). Usage::
 
@@ -30,9 +31,10 @@ from tissuemech.fem.mesh import mesh_quality, read_mesh  # noqa: E402
 from tissuemech.fem.tled import build_model, critical_time_step, numba_threads, run_explicit  # noqa: E402
 
 
-def timed(model, v0, dt, n_steps, threads):
+def timed(model, v0, dt, n_steps, threads, kernel="auto"):
     t0 = time.perf_counter()
-    res = run_explicit(model, n_steps * dt, dt_s=dt, v0_m_s=v0, n_outputs=1, track_energy=False, n_threads=threads)
+    res = run_explicit(model, n_steps * dt, dt_s=dt, v0_m_s=v0, n_outputs=1, track_energy=False, n_threads=threads,
+                       kernel=kernel)
     return time.perf_counter() - t0, res
 
 
@@ -99,6 +101,10 @@ def main(argv=None) -> None:
     ap.add_argument("--laws", default="NH,QLV4-NH")
     ap.add_argument("--seconds", type=float, default=0.1, help="simulated seconds per measurement")
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--kernels", default="auto",
+                    help="internal-force kernels timed side by side, interleaved (e.g. vectorised,fused); the "
+                         "float32 - float64 difference is per kernel, 'vs 1st' the speed ratio to the first kernel")
+    ap.add_argument("--precisions", default="float64,float32")
     ap.add_argument("--rt-mass-scaling", type=float, default=None,
                     help="build the timed models with selective mass scaling to this multiple of the unscaled "
                          "critical step (the table's RT then includes it)")
@@ -112,14 +118,16 @@ def main(argv=None) -> None:
     meshes = [(Path(p).stem, read_mesh(p)[0]) for p in args.brain_mesh]
     if args.cube:
         meshes.append(("cube", cube_with_n_elements(1e4)))
-    print(f"{'mesh':>16} {'tets':>6} {'alt mm':>6} {'law':>8} {'prec':>7} {'steps':>6} {'load1':>5} "
-          f"{'Mupd/s 1t':>9} {'Mupd/s 2t':>9} {'RT 1t':>6} {'RT 2t':>6} {'du32/u64':>9} {'dF32/F64':>9}")
+    kernels = args.kernels.split(",")
+    print(f"{'mesh':>16} {'tets':>6} {'alt mm':>6} {'law':>8} {'prec':>7} {'kernel':>10} {'steps':>6} {'load1':>5} "
+          f"{'Mupd/s 1t':>9} {'Mupd/s 2t':>9} {'RT 1t':>6} {'RT 2t':>6} {'vs 1st 1t':>9} {'vs 1st 2t':>9} "
+          f"{'du32/u64':>9} {'dF32/F64':>9} {'load1 end':>9}")
     with numba_threads(2):
         for name, mesh in meshes:
             alt = mesh_quality(mesh)["min_altitude_m"]
             for law in args.laws.split(","):
-                ref = None
-                for precision in ("float64", "float32"):
+                ref = {}
+                for precision in args.precisions.split(","):
                     load = os.getloadavg()[0]
                     model, v0 = setup(mesh, law, precision, True)
                     if args.rt_mass_scaling:
@@ -127,24 +135,36 @@ def main(argv=None) -> None:
                                             mass_scaling_step_s=args.rt_mass_scaling * critical_time_step(model, 1.0))
                     dt = critical_time_step(model, 0.7)
                     n_steps = max(20, int(round(args.seconds / dt)))
-                    timed(model, v0, dt, 3, 1)
-                    best = {1: np.inf, 2: np.inf}
+                    for kernel in kernels:
+                        for threads in (1, 2):
+                            timed(model, v0, dt, 3, threads, kernel)
+                    # every repeat times each kernel on 1 and 2 threads back to back (A/B under the same load)
+                    walls = {(k, t): [] for k in kernels for t in (1, 2)}
+                    last = {}
                     for _ in range(args.repeats):
                         for threads in (1, 2):
-                            wall, res = timed(model, v0, dt, n_steps, threads)
-                            best[threads] = min(best[threads], wall)
-                    u, f = res.displacement_m, res.reaction_force_n["bottom"][-1]
-                    if ref is None:
-                        ref = (u, f)
-                        du = df = float("nan")
-                    else:
-                        du = np.abs(u - ref[0]).max() / np.abs(ref[0]).max()
-                        df = np.abs(f - ref[1]).max() / np.abs(ref[1]).max()
+                            for kernel in kernels:
+                                wall, res = timed(model, v0, dt, n_steps, threads, kernel)
+                                walls[kernel, threads].append(wall)
+                                last[kernel] = res
+                    load_end = os.getloadavg()[0]
                     ne = mesh.n_elements
-                    print(f"{name:>16} {ne:>6d} {alt * 1e3:>6.3f} {law:>8} {precision[-2:]:>7} {n_steps:>6d} {load:>5.2f} "
-                          f"{ne * n_steps / best[1] / 1e6:>9.1f} {ne * n_steps / best[2] / 1e6:>9.1f} "
-                          f"{n_steps * dt / best[1]:>6.2f} {n_steps * dt / best[2]:>6.2f} {du:>9.1e} {df:>9.1e}",
-                          flush=True)
+                    for kernel in kernels:
+                        res = last[kernel]
+                        u, f = res.displacement_m, res.reaction_force_n["bottom"][-1]
+                        if kernel not in ref:
+                            ref[kernel] = (u, f)
+                            du = df = float("nan")
+                        else:
+                            du = np.abs(u - ref[kernel][0]).max() / np.abs(ref[kernel][0]).max()
+                            df = np.abs(f - ref[kernel][1]).max() / np.abs(ref[kernel][1]).max()
+                        b1, b2 = np.median(walls[kernel, 1]), np.median(walls[kernel, 2])
+                        r1 = np.median(walls[kernels[0], 1]) / b1
+                        r2 = np.median(walls[kernels[0], 2]) / b2
+                        print(f"{name:>16} {ne:>6d} {alt * 1e3:>6.3f} {law:>8} {precision[-2:]:>7} {res.kernel:>10} "
+                              f"{n_steps:>6d} {load:>5.2f} {ne * n_steps / b1 / 1e6:>9.1f} {ne * n_steps / b2 / 1e6:>9.1f} "
+                              f"{n_steps * dt / b1:>6.2f} {n_steps * dt / b2:>6.2f} {r1:>9.2f} {r2:>9.2f} {du:>9.1e} "
+                              f"{df:>9.1e} {load_end:>9.2f}", flush=True)
     if args.mass_scaling and args.brain_mesh:
         print(f"# explicit flat-punch indentation (QLV4-NH, float32, 2 mm in 0.2 s, held 0.1 s, 1 thread), mass scaling to "
               f"{args.mass_scaling} x the critical step, {meshes[0][0]}; load {os.getloadavg()[0]:.2f}")

@@ -24,7 +24,8 @@ Method (Miller, Joldes, Lance & Wittek 2007; Taylor, Cheng & Ourselin 2008; Nift
 
 Two kernels compute the internal forces (``kernel=`` of :func:`run_explicit` / :func:`solve_quasistatic`):
 the generic one below (any law) and the vectorised structure-of-arrays passes of :mod:`.vectorised` (SVK
-and invariant laws, with up to four Prony terms; chosen by ``"auto"``), which agree to rounding.
+and invariant laws, with up to four Prony terms; chosen by ``"auto"``), which agree to rounding. Explicit runs
+of invariant laws can run those passes fused into one parallel region per step (:mod:`.fused`, ``"fused"``).
 
 The whole time loop runs inside one compiled function (no Python per step); the compiled passes and loops are
 in :mod:`._kernels` (this module assembles the model and dispatches). The element stress of
@@ -44,7 +45,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from . import vectorised
+from . import fused, vectorised
 from ._kernels import (STATUS_INVERTED, STATUS_NOT_CONVERGED, STATUS_NOT_FINITE, KernelLaws, KernelLoads, KernelMaterial,
                        KernelMesh, dynamic_relaxation_loop, explicit_loop)
 from .materials import KIND_INVARIANT, KIND_INVARIANT_I1, KIND_SVK, Material, constant_invariant_derivatives
@@ -444,7 +445,7 @@ def _caller_state(model: TLEDModel, h_state, s_prev, w_prev) -> tuple:
     return tuple(out)
 
 
-KERNELS = ("auto", "vectorised", "generic")
+KERNELS = ("auto", "fused", "fused2", "vectorised", "generic")
 
 #: above this many elements ``kernel="auto"`` keeps float64 runs on the generic kernel: the vectorised passes
 #: move ~3x the bytes per element (stored F, element forces), which costs more than vectorisation gains once
@@ -467,6 +468,38 @@ def vectorised_law(material: Material) -> tuple[bool, bool, float, float] | None
         return None
     w = constant_invariant_derivatives(material)
     return (False, False, 0.0, 0.0) if w is None else (False, True, w[0], w[1])
+
+
+def _fused_law(model: TLEDModel, kernel: str) -> tuple[bool, bool, float, float] | None:
+    """The :func:`vectorised_law` of an explicit run on the fused one-region-per-step kernel (:mod:`.fused`), or
+    None when the run takes another kernel: ``kernel="fused"`` requires an invariant law (SVK and the generic
+    kernel's laws raise); ``"auto"`` takes it wherever it takes the vectorised kernel, except SVK and
+    constant-derivative laws (neo-Hookean, Mooney-Rivlin) on plain tets without QLV, whose single vectorised
+    element pass is faster."""
+    if kernel not in KERNELS:
+        raise ValueError(f"kernel must be one of {KERNELS}, not {kernel!r}")
+    if kernel not in ("auto", "fused", "fused2"):
+        return None
+    law = vectorised_law(model.material)
+    if kernel in ("fused", "fused2") and (law is None or law[0]):
+        raise ValueError(f"the fused kernel needs an invariant law with at most {vectorised.MAX_PRONY_TERMS} Prony "
+                         f"terms and no branch energies; {model.material.law_key!r} "
+                         f"({model.material.prony_g.size} terms) runs on the vectorised or generic kernel")
+    if kernel == "auto" and (law is None or law[0] or (model.dtype == np.float64 and model.mesh.n_elements
+                                                       > AUTO_VECTORISED_MAX_FLOAT64_ELEMENTS)):
+        return None
+    if kernel == "auto" and law[1] and not model.use_anp and model.material.prony_g.size == 0:
+        # plain tets, constant-derivative law: the vectorised kernel's single fused element pass (F not stored) is
+        # faster than the fused step's kinematics + force passes (docs/fem_timing.md: 0.86-0.92x on 1 thread)
+        return None
+    return law
+
+
+def _fused_parts(threads: int | None) -> int:
+    """Parts of the fused kernel's node partition: one per thread the run gets (``threads`` as from
+    :func:`resolve_threads`; None: numba's current setting)."""
+    with numba_threads(threads):
+        return numba.get_num_threads()
 
 
 def _vector_setup(model: TLEDModel, kernel: str, h_state, s_prev):
@@ -645,28 +678,46 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
         step, a few % of the step time)
     kernel : ``"auto"`` (the vectorised kernels of :mod:`.vectorised` for SVK and invariant laws, with or
         without up to four QLV terms, except float64 meshes above :data:`AUTO_VECTORISED_MAX_FLOAT64_ELEMENTS`
-        elements; the generic kernel for stretch-based laws and beyond-QLV), ``"vectorised"`` or ``"generic"``
+        elements, for invariant laws in their one-region-per-step form ``"fused"`` except neo-Hookean and
+        Mooney-Rivlin on plain tets without QLV (one vectorised element pass); the generic kernel for
+        stretch-based laws and beyond-QLV), ``"fused"`` (:mod:`.fused`: the vectorised passes of an invariant law
+        in one parallel region per step over overlapping node parts, one part per thread), ``"fused2"`` (the
+        same with the elements partitioned, each computed once, and the node update in a second region),
+        ``"vectorised"`` or ``"generic"``; all agree to rounding
     """
     dt = critical_time_step(model, safety) if dt_s is None else float(dt_s)
     n_steps = max(1, int(np.ceil(t_end_s / dt - 1e-9)))
     out_every = max(1, n_steps // max(1, n_outputs))
+    law = _fused_law(model, kernel)
+    threads = resolve_threads(model, n_threads)
+    if law is not None:
+        # the same problem with the kernel nodes numbered part after part (the caller's numbering is unchanged)
+        model, layout = fused.model_for_parts(model, _fused_parts(threads), kernel == "fused2")
     u = np.zeros((model.mesh.n_nodes, 3), model.dtype) if u0_m is None else \
         np.array(model.to_kernel_nodes(u0_m), dtype=model.dtype)
     u_old = u.copy() if v0_m_s is None else (u - dt * model.to_kernel_nodes(v0_m_s)).astype(model.dtype)
     h_state, s_prev, w_prev = _state(model, state)
-    vec, fbuf, pbuf = _vector_setup(model, kernel, h_state, s_prev)
-    with numba_threads(resolve_threads(model, n_threads)):
-        res = explicit_loop(*_kernel_arguments(model), model.mass, h_state, s_prev, w_prev, dt, n_steps, damping_1_s,
-                            out_every, u, u_old, fbuf, pbuf, bool(track_energy), vec)
-    _vector_state_back(vec, h_state, s_prev)
+    with numba_threads(threads):
+        if law is not None:
+            # one parallel region per step over numba.get_num_threads() overlapping parts (fem.fused)
+            fz = fused.fused_workspace(model, layout, law, h_state, s_prev)
+            res = fused.fused_explicit_loop(*_kernel_arguments(model), model.mass, dt, n_steps, damping_1_s,
+                                            out_every, u, u_old, bool(track_energy), fz)
+            fused.fused_state_back(fz, layout, h_state, s_prev)
+            ran = "fused2" if layout.two_regions else "fused"
+        else:
+            vec, fbuf, pbuf = _vector_setup(model, kernel, h_state, s_prev)
+            res = explicit_loop(*_kernel_arguments(model), model.mass, h_state, s_prev, w_prev, dt, n_steps,
+                                damping_1_s, out_every, u, u_old, fbuf, pbuf, bool(track_energy), vec)
+            _vector_state_back(vec, h_state, s_prev)
+            ran = "vectorised" if vec[0] else "generic"
     status, bad, step, u, u_old, t, force, torque, cforce, ke, energy = res
     _check_status(model, status, bad, f"step {step}", step * dt)
     names = model.group_names
     return RunResult(t, {n: force[:, i] for i, n in enumerate(names)}, {n: torque[:, i] for i, n in enumerate(names)},
                      cforce, ke, model.to_caller_nodes(u), model.to_caller_nodes(u_old), dt, np.zeros(0, np.int64),
                      _caller_state(model, h_state, s_prev, w_prev),
-                     {k: energy[:, i] for i, k in enumerate(ENERGY_TERMS)} if track_energy else {},
-                     "vectorised" if vec[0] else "generic")
+                     {k: energy[:, i] for i, k in enumerate(ENERGY_TERMS)} if track_energy else {}, ran)
 
 
 def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, min_iter: int = 20,
@@ -681,7 +732,8 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
     tol_m : displacement error bound for the Joldes termination criterion (default 1e-6 of the smallest
         element altitude)
     n_threads : numba threads for this run (None: numba's current setting; ``"auto"``: see :func:`run_explicit`)
-    kernel : ``"auto"``, ``"vectorised"`` or ``"generic"`` (see :func:`run_explicit`)
+    kernel : ``"auto"``, ``"vectorised"`` or ``"generic"`` (see :func:`run_explicit`; dynamic relaxation has no
+        fused loop: ``"fused"``/``"fused2"`` run the vectorised passes)
     """
     times = np.atleast_1d(np.asarray(times_s, float))
     if np.any(np.diff(times) < 0):
@@ -690,7 +742,8 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
     u = np.zeros((model.mesh.n_nodes, 3), model.dtype) if u0_m is None else \
         np.array(model.to_kernel_nodes(u0_m), dtype=model.dtype)
     h_state, s_prev, w_prev = _state(model, state)
-    vec, fbuf, pbuf = _vector_setup(model, kernel, h_state, s_prev)
+    # dynamic relaxation has no fused loop: "fused" runs the vectorised passes
+    vec, fbuf, pbuf = _vector_setup(model, "vectorised" if kernel.startswith("fused") else kernel, h_state, s_prev)
     with numba_threads(resolve_threads(model, n_threads)):
         res = dynamic_relaxation_loop(*_kernel_arguments(model), model.dr_mass, h_state, s_prev, w_prev, times, tol,
                                       min_iter, max_iter, u, fbuf, pbuf, vec)
