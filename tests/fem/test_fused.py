@@ -198,11 +198,10 @@ def test_halo_layout_covers_what_each_part_needs(anp, n_parts, two_regions):
 
 def test_kernel_choice():
     nh = _model(_material("neo_hookean"), cells=(2, 2, 2))
-    assert run_explicit(nh, 1e-4, kernel="auto").kernel == "fused"
-    # plain tets, constant law: one vectorised element pass; per-element laws and QLV take the fused step
-    assert run_explicit(_model(_material("neo_hookean"), anp=False, cells=(2, 2, 2)), 1e-4).kernel == "vectorised"
-    assert run_explicit(_model(_material("lp2"), anp=False, cells=(2, 2, 2)), 1e-4).kernel == "fused"
-    assert run_explicit(_model(_material("qlv4_nh"), anp=False, cells=(2, 2, 2)), 1e-4).kernel == "fused"
+    # "auto" keeps the vectorised passes (the fused step is opt-in: no faster on a free machine)
+    assert run_explicit(nh, 1e-4, kernel="auto").kernel == "vectorised"
+    assert run_explicit(nh, 1e-4, kernel="fused").kernel == "fused"
+    assert run_explicit(_model(_material("qlv4_nh"), anp=False, cells=(2, 2, 2)), 1e-4).kernel == "vectorised"
     svk = _model(make_material("saint_venant_kirchhoff", {"mu": 1000.0}, poisson_ratio=0.45), cells=(2, 2, 2))
     assert run_explicit(svk, 1e-4, kernel="auto").kernel == "vectorised"
     ogden = _model(make_material("ogden1", {"mu1": 1000.0, "alpha1": -5.0}, poisson_ratio=0.45), cells=(2, 2, 2))

@@ -126,8 +126,7 @@ def test_kernel_choice():
     assert vectorised_law(ogden) is None and vectorised_law(five_terms) is None
     model = _sheared_block(ogden)
     assert run_explicit(model, 1e-3, kernel="auto").kernel == "generic"
-    # explicit runs of invariant laws take the fused one-region-per-step form of these passes (test_fused.py)
-    assert run_explicit(_sheared_block(_material("rp3")), 1e-3, kernel="auto").kernel == "fused"
+    assert run_explicit(_sheared_block(_material("rp3")), 1e-3, kernel="auto").kernel == "vectorised"
     assert run_explicit(_sheared_block(_material("svk")), 1e-3, kernel="auto").kernel == "vectorised"
     with pytest.raises(ValueError, match="ogden1"):
         run_explicit(model, 1e-3, kernel="vectorised")

@@ -472,26 +472,20 @@ def vectorised_law(material: Material) -> tuple[bool, bool, float, float] | None
 
 def _fused_law(model: TLEDModel, kernel: str) -> tuple[bool, bool, float, float] | None:
     """The :func:`vectorised_law` of an explicit run on the fused one-region-per-step kernel (:mod:`.fused`), or
-    None when the run takes another kernel: ``kernel="fused"`` requires an invariant law (SVK and the generic
-    kernel's laws raise); ``"auto"`` takes it wherever it takes the vectorised kernel, except SVK and
-    constant-derivative laws (neo-Hookean, Mooney-Rivlin) on plain tets without QLV, whose single vectorised
-    element pass is faster."""
+    None when the run takes another kernel. ``kernel="fused"`` / ``"fused2"`` require an invariant law (SVK and
+    the generic kernel's laws raise). ``"auto"`` never takes it: on a free machine it measured as fast as the
+    vectorised passes (a parallel region costs ~1.3 us of a ~200 us brain step) and it costs a compile of its
+    own (~35 CPU s); it holds up better than them with 2 threads on a loaded machine (docs/fem_timing.md,
+    "Issue 17, fused step"), where ``n_threads="auto"`` already runs one thread."""
     if kernel not in KERNELS:
         raise ValueError(f"kernel must be one of {KERNELS}, not {kernel!r}")
-    if kernel not in ("auto", "fused", "fused2"):
+    if kernel not in ("fused", "fused2"):
         return None
     law = vectorised_law(model.material)
-    if kernel in ("fused", "fused2") and (law is None or law[0]):
+    if law is None or law[0]:
         raise ValueError(f"the fused kernel needs an invariant law with at most {vectorised.MAX_PRONY_TERMS} Prony "
                          f"terms and no branch energies; {model.material.law_key!r} "
                          f"({model.material.prony_g.size} terms) runs on the vectorised or generic kernel")
-    if kernel == "auto" and (law is None or law[0] or (model.dtype == np.float64 and model.mesh.n_elements
-                                                       > AUTO_VECTORISED_MAX_FLOAT64_ELEMENTS)):
-        return None
-    if kernel == "auto" and law[1] and not model.use_anp and model.material.prony_g.size == 0:
-        # plain tets, constant-derivative law: the vectorised kernel's single fused element pass (F not stored) is
-        # faster than the fused step's kinematics + force passes (docs/fem_timing.md: 0.86-0.92x on 1 thread)
-        return None
     return law
 
 
@@ -678,9 +672,8 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
         step, a few % of the step time)
     kernel : ``"auto"`` (the vectorised kernels of :mod:`.vectorised` for SVK and invariant laws, with or
         without up to four QLV terms, except float64 meshes above :data:`AUTO_VECTORISED_MAX_FLOAT64_ELEMENTS`
-        elements, for invariant laws in their one-region-per-step form ``"fused"`` except neo-Hookean and
-        Mooney-Rivlin on plain tets without QLV (one vectorised element pass); the generic kernel for
-        stretch-based laws and beyond-QLV), ``"fused"`` (:mod:`.fused`: the vectorised passes of an invariant law
+        elements; the generic kernel for stretch-based laws and beyond-QLV), ``"fused"`` (opt-in,
+        :mod:`.fused`: the vectorised passes of an invariant law
         in one parallel region per step over overlapping node parts, one part per thread), ``"fused2"`` (the
         same with the elements partitioned, each computed once, and the node update in a second region),
         ``"vectorised"`` or ``"generic"``; all agree to rounding
