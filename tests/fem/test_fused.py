@@ -116,7 +116,9 @@ def test_external_load_contact_renumbered_mesh_and_continued_state(parts, kernel
                                             state=first.state))
     for a, b in zip(runs["vectorised"], runs[kernel]):
         assert np.abs(a.contact_force_n).max() > 0
-        _assert_same_run(a, b)
+        # two runs of contact steps: the parts sum the nodal forces in another order, and the rounding grows to
+        # ~1e-12 of the largest reaction (1.05e-12 seen with 3 parts)
+        _assert_same_run(a, b, rtol=1e-11)
         np.testing.assert_allclose(b.contact_force_n, a.contact_force_n, rtol=0,
                                    atol=1e-12 * np.abs(a.contact_force_n).max())
 

@@ -302,13 +302,13 @@ def _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_nod
 
 
 @njit(cache=True)
-def _history_values(t, hist_time, hist_vals, out):
+def history_values(t, hist_time, hist_vals, out):
     for r in range(hist_vals.shape[0]):
         out[r] = np.interp(t, hist_time, hist_vals[r])
 
 
 @njit(cache=True)
-def _apply_bcs(u, X, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups):
+def apply_bcs(u, X, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups):
     """Set prescribed dofs: ``u = s_g dir`` (+ rotation about z by angle theta_g around the group centre)."""
     for k in range(bc_nodes.size):
         n = bc_nodes[k]
@@ -332,7 +332,7 @@ def _apply_bcs(u, X, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center,
 
 
 @njit(cache=True)
-def _reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_out, torque_out):
+def group_reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_out, torque_out):
     """Reaction force (sum of internal forces) and z-torque about the group centre, per group."""
     force_out[:] = 0.0
     torque_out[:] = 0.0
@@ -349,7 +349,7 @@ def _reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_out, torque_out
 
 
 @njit(cache=True)
-def _contact_project(u, X, contact_nodes, in_contact, contact_kind, cparams, s_contact):
+def contact_project(u, X, contact_nodes, in_contact, contact_kind, cparams, s_contact):
     """Project nodes inside a rigid sphere (kind 1), infinite cylinder (kind 2) or flat cylindrical punch
     (kind 3) onto its surface.
 
@@ -402,7 +402,7 @@ def _contact_project(u, X, contact_nodes, in_contact, contact_kind, cparams, s_c
 
 
 @njit(cache=True)
-def _contact_force(fint, contact_nodes, in_contact, out):
+def contact_force(fint, contact_nodes, in_contact, out):
     out[:] = 0.0
     for k in range(contact_nodes.size):
         if in_contact[k]:
@@ -440,7 +440,7 @@ def _cd_node_pass(fbuf, fint, fext_ref, s_ext, u, u_old, u_new, coef_a, coef_b, 
 
 
 @njit(cache=True)
-def _energy_increments(u_new, u, u_old, fint, fext_ref, s_ext, mass, damping, dt, acc):
+def energy_increments(u_new, u, u_old, fint, fext_ref, s_ext, mass, damping, dt, acc):
     """Add one central-difference step's energy increments to ``acc``.
 
     With ``dc = (u_new - u_old)/2`` (the displacement over the step centred at ``u``):
@@ -522,14 +522,14 @@ def explicit_loop(mesh, mat, laws, loads, mass, h_state, s_prev, w_prev, dt, n_s
             return STATUS_INVERTED, bad_e, step, u, u_old, out_t[:k_out], out_force[:k_out], \
                 out_torque[:k_out], out_contact[:k_out], out_ke[:k_out], out_energy[:k_out]
         # the balance at step n uses the loads at t_n; the prescribed motions are needed at t_(n+1)
-        _history_values(t, hist_time, hist_vals, hv)
+        history_values(t, hist_time, hist_vals, hv)
         s_ext = hv[2 * n_groups + 1]
-        _history_values(t + dt, hist_time, hist_vals, hv)
+        history_values(t + dt, hist_time, hist_vals, hv)
         # reduces fbuf into fint and computes u_new on the free dofs
         _cd_node_pass(fbuf, fint, fext_ref, s_ext, u, u_old, u_new, coef_a, coef_b, coef_c, free, vec)
         if step % out_every == 0 or step == n_steps:
-            _reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_g, torque_g)
-            _contact_force(fint, contact_nodes, in_contact, cforce)
+            group_reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_g, torque_g)
+            contact_force(fint, contact_nodes, in_contact, cforce)
             ke = 0.0
             for n in range(nn):
                 for i in range(3):
@@ -547,11 +547,11 @@ def explicit_loop(mesh, mat, laws, loads, mass, h_state, s_prev, w_prev, dt, n_s
             k_out += 1
         if step == n_steps:
             break
-        _apply_bcs(u_new, X, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups)
+        apply_bcs(u_new, X, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups)
         if contact_kind > 0:
-            _contact_project(u_new, X, contact_nodes, in_contact, contact_kind, cparams, hv[2 * n_groups])
+            contact_project(u_new, X, contact_nodes, in_contact, contact_kind, cparams, hv[2 * n_groups])
         if track_energy:
-            _energy_increments(u_new, u, u_old, fint, fext_ref, s_ext, mass, damping, dt, energy)
+            energy_increments(u_new, u, u_old, fint, fext_ref, s_ext, mass, damping, dt, energy)
         u_old, u, u_new = u, u_new, u_old
     return STATUS_OK, -1, n_steps, u, u_old, out_t[:k_out], out_force[:k_out], out_torque[:k_out], \
         out_contact[:k_out], out_ke[:k_out], out_energy[:k_out]
@@ -617,7 +617,7 @@ def dynamic_relaxation_loop(mesh, mat, laws, loads, dr_mass, h_state, s_prev, w_
     u_eq = u.copy()
     t_eq = 0.0
     lam_prev = lam_max
-    _history_values(0.0, hist_time, hist_vals, hv)
+    history_values(0.0, hist_time, hist_vals, hv)
     have_eq = times.size > 0 and np.all(u == 0.0) and np.all(hv[:2 * n_groups + 1] == 0.0) \
         and (hv[2 * n_groups + 1] == 0.0 or np.all(fext_ref == 0.0))
     for k in range(nk):
@@ -639,10 +639,10 @@ def dynamic_relaxation_loop(mesh, mat, laws, loads, dr_mass, h_state, s_prev, w_
                 prony_e[i], prony_f[i] = relaxation_factors(dt, prony_tau[i])
             else:
                 prony_e[i], prony_f[i] = 1.0, 1.0
-        _history_values(times[k], hist_time, hist_vals, hv)
-        _apply_bcs(u, X, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups)
+        history_values(times[k], hist_time, hist_vals, hv)
+        apply_bcs(u, X, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups)
         if contact_kind > 0:
-            _contact_project(u, X, contact_nodes, in_contact, contact_kind, cparams, hv[2 * n_groups])
+            contact_project(u, X, contact_nodes, in_contact, contact_kind, cparams, hv[2 * n_groups])
         u_old[:] = u
         lam_min = 1e-6
         c = 2.0 * np.sqrt(lam_min)
@@ -676,7 +676,7 @@ def dynamic_relaxation_loop(mesh, mat, laws, loads, dr_mass, h_state, s_prev, w_
                         beta = (2.0 - c) / (2.0 + c)
             _dr_node_pass(fint, fext_ref, hv[2 * n_groups + 1], u, u_old, u_new, inv_mass, alpha, beta, free)
             if contact_kind > 0:
-                _contact_project(u_new, X, contact_nodes, in_contact, contact_kind, cparams, hv[2 * n_groups])
+                contact_project(u_new, X, contact_nodes, in_contact, contact_kind, cparams, hv[2 * n_groups])
             dmax = 0.0
             for n in range(nn):
                 for i in range(3):
@@ -708,8 +708,8 @@ def dynamic_relaxation_loop(mesh, mat, laws, loads, dr_mass, h_state, s_prev, w_
         _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind, w1fn, w2fn,
                          wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f, h_state, s_prev, bfn, branch_params, w_prev, YES(), bad,
                          vec, YES())
-        _reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_g, torque_g)
-        _contact_force(fint, contact_nodes, in_contact, cforce)
+        group_reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_g, torque_g)
+        contact_force(fint, contact_nodes, in_contact, cforce)
         out_force[k] = force_g
         out_torque[k] = torque_g
         out_contact[k] = cforce

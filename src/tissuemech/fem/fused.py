@@ -41,19 +41,21 @@ Results equal the vectorised kernel's to rounding (the node sums add the element
 """
 from __future__ import annotations
 
+import dataclasses
 from collections import namedtuple
 
 import numpy as np
 from numba import njit, prange
 
 from ..models.recursion import relaxation_factors
-from ._kernels import (STATUS_INVERTED, STATUS_NOT_FINITE, STATUS_OK, _apply_bcs, _contact_force, _contact_project,
-                       _energy_increments, _history_values, _reactions)
+from ._kernels import (STATUS_INVERTED, STATUS_NOT_FINITE, STATUS_OK, apply_bcs, contact_force, contact_project,
+                       energy_increments, group_reactions, history_values)
 from .kinematics import FASTMATH, cofactor, left_cauchy_green, push_forward
 from .materials import KIND_INVARIANT, j_minus_two_thirds
-from .vectorised import (JM23_NEWTON_MAX, JM23_NEWTON_MIN, MAX_PRONY_TERMS, _element_pressure,
-                         _gathered_deformation_gradient, _isochoric_kirchhoff, _isochoric_pk2, _nodal_forces,
-                         _prony_update, _store_nodal_forces, first_inverted_element_of, jm23_newton)
+from .mesh import TetMesh
+from .vectorised import (JM23_NEWTON_MAX, JM23_NEWTON_MIN, MAX_PRONY_TERMS, element_pressure,
+                         gathered_deformation_gradient, isochoric_kirchhoff, isochoric_pk2, nodal_forces,
+                         prony_update, store_nodal_forces, first_inverted_element_of, jm23_newton)
 
 _REGION = dict(parallel=True, cache=True, fastmath=FASTMATH, error_model="numpy")
 
@@ -250,7 +252,7 @@ def fused_step(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, f
         bad = 0
         far = 0
         for e in range(e_lo, e_mid):
-            f11, f12, f13, f21, f22, f23, f31, f32, f33 = _gathered_deformation_gradient(u, conn, d9, e)
+            f11, f12, f13, f21, f22, f23, f31, f32, f33 = gathered_deformation_gradient(u, conn, d9, e)
             J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
             pe[e] = kappa * (J - 1.0) * vol0[e]
             jm23a[e] = jm23_newton(J)
@@ -266,7 +268,7 @@ def fused_step(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, f
             bad += 0 if J > 0.0 else 1
             far += 0 if (J > JM23_NEWTON_MIN) & (J < JM23_NEWTON_MAX) else 1
         for e in range(e_mid, e_hi):
-            f11, f12, f13, f21, f22, f23, f31, f32, f33 = _gathered_deformation_gradient(u, conn, d9, e)
+            f11, f12, f13, f21, f22, f23, f31, f32, f33 = gathered_deformation_gradient(u, conn, d9, e)
             J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
             pe[e] = kappa * (J - 1.0) * vol0[e]
         # (a halo element is in another part's E1, which counts it)
@@ -315,7 +317,7 @@ def fused_step(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, f
                     f31, f32, f33 = g6[e], g7[e], 1.0 + g8[e]
                     c11, c12, c13, c21, c22, c23, c31, c32, c33, J = cofactor(f11, f12, f13, f21, f22, f23, f31,
                                                                               f32, f33)
-                    se0, se1, se2, se3, se4, se5 = _isochoric_pk2(w1a[e], w2a[e], jm23a[e], f11, f12, f13, f21, f22,
+                    se0, se1, se2, se3, se4, se5 = isochoric_pk2(w1a[e], w2a[e], jm23a[e], f11, f12, f13, f21, f22,
                                                                   f23, f31, f32, f33, c11, c12, c13, c21, c22, c23,
                                                                   c31, c32, c33, J)
                     d0, d1, d2 = se0 - sp0[e], se1 - sp1[e], se2 - sp2[e]
@@ -323,19 +325,19 @@ def fused_step(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, f
                     sp0[e], sp1[e], sp2[e], sp3[e], sp4[e], sp5[e] = se0, se1, se2, se3, se4, se5
                     s0, s1, s2, s3, s4, s5 = g_inf * se0, g_inf * se1, g_inf * se2, g_inf * se3, g_inf * se4, \
                         g_inf * se5
-                    x0, x1, x2, x3, x4, x5 = _prony_update(da, ga, ha0[e], ha1[e], ha2[e], ha3[e], ha4[e], ha5[e],
+                    x0, x1, x2, x3, x4, x5 = prony_update(da, ga, ha0[e], ha1[e], ha2[e], ha3[e], ha4[e], ha5[e],
                                                            d0, d1, d2, d3, d4, d5)
                     ha0[e], ha1[e], ha2[e], ha3[e], ha4[e], ha5[e] = x0, x1, x2, x3, x4, x5
                     s0, s1, s2, s3, s4, s5 = s0 + x0, s1 + x1, s2 + x2, s3 + x3, s4 + x4, s5 + x5
-                    x0, x1, x2, x3, x4, x5 = _prony_update(db, gb, hb0[e], hb1[e], hb2[e], hb3[e], hb4[e], hb5[e],
+                    x0, x1, x2, x3, x4, x5 = prony_update(db, gb, hb0[e], hb1[e], hb2[e], hb3[e], hb4[e], hb5[e],
                                                            d0, d1, d2, d3, d4, d5)
                     hb0[e], hb1[e], hb2[e], hb3[e], hb4[e], hb5[e] = x0, x1, x2, x3, x4, x5
                     s0, s1, s2, s3, s4, s5 = s0 + x0, s1 + x1, s2 + x2, s3 + x3, s4 + x4, s5 + x5
-                    x0, x1, x2, x3, x4, x5 = _prony_update(dc, gc, hc0[e], hc1[e], hc2[e], hc3[e], hc4[e], hc5[e],
+                    x0, x1, x2, x3, x4, x5 = prony_update(dc, gc, hc0[e], hc1[e], hc2[e], hc3[e], hc4[e], hc5[e],
                                                            d0, d1, d2, d3, d4, d5)
                     hc0[e], hc1[e], hc2[e], hc3[e], hc4[e], hc5[e] = x0, x1, x2, x3, x4, x5
                     s0, s1, s2, s3, s4, s5 = s0 + x0, s1 + x1, s2 + x2, s3 + x3, s4 + x4, s5 + x5
-                    x0, x1, x2, x3, x4, x5 = _prony_update(dd, gd, hd0[e], hd1[e], hd2[e], hd3[e], hd4[e], hd5[e],
+                    x0, x1, x2, x3, x4, x5 = prony_update(dd, gd, hd0[e], hd1[e], hd2[e], hd3[e], hd4[e], hd5[e],
                                                            d0, d1, d2, d3, d4, d5)
                     hd0[e], hd1[e], hd2[e], hd3[e], hd4[e], hd5[e] = x0, x1, x2, x3, x4, x5
                     s0a[e], s1a[e], s2a[e] = s0 + x0, s1 + x1, s2 + x2
@@ -349,13 +351,13 @@ def fused_step(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, f
                                                                               f32, f33)
                     t11, t22, t33, t12, t23, t13 = push_forward(f11, f12, f13, f21, f22, f23, f31, f32, f33,
                                                                  s0a[e], s1a[e], s2a[e], s3a[e], s4a[e], s5a[e])
-                    jp = J * _element_pressure(anp_weight, kappa, J, p_flat, off + conn[0, e], off + conn[1, e],
+                    jp = J * element_pressure(anp_weight, kappa, J, p_flat, off + conn[0, e], off + conn[1, e],
                                                off + conn[2, e], off + conn[3, e])
-                    r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = _nodal_forces(
+                    r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = nodal_forces(
                         t11 + jp, t22 + jp, t33 + jp, t12, t23, t13, c11, c12, c13, c21, c22, c23, c31, c32, c33,
                         vol0[e] / J, d9[0, e], d9[1, e], d9[2, e], d9[3, e], d9[4, e], d9[5, e], d9[6, e], d9[7, e],
                         d9[8, e])
-                    _store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
+                    store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
                                         fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11)
             else:
                 # (as vectorised.invariant_force_pass) isochoric Kirchhoff stress + pressure, element nodal forces
@@ -366,15 +368,15 @@ def fused_step(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, f
                     c11, c12, c13, c21, c22, c23, c31, c32, c33, J = cofactor(f11, f12, f13, f21, f22, f23, f31,
                                                                               f32, f33)
                     b11, b22, b33, b12, b23, b13 = left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-                    t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff(w1a[e], w2a[e], jm23a[e], b11, b22, b33,
+                    t11, t22, t33, t12, t23, t13 = isochoric_kirchhoff(w1a[e], w2a[e], jm23a[e], b11, b22, b33,
                                                                         b12, b23, b13)
-                    jp = J * _element_pressure(anp_weight, kappa, J, p_flat, off + conn[0, e], off + conn[1, e],
+                    jp = J * element_pressure(anp_weight, kappa, J, p_flat, off + conn[0, e], off + conn[1, e],
                                                off + conn[2, e], off + conn[3, e])
-                    r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = _nodal_forces(
+                    r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = nodal_forces(
                         t11 + jp, t22 + jp, t33 + jp, t12, t23, t13, c11, c12, c13, c21, c22, c23, c31, c32, c33,
                         vol0[e] / J, d9[0, e], d9[1, e], d9[2, e], d9[3, e], d9[4, e], d9[5, e], d9[6, e], d9[7, e],
                         d9[8, e])
-                    _store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
+                    store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
                                         fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11)
             if gather:
                 # (as vectorised.node_force + _kernels._cd_node_pass) owned nodes: gather, central difference
@@ -484,7 +486,7 @@ def fused_explicit_loop(mesh, mat, laws, loads, mass, dt, n_steps, damping, out_
     k_out = 0
     for step in range(n_steps + 1):
         t = step * dt
-        _history_values(t, hist_time, hist_vals, hv)
+        history_values(t, hist_time, hist_vals, hv)
         s_ext = hv[2 * n_groups + 1]
         fused_step(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, free,
                    conn, d9, vol0, kappa, anp_weight, use_anp, constant, i2_dependent, w1fn, w2fn, params,
@@ -506,10 +508,10 @@ def fused_explicit_loop(mesh, mat, laws, loads, mass, dt, n_steps, damping, out_
         if two_regions:
             fused_node_pass(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, free, onode, olo, gptr,
                             gel, fe[0], fe[1], fe[2], fe[3], fe[4], fe[5], fe[6], fe[7], fe[8], fe[9], fe[10], fe[11])
-        _history_values(t + dt, hist_time, hist_vals, hv)
+        history_values(t + dt, hist_time, hist_vals, hv)
         if step % out_every == 0 or step == n_steps:
-            _reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_g, torque_g)
-            _contact_force(fint, contact_nodes, in_contact, cforce)
+            group_reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_g, torque_g)
+            contact_force(fint, contact_nodes, in_contact, cforce)
             ke = 0.0
             for n in range(nn):
                 for i in range(3):
@@ -527,11 +529,11 @@ def fused_explicit_loop(mesh, mat, laws, loads, mass, dt, n_steps, damping, out_
             k_out += 1
         if step == n_steps:
             break
-        _apply_bcs(u_new, X, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups)
+        apply_bcs(u_new, X, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups)
         if contact_kind > 0:
-            _contact_project(u_new, X, contact_nodes, in_contact, contact_kind, cparams, hv[2 * n_groups])
+            contact_project(u_new, X, contact_nodes, in_contact, contact_kind, cparams, hv[2 * n_groups])
         if track_energy:
-            _energy_increments(u_new, u, u_old, fint, fext_ref, s_ext, mass, damping, dt, energy)
+            energy_increments(u_new, u, u_old, fint, fext_ref, s_ext, mass, damping, dt, energy)
         u_old, u, u_new = u, u_new, u_old
     return STATUS_OK, -1, n_steps, u, u_old, out_t[:k_out], out_force[:k_out], out_torque[:k_out], \
         out_contact[:k_out], out_ke[:k_out], out_energy[:k_out]
@@ -587,10 +589,6 @@ def renumbered_by_part(model, layout: HaloLayout):
     their order, so element states and ids are unaffected, and runs take and return the caller's numbering as
     before.
     """
-    import dataclasses
-
-    from .mesh import TetMesh
-
     perm = layout.onode.astype(np.int64)  # new node k = old kernel node perm[k]
     inv = np.empty_like(perm)
     inv[perm] = np.arange(perm.size)

@@ -67,14 +67,14 @@ def jm23_newton(J):
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
-def _isochoric_kirchhoff(w1, w2, jm23, b11, b22, b33, b12, b23, b13):
+def isochoric_kirchhoff(w1, w2, jm23, b11, b22, b33, b12, b23, b13):
     """Isochoric Kirchhoff stress of an invariant law from ``b``, ``J^(-2/3)`` and the law's derivatives."""
     return isochoric_kirchhoff_invariant(w1, w2, jm23 * b11, jm23 * b22, jm23 * b33, jm23 * b12, jm23 * b23,
                                          jm23 * b13)
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
-def _nodal_forces(t11, t22, t33, t12, t23, t13, c11, c12, c13, c21, c22, c23, c31, c32, c33, sc,
+def nodal_forces(t11, t22, t33, t12, t23, t13, c11, c12, c13, c21, c22, c23, c31, c32, c33, sc,
                   d1x, d1y, d1z, d2x, d2y, d2z, d3x, d3y, d3z):
     """``f_a = tau g_a`` with ``g_a = sc cof dN_a`` (``sc = V0/J``) for nodes 1-3; node 0 is minus their sum."""
     g1x = (c11 * d1x + c12 * d1y + c13 * d1z) * sc
@@ -99,7 +99,7 @@ def _nodal_forces(t11, t22, t33, t12, t23, t13, c11, c12, c13, c21, c22, c23, c3
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
-def _gathered_deformation_gradient(u, conn, d9, e):
+def gathered_deformation_gradient(u, conn, d9, e):
     """``F`` of element ``e`` from the displacements of its nodes (gathered through ``conn``)."""
     n0, n1, n2, n3 = conn[0, e], conn[1, e], conn[2, e], conn[3, e]
     x0, y0, z0 = u[n0, 0], u[n0, 1], u[n0, 2]
@@ -131,7 +131,7 @@ def kinematics_pass(u, conn, d9, vol0, kappa, pe, jm23a, f11a, f12a, f13a, f21a,
         bad = 0
         far = 0
         for e in range(lo[c], lo[c + 1]):
-            f11, f12, f13, f21, f22, f23, f31, f32, f33 = _gathered_deformation_gradient(u, conn, d9, e)
+            f11, f12, f13, f21, f22, f23, f31, f32, f33 = gathered_deformation_gradient(u, conn, d9, e)
             J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
             pe[e] = kappa * (J - 1.0) * vol0[e]
             jm23a[e] = jm23_newton(J)
@@ -199,16 +199,16 @@ def nodal_pressure_pass(pe, node_ptr, inc_elem, inv_vnode, p_node, lo):
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
-def _element_pressure(anp_weight, kappa, J, p_node, n0, n1, n2, n3):
+def element_pressure(anp_weight, kappa, J, p_node, n0, n1, n2, n3):
     """Branch-free choice between the average nodal pressure (weight 1) and the element's own (weight 0)."""
     return (anp_weight * 0.25 * (p_node[n0] + p_node[n1] + p_node[n2] + p_node[n3])
             + (1.0 - anp_weight) * kappa * (J - 1.0))
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
-def _store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
+def store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
                         fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11):
-    # The passes repeat "F from the stored F - I, cofactor, pressure, _nodal_forces, _store_nodal_forces" instead
+    # The passes repeat "F from the stored F - I, cofactor, pressure, nodal_forces, store_nodal_forces" instead
     # of one helper: numba 0.68 refuses an inlined helper that takes these arrays and calls other inlined helpers
     # inside a parfor ("Calling a closure with *args is unsupported").
     fe0[e] = -(r1x + r2x + r3x)
@@ -239,27 +239,27 @@ def invariant_force_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, j
             f31, f32, f33 = f31a[e], f32a[e], 1.0 + f33a[e]
             c11, c12, c13, c21, c22, c23, c31, c32, c33, J = cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
             b11, b22, b33, b12, b23, b13 = left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-            t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff(w1a[e], w2a[e], jm23a[e], b11, b22, b33, b12,
+            t11, t22, t33, t12, t23, t13 = isochoric_kirchhoff(w1a[e], w2a[e], jm23a[e], b11, b22, b33, b12,
                                                                          b23, b13)
-            jp = J * _element_pressure(anp_weight, kappa, J, p_node, conn[0, e], conn[1, e], conn[2, e], conn[3, e])
-            r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = _nodal_forces(
+            jp = J * element_pressure(anp_weight, kappa, J, p_node, conn[0, e], conn[1, e], conn[2, e], conn[3, e])
+            r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = nodal_forces(
                 t11 + jp, t22 + jp, t33 + jp, t12, t23, t13, c11, c12, c13, c21, c22, c23, c31, c32, c33,
                 vol0[e] / J, d9[0, e], d9[1, e], d9[2, e], d9[3, e], d9[4, e], d9[5, e], d9[6, e], d9[7, e], d9[8, e])
-            _store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
+            store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
                                 fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11)
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
-def _isochoric_pk2(w1, w2, jm23, f11, f12, f13, f21, f22, f23, f31, f32, f33, c11, c12, c13, c21, c22, c23, c31,
+def isochoric_pk2(w1, w2, jm23, f11, f12, f13, f21, f22, f23, f31, f32, f33, c11, c12, c13, c21, c22, c23, c31,
                    c32, c33, J):
     """Isochoric 2nd Piola-Kirchhoff ``S = F^-1 tau_iso F^-T`` (11 22 33 12 23 13) of an invariant law."""
     b11, b22, b33, b12, b23, b13 = left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-    t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff(w1, w2, jm23, b11, b22, b33, b12, b23, b13)
+    t11, t22, t33, t12, t23, t13 = isochoric_kirchhoff(w1, w2, jm23, b11, b22, b33, b12, b23, b13)
     return pull_back(c11, c12, c13, c21, c22, c23, c31, c32, c33, J, t11, t22, t33, t12, t23, t13)
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
-def _prony_update(decay, gain, h0, h1, h2, h3, h4, h5, d0, d1, d2, d3, d4, d5):
+def prony_update(decay, gain, h0, h1, h2, h3, h4, h5, d0, d1, d2, d3, d4, d5):
     """One term of the recursive QLV update (``models.recursion``): ``h+ = decay h + gain dS_e`` with
     ``decay = exp(-dt/tau)`` and ``gain = g (1 - decay)/(dt/tau)``."""
     return (decay * h0 + gain * d0, decay * h1 + gain * d1, decay * h2 + gain * d2,
@@ -291,7 +291,7 @@ def qlv_stress_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a,
             f21, f22, f23 = f21a[e], 1.0 + f22a[e], f23a[e]
             f31, f32, f33 = f31a[e], f32a[e], 1.0 + f33a[e]
             c11, c12, c13, c21, c22, c23, c31, c32, c33, J = cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-            se0, se1, se2, se3, se4, se5 = _isochoric_pk2(w1a[e], w2a[e], jm23a[e], f11, f12, f13, f21, f22, f23,
+            se0, se1, se2, se3, se4, se5 = isochoric_pk2(w1a[e], w2a[e], jm23a[e], f11, f12, f13, f21, f22, f23,
                                                           f31, f32, f33, c11, c12, c13, c21, c22, c23, c31, c32,
                                                           c33, J)
             d0, d1, d2 = se0 - sp0[e], se1 - sp1[e], se2 - sp2[e]
@@ -306,22 +306,22 @@ def qlv_stress_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a,
             # the four Prony terms are written out, each with its own six state arrays (ha..hd): one array per stored
             # component keeps the loop vectorisable (module note), so no loop over terms of a 2-D state
             s0, s1, s2, s3, s4, s5 = g_inf * se0, g_inf * se1, g_inf * se2, g_inf * se3, g_inf * se4, g_inf * se5
-            x0, x1, x2, x3, x4, x5 = _prony_update(da, ga, ha0[e], ha1[e], ha2[e], ha3[e], ha4[e], ha5[e],
+            x0, x1, x2, x3, x4, x5 = prony_update(da, ga, ha0[e], ha1[e], ha2[e], ha3[e], ha4[e], ha5[e],
                                                    d0, d1, d2, d3, d4, d5)
             ha0[e], ha1[e], ha2[e] = (x0 if commit else ha0[e]), (x1 if commit else ha1[e]), (x2 if commit else ha2[e])
             ha3[e], ha4[e], ha5[e] = (x3 if commit else ha3[e]), (x4 if commit else ha4[e]), (x5 if commit else ha5[e])
             s0, s1, s2, s3, s4, s5 = s0 + x0, s1 + x1, s2 + x2, s3 + x3, s4 + x4, s5 + x5
-            x0, x1, x2, x3, x4, x5 = _prony_update(db, gb, hb0[e], hb1[e], hb2[e], hb3[e], hb4[e], hb5[e],
+            x0, x1, x2, x3, x4, x5 = prony_update(db, gb, hb0[e], hb1[e], hb2[e], hb3[e], hb4[e], hb5[e],
                                                    d0, d1, d2, d3, d4, d5)
             hb0[e], hb1[e], hb2[e] = (x0 if commit else hb0[e]), (x1 if commit else hb1[e]), (x2 if commit else hb2[e])
             hb3[e], hb4[e], hb5[e] = (x3 if commit else hb3[e]), (x4 if commit else hb4[e]), (x5 if commit else hb5[e])
             s0, s1, s2, s3, s4, s5 = s0 + x0, s1 + x1, s2 + x2, s3 + x3, s4 + x4, s5 + x5
-            x0, x1, x2, x3, x4, x5 = _prony_update(dc, gc, hc0[e], hc1[e], hc2[e], hc3[e], hc4[e], hc5[e],
+            x0, x1, x2, x3, x4, x5 = prony_update(dc, gc, hc0[e], hc1[e], hc2[e], hc3[e], hc4[e], hc5[e],
                                                    d0, d1, d2, d3, d4, d5)
             hc0[e], hc1[e], hc2[e] = (x0 if commit else hc0[e]), (x1 if commit else hc1[e]), (x2 if commit else hc2[e])
             hc3[e], hc4[e], hc5[e] = (x3 if commit else hc3[e]), (x4 if commit else hc4[e]), (x5 if commit else hc5[e])
             s0, s1, s2, s3, s4, s5 = s0 + x0, s1 + x1, s2 + x2, s3 + x3, s4 + x4, s5 + x5
-            x0, x1, x2, x3, x4, x5 = _prony_update(dd, gd, hd0[e], hd1[e], hd2[e], hd3[e], hd4[e], hd5[e],
+            x0, x1, x2, x3, x4, x5 = prony_update(dd, gd, hd0[e], hd1[e], hd2[e], hd3[e], hd4[e], hd5[e],
                                                    d0, d1, d2, d3, d4, d5)
             hd0[e], hd1[e], hd2[e] = (x0 if commit else hd0[e]), (x1 if commit else hd1[e]), (x2 if commit else hd2[e])
             hd3[e], hd4[e], hd5[e] = (x3 if commit else hd3[e]), (x4 if commit else hd4[e]), (x5 if commit else hd5[e])
@@ -342,11 +342,11 @@ def pk2_force_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, s0a, s1
             c11, c12, c13, c21, c22, c23, c31, c32, c33, J = cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
             t11, t22, t33, t12, t23, t13 = push_forward(f11, f12, f13, f21, f22, f23, f31, f32, f33,
                                                          s0a[e], s1a[e], s2a[e], s3a[e], s4a[e], s5a[e])
-            jp = J * _element_pressure(anp_weight, kappa, J, p_node, conn[0, e], conn[1, e], conn[2, e], conn[3, e])
-            r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = _nodal_forces(
+            jp = J * element_pressure(anp_weight, kappa, J, p_node, conn[0, e], conn[1, e], conn[2, e], conn[3, e])
+            r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = nodal_forces(
                 t11 + jp, t22 + jp, t33 + jp, t12, t23, t13, c11, c12, c13, c21, c22, c23, c31, c32, c33,
                 vol0[e] / J, d9[0, e], d9[1, e], d9[2, e], d9[3, e], d9[4, e], d9[5, e], d9[6, e], d9[7, e], d9[8, e])
-            _store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
+            store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
                                 fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11)
 
 
@@ -363,22 +363,22 @@ def element_force_pass(u, conn, d9, vol0, svk, w1, w2, mu, kappa, n_bad,
         bad = 0
         far = 0
         for e in range(lo[c], lo[c + 1]):
-            f11, f12, f13, f21, f22, f23, f31, f32, f33 = _gathered_deformation_gradient(u, conn, d9, e)
+            f11, f12, f13, f21, f22, f23, f31, f32, f33 = gathered_deformation_gradient(u, conn, d9, e)
             c11, c12, c13, c21, c22, c23, c31, c32, c33, J = cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
             b11, b22, b33, b12, b23, b13 = left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
             if svk:
                 t11, t22, t33, t12, t23, t13 = svk_kirchhoff(mu, lam, b11, b22, b33, b12, b23, b13)
             else:
-                t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff(w1, w2, jm23_newton(J), b11, b22, b33,
+                t11, t22, t33, t12, t23, t13 = isochoric_kirchhoff(w1, w2, jm23_newton(J), b11, b22, b33,
                                                                              b12, b23, b13)
                 jp = J * kappa * (J - 1.0)
                 t11 += jp
                 t22 += jp
                 t33 += jp
-            r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = _nodal_forces(
+            r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = nodal_forces(
                 t11, t22, t33, t12, t23, t13, c11, c12, c13, c21, c22, c23, c31, c32, c33,
                 vol0[e] / J, d9[0, e], d9[1, e], d9[2, e], d9[3, e], d9[4, e], d9[5, e], d9[6, e], d9[7, e], d9[8, e])
-            _store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
+            store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
                                 fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11)
             bad += 0 if J > 0.0 else 1
             far += 0 if (J > JM23_NEWTON_MIN) & (J < JM23_NEWTON_MAX) else 1
@@ -386,18 +386,18 @@ def element_force_pass(u, conn, d9, vol0, svk, w1, w2, mu, kappa, n_bad,
         if svk or far == 0:
             continue
         for e in range(lo[c], lo[c + 1]):
-            f11, f12, f13, f21, f22, f23, f31, f32, f33 = _gathered_deformation_gradient(u, conn, d9, e)
+            f11, f12, f13, f21, f22, f23, f31, f32, f33 = gathered_deformation_gradient(u, conn, d9, e)
             c11, c12, c13, c21, c22, c23, c31, c32, c33, J = cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
             if J > JM23_NEWTON_MIN and J < JM23_NEWTON_MAX:
                 continue
             b11, b22, b33, b12, b23, b13 = left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-            t11, t22, t33, t12, t23, t13 = _isochoric_kirchhoff(w1, w2, j_minus_two_thirds(J), b11, b22,
+            t11, t22, t33, t12, t23, t13 = isochoric_kirchhoff(w1, w2, j_minus_two_thirds(J), b11, b22,
                                                                          b33, b12, b23, b13)
             jp = J * kappa * (J - 1.0)
-            r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = _nodal_forces(
+            r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z = nodal_forces(
                 t11 + jp, t22 + jp, t33 + jp, t12, t23, t13, c11, c12, c13, c21, c22, c23, c31, c32, c33,
                 vol0[e] / J, d9[0, e], d9[1, e], d9[2, e], d9[3, e], d9[4, e], d9[5, e], d9[6, e], d9[7, e], d9[8, e])
-            _store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
+            store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
                                 fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11)
 
 
@@ -405,7 +405,7 @@ def element_force_pass(u, conn, d9, vol0, svk, w1, w2, mu, kappa, n_bad,
 def first_inverted_element_of(u, conn, d9, n_elements):
     """Smallest element id with ``J <= 0`` (or NaN) of the displacement ``u``; -1 if none."""
     for e in range(np.uint64(n_elements)):
-        f11, f12, f13, f21, f22, f23, f31, f32, f33 = _gathered_deformation_gradient(u, conn, d9, e)
+        f11, f12, f13, f21, f22, f23, f31, f32, f33 = gathered_deformation_gradient(u, conn, d9, e)
         J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
         if not J > 0.0:
             return np.int64(e)
