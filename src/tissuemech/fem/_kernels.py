@@ -468,6 +468,44 @@ def energy_increments(u_new, u, u_old, fint, fext_ref, s_ext, mass, damping, dt,
 
 
 @njit(cache=True)
+def record_explicit_output(k_out, t, u, u_old, fint, mass, dt, energy, X, bc_nodes, bc_group, rot_center,
+                           contact_nodes, in_contact, force_g, torque_g, cforce, out_t, out_energy, out_force,
+                           out_torque, out_contact, out_ke):
+    """Store output ``k_out`` of an explicit run (time, energy terms, group reactions and torques, contact force,
+    kinetic energy ``sum m v^2 / 2`` with ``v = (u - u_old)/dt``); False (nothing stored) when the kinetic energy
+    is not finite. Shared by :func:`explicit_loop` and the fused loop (:mod:`.fused`)."""
+    group_reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_g, torque_g)
+    contact_force(fint, contact_nodes, in_contact, cforce)
+    ke = 0.0
+    for n in range(u.shape[0]):
+        for i in range(3):
+            v = (u[n, i] - u_old[n, i]) / dt
+            ke += 0.5 * mass[n] * v * v
+    if not np.isfinite(ke):
+        return False
+    out_t[k_out] = t
+    out_energy[k_out] = energy
+    out_force[k_out] = force_g
+    out_torque[k_out] = torque_g
+    out_contact[k_out] = cforce
+    out_ke[k_out] = ke
+    return True
+
+
+@njit(cache=True)
+def constrain_explicit_step(u_new, u, u_old, fint, fext_ref, s_ext, mass, damping, dt, X, bc_nodes, bc_group, bc_mask,
+                            bc_dir, bc_rotate, rot_center, hv, n_groups, contact_kind, contact_nodes, in_contact,
+                            cparams, track_energy, energy):
+    """After the node update of an explicit step: prescribed displacements, rigid-contact projection and (with
+    ``track_energy``) the energy increments of the step. Shared by :func:`explicit_loop` and :mod:`.fused`."""
+    apply_bcs(u_new, X, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups)
+    if contact_kind > 0:
+        contact_project(u_new, X, contact_nodes, in_contact, contact_kind, cparams, hv[2 * n_groups])
+    if track_energy:
+        energy_increments(u_new, u, u_old, fint, fext_ref, s_ext, mass, damping, dt, energy)
+
+
+@njit(cache=True)
 def explicit_loop(mesh, mat, laws, loads, mass, h_state, s_prev, w_prev, dt, n_steps, damping, out_every, u, u_old,
                   fbuf, pbuf, track_energy, vec):
     """Central-difference time loop. ``u``/``u_old`` hold the state at steps 0 and -1 on entry and the
@@ -528,30 +566,17 @@ def explicit_loop(mesh, mat, laws, loads, mass, h_state, s_prev, w_prev, dt, n_s
         # reduces fbuf into fint and computes u_new on the free dofs
         _cd_node_pass(fbuf, fint, fext_ref, s_ext, u, u_old, u_new, coef_a, coef_b, coef_c, free, vec)
         if step % out_every == 0 or step == n_steps:
-            group_reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_g, torque_g)
-            contact_force(fint, contact_nodes, in_contact, cforce)
-            ke = 0.0
-            for n in range(nn):
-                for i in range(3):
-                    v = (u[n, i] - u_old[n, i]) / dt
-                    ke += 0.5 * mass[n] * v * v
-            if not np.isfinite(ke):
+            if not record_explicit_output(k_out, t, u, u_old, fint, mass, dt, energy, X, bc_nodes, bc_group,
+                                          rot_center, contact_nodes, in_contact, force_g, torque_g, cforce, out_t,
+                                          out_energy, out_force, out_torque, out_contact, out_ke):
                 return STATUS_NOT_FINITE, -1, step, u, u_old, out_t[:k_out], out_force[:k_out], \
                     out_torque[:k_out], out_contact[:k_out], out_ke[:k_out], out_energy[:k_out]
-            out_t[k_out] = t
-            out_energy[k_out] = energy
-            out_force[k_out] = force_g
-            out_torque[k_out] = torque_g
-            out_contact[k_out] = cforce
-            out_ke[k_out] = ke
             k_out += 1
         if step == n_steps:
             break
-        apply_bcs(u_new, X, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups)
-        if contact_kind > 0:
-            contact_project(u_new, X, contact_nodes, in_contact, contact_kind, cparams, hv[2 * n_groups])
-        if track_energy:
-            energy_increments(u_new, u, u_old, fint, fext_ref, s_ext, mass, damping, dt, energy)
+        constrain_explicit_step(u_new, u, u_old, fint, fext_ref, s_ext, mass, damping, dt, X, bc_nodes, bc_group,
+                                bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups, contact_kind, contact_nodes,
+                                in_contact, cparams, track_energy, energy)
         u_old, u, u_new = u, u_new, u_old
     return STATUS_OK, -1, n_steps, u, u_old, out_t[:k_out], out_force[:k_out], out_torque[:k_out], \
         out_contact[:k_out], out_ke[:k_out], out_energy[:k_out]

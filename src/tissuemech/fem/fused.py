@@ -48,8 +48,8 @@ import numpy as np
 from numba import njit, prange
 
 from ..models.recursion import relaxation_factors
-from ._kernels import (STATUS_INVERTED, STATUS_NOT_FINITE, STATUS_OK, apply_bcs, contact_force, contact_project,
-                       energy_increments, group_reactions, history_values)
+from ._kernels import (STATUS_INVERTED, STATUS_NOT_FINITE, STATUS_OK, constrain_explicit_step, history_values,
+                       record_explicit_output)
 from .kinematics import FASTMATH, cofactor, left_cauchy_green, push_forward
 from .materials import KIND_INVARIANT, j_minus_two_thirds
 from .mesh import TetMesh
@@ -510,30 +510,17 @@ def fused_explicit_loop(mesh, mat, laws, loads, mass, dt, n_steps, damping, out_
                             gel, fe[0], fe[1], fe[2], fe[3], fe[4], fe[5], fe[6], fe[7], fe[8], fe[9], fe[10], fe[11])
         history_values(t + dt, hist_time, hist_vals, hv)
         if step % out_every == 0 or step == n_steps:
-            group_reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_g, torque_g)
-            contact_force(fint, contact_nodes, in_contact, cforce)
-            ke = 0.0
-            for n in range(nn):
-                for i in range(3):
-                    v = (u[n, i] - u_old[n, i]) / dt
-                    ke += 0.5 * mass[n] * v * v
-            if not np.isfinite(ke):
+            if not record_explicit_output(k_out, t, u, u_old, fint, mass, dt, energy, X, bc_nodes, bc_group,
+                                          rot_center, contact_nodes, in_contact, force_g, torque_g, cforce, out_t,
+                                          out_energy, out_force, out_torque, out_contact, out_ke):
                 return STATUS_NOT_FINITE, -1, step, u, u_old, out_t[:k_out], out_force[:k_out], \
                     out_torque[:k_out], out_contact[:k_out], out_ke[:k_out], out_energy[:k_out]
-            out_t[k_out] = t
-            out_energy[k_out] = energy
-            out_force[k_out] = force_g
-            out_torque[k_out] = torque_g
-            out_contact[k_out] = cforce
-            out_ke[k_out] = ke
             k_out += 1
         if step == n_steps:
             break
-        apply_bcs(u_new, X, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups)
-        if contact_kind > 0:
-            contact_project(u_new, X, contact_nodes, in_contact, contact_kind, cparams, hv[2 * n_groups])
-        if track_energy:
-            energy_increments(u_new, u, u_old, fint, fext_ref, s_ext, mass, damping, dt, energy)
+        constrain_explicit_step(u_new, u, u_old, fint, fext_ref, s_ext, mass, damping, dt, X, bc_nodes, bc_group,
+                                bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups, contact_kind, contact_nodes,
+                                in_contact, cparams, track_energy, energy)
         u_old, u, u_new = u, u_new, u_old
     return STATUS_OK, -1, n_steps, u, u_old, out_t[:k_out], out_force[:k_out], out_torque[:k_out], \
         out_contact[:k_out], out_ke[:k_out], out_energy[:k_out]
