@@ -55,7 +55,7 @@ from .materials import KIND_INVARIANT, j_minus_two_thirds
 from .mesh import TetMesh
 from .vectorised import (JM23_NEWTON_MAX, JM23_NEWTON_MIN, MAX_PRONY_TERMS, element_pressure,
                          gathered_deformation_gradient, isochoric_kirchhoff, isochoric_pk2, nodal_forces,
-                         prony_update, store_nodal_forces, first_inverted_element_of, jm23_newton)
+                         prony_update, store_element_kinematics, store_nodal_forces, first_inverted_element_of)
 
 _REGION = dict(parallel=True, cache=True, fastmath=FASTMATH, error_model="numpy")
 
@@ -252,19 +252,7 @@ def fused_step(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, f
         bad = 0
         far = 0
         for e in range(e_lo, e_mid):
-            f11, f12, f13, f21, f22, f23, f31, f32, f33 = gathered_deformation_gradient(u, conn, d9, e)
-            J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
-            pe[e] = kappa * (J - 1.0) * vol0[e]
-            jm23a[e] = jm23_newton(J)
-            g0[e] = f11 - 1.0
-            g1[e] = f12
-            g2[e] = f13
-            g3[e] = f21
-            g4[e] = f22 - 1.0
-            g5[e] = f23
-            g6[e] = f31
-            g7[e] = f32
-            g8[e] = f33 - 1.0
+            J = store_element_kinematics(u, conn, d9, vol0, kappa, e, pe, jm23a, g0, g1, g2, g3, g4, g5, g6, g7, g8)
             bad += 0 if J > 0.0 else 1
             far += 0 if (J > JM23_NEWTON_MIN) & (J < JM23_NEWTON_MAX) else 1
         for e in range(e_mid, e_hi):

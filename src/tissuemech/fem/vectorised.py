@@ -114,6 +114,28 @@ def gathered_deformation_gradient(u, conn, d9, e):
             az * d1x + bz * d2x + cz * d3x, az * d1y + bz * d2y + cz * d3y, 1.0 + az * d1z + bz * d2z + cz * d3z)
 
 
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def store_element_kinematics(u, conn, d9, vol0, kappa, e, pe, jm23a, f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a,
+                             f33a):
+    """Kinematics of element ``e`` into the pass arrays: ``F - I`` (9 arrays), ``pe = kappa (J-1) V0`` and the
+    branch-free ``J^(-2/3)``; returns ``J``. Shared by :func:`kinematics_pass` and the fused step (:mod:`.fused`)."""
+    f11, f12, f13, f21, f22, f23, f31, f32, f33 = gathered_deformation_gradient(u, conn, d9, e)
+    J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
+    pe[e] = kappa * (J - 1.0) * vol0[e]
+    jm23a[e] = jm23_newton(J)
+    # the displacement gradient F - I is stored: in float32 storage F itself would lose the strain
+    f11a[e] = f11 - 1.0
+    f12a[e] = f12
+    f13a[e] = f13
+    f21a[e] = f21
+    f22a[e] = f22 - 1.0
+    f23a[e] = f23
+    f31a[e] = f31
+    f32a[e] = f32
+    f33a[e] = f33 - 1.0
+    return J
+
+
 # --------------------------------------------------------------------------------------------------
 # passes
 # --------------------------------------------------------------------------------------------------
@@ -131,20 +153,8 @@ def kinematics_pass(u, conn, d9, vol0, kappa, pe, jm23a, f11a, f12a, f13a, f21a,
         bad = 0
         far = 0
         for e in range(lo[c], lo[c + 1]):
-            f11, f12, f13, f21, f22, f23, f31, f32, f33 = gathered_deformation_gradient(u, conn, d9, e)
-            J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
-            pe[e] = kappa * (J - 1.0) * vol0[e]
-            jm23a[e] = jm23_newton(J)
-            # the displacement gradient F - I is stored: in float32 storage F itself would lose the strain
-            f11a[e] = f11 - 1.0
-            f12a[e] = f12
-            f13a[e] = f13
-            f21a[e] = f21
-            f22a[e] = f22 - 1.0
-            f23a[e] = f23
-            f31a[e] = f31
-            f32a[e] = f32
-            f33a[e] = f33 - 1.0
+            J = store_element_kinematics(u, conn, d9, vol0, kappa, e, pe, jm23a, f11a, f12a, f13a, f21a, f22a, f23a,
+                                         f31a, f32a, f33a)
             bad += 0 if J > 0.0 else 1
             far += 0 if (J > JM23_NEWTON_MIN) & (J < JM23_NEWTON_MAX) else 1
         n_bad[c] = bad
