@@ -70,7 +70,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import brentq, nnls
+import scipy
 
 from .canonical import to_jsonable, write_text
 from .cards_febio import (FEBIO_SOURCE_COMMIT, febio_card_material, febio_document, febio_material_element,
@@ -131,7 +131,7 @@ def prony_from_complex_modulus(model: ConstitutiveModel, p: Mapping[str, float],
     re, im = prony_oscillation_basis(w, taus)
     A = np.vstack([re / np.abs(gs.real)[:, None], im / np.abs(gs.imag)[:, None]])
     b = np.r_[np.ones(w.size), np.ones(w.size)]
-    coef, _ = nnls(A, b)
+    coef, _ = scipy.optimize.nnls(A, b)
     fitted = np.r_[re @ coef, im @ coef]
     target = np.r_[gs.real, gs.imag]
     g0 = float(coef.sum())
@@ -237,7 +237,7 @@ def marlow_uniaxial_table(law: ConstitutiveModel, lp: Mapping[str, float], strai
     I1 = 3 (unbounded initial tangent modulus), which a linear grid cannot resolve at small strain.
     """
     i1_max = 3.0 + strain_max ** 2
-    lam_max = brentq(lambda lam: lam ** 2 + 2.0 / lam - i1_max, 1.0 + 1e-12, 10.0 + strain_max * 10)
+    lam_max = scipy.optimize.brentq(lambda lam: lam ** 2 + 2.0 / lam - i1_max, 1.0 + 1e-12, 10.0 + strain_max * 10)
     if spacing == "geometric":
         lam = 1.0 + np.geomspace(1e-3 * (lam_max - 1.0), lam_max - 1.0, n_points - 1)
     elif spacing == "linear":

@@ -41,15 +41,16 @@ two-parameter test problem -- so a high fraction alone is not flagged).
 """
 from __future__ import annotations
 
+import importlib.util
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
+import lazy_loader
 import numpy as np
 
-try:  # optional dependency (extra "uq")
-    import emcee
-except ImportError:  # pragma: no cover - exercised only without the extra
-    emcee = None
+# optional dependency (extra "uq"), loaded on first use: importing it (with tqdm, h5py) costs every job that
+# imports the package ~0.1 s (issue 17)
+emcee = lazy_loader.load("emcee") if importlib.util.find_spec("emcee") is not None else None
 
 #: thresholds of a usable posterior (issue 16)
 RHAT_MAX = 1.01

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
-from scipy import stats as sps
+import scipy
 
 from .fitting import (Curve, FitProblem, FitResult, NoiseModel, at_bound_parameters, evaluate, fit, has_covariance,
                       prony_start)
@@ -195,7 +195,7 @@ def paired_comparison(cv: pd.DataFrame, metric: str = "nrmse") -> pd.DataFrame:
         both = wide[[best, model]].dropna()
         p = np.nan
         if model != best and len(both) >= 2 and np.any(both[model] != both[best]):
-            p = float(sps.wilcoxon(both[model], both[best]).pvalue)
+            p = float(scipy.stats.wilcoxon(both[model], both[best]).pvalue)
         rows.append({"model": model, f"cv_{metric}": float(means[model]), "cv_folds": int(wide[model].notna().sum()),
                      "cv_best": best, "cv_p_vs_best": p})
     return pd.DataFrame(rows)

@@ -74,7 +74,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 from scipy.linalg import eigh
-from scipy.optimize import nnls
+import scipy
 
 from .canonical import read_netcdf, write_netcdf
 from .curves import as_str, select_average
@@ -178,7 +178,7 @@ def prony_nnls_weights(time_s: np.ndarray, modulus_pa: np.ndarray, tau_s: np.nda
     if row_weights is not None:
         w = np.asarray(row_weights, float)
         basis, y = basis * w[:, None], y * w
-    weights, resid = nnls(basis, y)
+    weights, resid = scipy.optimize.nnls(basis, y)
     if equilibrium:
         return float(weights[0]), weights[1:], float(resid)
     return 0.0, weights, float(resid)
@@ -330,7 +330,7 @@ def regularised_nnls(kernel: np.ndarray, data: np.ndarray, sigma: np.ndarray, n_
     def solve(lmb: float) -> tuple[np.ndarray, float, float]:
         A = np.vstack([Aw, lmb * L]) / colnorm
         b = np.r_[bw, np.zeros(L.shape[0])]
-        z, _ = nnls(A, b, maxiter=100 * p)
+        z, _ = scipy.optimize.nnls(A, b, maxiter=100 * p)
         u = z / colnorm
         r = Aw @ u - bw
         act = u > 0

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
-from scipy import stats as sps
+import scipy
 
 if TYPE_CHECKING:  # annotations only
     import statsmodels.api as sm
@@ -41,24 +41,24 @@ ALPHA = 0.01
 
 def log10_p_from_z(z: float) -> float:
     """log10 of the two-sided normal p-value of ``z``, accurate far below 1e-308."""
-    return float((np.log(2.0) + sps.norm.logsf(abs(z))) / np.log(10.0))
+    return float((np.log(2.0) + scipy.stats.norm.logsf(abs(z))) / np.log(10.0))
 
 
 def log10_p_from_t(t: float, df: float) -> float:
     """log10 of the two-sided Student-t p-value of ``t`` with ``df`` degrees of freedom."""
     if not np.isfinite(df) or df > 1e6:
         return log10_p_from_z(t)
-    return float((np.log(2.0) + sps.t.logsf(abs(t), df)) / np.log(10.0))
+    return float((np.log(2.0) + scipy.stats.t.logsf(abs(t), df)) / np.log(10.0))
 
 
 def log10_p_from_f(f: float, df1: float, df2: float) -> float:
     """log10 of the upper-tail F p-value."""
-    return float(sps.f.logsf(max(f, 0.0), df1, df2) / np.log(10.0))
+    return float(scipy.stats.f.logsf(max(f, 0.0), df1, df2) / np.log(10.0))
 
 
 def log10_p_from_chi2(x: float, df: float) -> float:
     """log10 of the upper-tail chi-square p-value."""
-    return float(sps.chi2.logsf(max(x, 0.0), df) / np.log(10.0))
+    return float(scipy.stats.chi2.logsf(max(x, 0.0), df) / np.log(10.0))
 
 
 def statistic_result(statistic: float, log10_p: float, **extra) -> dict:
@@ -249,7 +249,7 @@ def modified_z_scores(values: np.ndarray) -> np.ndarray:
     """Iglewicz-Hoaglin modified z = 0.6745 (x - median) / MAD (|z| > 3.5 flags an outlier)."""
     x = np.asarray(values, float)
     med = np.median(x)
-    mad = float(sps.median_abs_deviation(x))  # unscaled: median |x - median|
+    mad = float(scipy.stats.median_abs_deviation(x))  # unscaled: median |x - median|
     if mad == 0:
         mad = 1.4826 * np.mean(np.abs(x - med)) / 0.6745 if np.any(x != med) else 1.0
     return 0.6745 * (x - med) / mad
@@ -322,41 +322,63 @@ def mixed_effects(table: pd.DataFrame, value: str, specimen: str = "specimen", s
     if n_spec < 2 or n < 3:
         out.update({"mean": float(d["y"].mean()) if n else float("nan"), "status": "fewer than 2 specimens"})
         return out
+    fit_method = list(method) if method is not None else None
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # boundary / convergence warnings: reported through `converged` and the SDs
         vc = {"sample": "0 + C(piece)"} if repeated else None
         model = smf.mixedlm("y ~ 1", d, groups=d["specimen"], re_formula="1", vc_formula=vc)
-        fit = model.fit(reml=True, method=list(method) if method is not None else None)
+        fit = model.fit(reml=True, method=fit_method)
     # statsmodels parameterises the variances relative to the residual scale; cov_params holds the covariance of
     # those relative parameters, so SE(variance) = scale x SE(relative) (the scale's own uncertainty left out)
-    scale = float(fit.scale)
-    k_fe = len(fit.fe_params)
-    cp = np.diag(np.asarray(fit.cov_params(), float))
-    rel_se = np.sqrt(np.where(cp[k_fe:] >= 0, cp[k_fe:], np.nan))
     var_spec = float(fit.cov_re.iloc[0, 0])
-    var_spec_se = float(scale * rel_se[0])
+    boundary = not var_spec > 0
+    if boundary:
+        # REML puts the specimen variance on its boundary (0): the model is the one without specimens. Its fit
+        # is refitted as such, because MixedLM's own fixed effect at the boundary can be meaningless (a mean of
+        # 2.2 with SE 1.7e6 on data of mean 5.7 seen with statsmodels 0.14 on an AVX-512 machine)
+        var_spec, var_spec_se = 0.0, float("nan")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            if repeated:
+                fit = smf.mixedlm("y ~ 1", d, groups=d["piece"]).fit(reml=True, method=fit_method)
+            else:
+                fit = smf.ols("y ~ 1", d).fit()
+    scale = float(fit.scale)
+    if boundary and not repeated:
+        mean, mean_se = float(fit.params.iloc[0]), float(fit.bse.iloc[0])
+    else:
+        mean, mean_se = float(fit.fe_params.iloc[0]), float(fit.bse_fe.iloc[0])
+        k_fe = len(fit.fe_params)
+        cp = np.diag(np.asarray(fit.cov_params(), float))
+        rel_se = np.sqrt(np.where(cp[k_fe:] >= 0, cp[k_fe:], np.nan))
+    if not boundary:
+        var_spec_se = float(scale * rel_se[0])
     if repeated:
-        var_samp, var_samp_se = float(fit.vcomp[0]), float(scale * rel_se[1])
+        var_samp = float(fit.cov_re.iloc[0, 0]) if boundary else float(fit.vcomp[0])
+        var_samp_se = float(scale * rel_se[0 if boundary else 1])
         var_resid, var_resid_se = scale, scale * math.sqrt(2.0 / max(n - n_piece, 1))
     else:  # one row per piece: the residual is the sample-to-sample variance
-        var_samp, var_samp_se = scale, scale * math.sqrt(2.0 / max(n - n_spec, 1))
+        var_samp, var_samp_se = scale, scale * math.sqrt(2.0 / max(n - (1 if boundary else n_spec), 1))
         var_resid, var_resid_se = float("nan"), float("nan")
 
     def sd(v, se):
         v = max(v, 0.0)
         return math.sqrt(v), (se / (2.0 * math.sqrt(v)) if v > 0 else float("nan"))
 
-    out["mean"] = float(fit.fe_params.iloc[0])
-    out["mean_se"] = float(fit.bse_fe.iloc[0])
+    out["mean"], out["mean_se"] = mean, mean_se
     out["sd_specimen"], out["sd_specimen_se"] = sd(var_spec, var_spec_se)
     out["sd_sample"], out["sd_sample_se"] = sd(var_samp, var_samp_se)
     out["sd_residual"], out["sd_residual_se"] = sd(var_resid, var_resid_se) if repeated else (float("nan"),) * 2
-    total = max(var_spec, 0.0) + max(var_samp, 0.0) + (var_resid if repeated else 0.0)
-    out["icc"] = float(max(var_spec, 0.0) / total) if total > 0 else 0.0
+    total = var_spec + max(var_samp, 0.0) + (var_resid if repeated else 0.0)
+    out["icc"] = float(var_spec / total) if total > 0 else 0.0
     sd_b = out["sd_specimen"]
-    out["blup_z"] = {str(g): (float(v.iloc[0]) / sd_b if sd_b > 0 else 0.0) for g, v in fit.random_effects.items()}
+    if boundary:  # every predicted specimen intercept is 0
+        out["blup_z"] = {str(g): 0.0 for g in model.group_labels}
+    else:
+        out["blup_z"] = {str(g): float(v.iloc[0]) / sd_b for g, v in fit.random_effects.items()}
     out["converged"] = bool(getattr(fit, "converged", True))
     out["method"] = ("statsmodels MixedLM (REML): value ~ 1 + specimen random intercept"
+                     + (" (estimated at 0, its boundary: refitted without it)" if boundary else "")
                      + (" + sample variance component nested in specimen" if repeated else
                         "; one run per piece, so the residual SD is the sample-to-sample SD (it includes the "
                         "within-run misfit)")

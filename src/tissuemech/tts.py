@@ -46,14 +46,17 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import lmfit
+import lazy_loader
 import numpy as np
+import scipy
 import xarray as xr
-from scipy.optimize import least_squares, minimize_scalar
 
 from .canonical import read_netcdf, write_json, write_netcdf, write_text
 from .curves import distinct_temperatures, drop_flagged  # noqa: F401 (distinct_temperatures re-exported)
 from .stats import information_criteria
+
+# loaded on first use (why: tissuemech.fitting._problem)
+lmfit = lazy_loader.load("lmfit")
 
 #: gas constant, J/(mol K)
 GAS_CONSTANT = 8.314462618
@@ -246,7 +249,8 @@ def pair_shift(cold: Sweep, warm: Sweep, vertical: bool = False) -> dict:
     if not np.isfinite(vals).any():
         return nan
     s0 = float(grid[int(np.argmin(vals))])
-    best = minimize_scalar(lambda s: _objective(cold, warm, s), bounds=(s0 - step, s0 + step), method="bounded")
+    best = scipy.optimize.minimize_scalar(lambda s: _objective(cold, warm, s), bounds=(s0 - step, s0 + step),
+                                          method="bounded")
     s = float(best.x) if np.isfinite(best.fun) and best.fun <= vals.min() else s0
     masks = _overlap_masks(cold, warm, s)
     if not vertical:
@@ -256,7 +260,7 @@ def pair_shift(cold: Sweep, warm: Sweep, vertical: bool = False) -> dict:
     # joint (log a, log b): alternate the overlap set and the least-squares fit on it until it is stable
     x = np.array([s, 0.0])
     for _ in range(5):
-        fit = least_squares(lambda v: _pair_residuals(cold, warm, float(v[0]), float(v[1]), masks), x)
+        fit = scipy.optimize.least_squares(lambda v: _pair_residuals(cold, warm, float(v[0]), float(v[1]), masks), x)
         x = fit.x
         new_masks = _overlap_masks(cold, warm, float(x[0]))
         if all(np.array_equal(a, b) for a, b in zip(new_masks, masks)):

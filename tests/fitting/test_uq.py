@@ -155,6 +155,37 @@ def test_mixed_effects_recovers_known_variance_components():
     assert 0.75 <= np.mean(cover_mean) <= 1.0 and 0.75 <= np.mean(cover_samp) <= 1.0
 
 
+def test_mixed_effects_with_no_specimen_variance_gives_zero_blups():
+    """Every specimen holds the same six values (shuffled): the specimen means are equal, REML puts the specimen
+    variance on its boundary, and the predicted intercepts are all 0 (statsmodels raises when asked for them)."""
+    rng = np.random.default_rng(7)
+    values = np.log(300.0) + rng.normal(0.0, 0.12, 6)
+    table = pd.DataFrame([{"specimen": f"sp{i}", "sample": f"s{j}", "log_g0": v}
+                          for i in range(5) for j, v in enumerate(rng.permutation(values))])
+    est = mixed_effects(table, "log_g0")
+    assert est["sd_specimen"] == pytest.approx(0.0, abs=1e-6)
+    assert est["mean"] == pytest.approx(values.mean(), abs=1e-9)
+    assert est["sd_sample"] == pytest.approx(np.tile(values, 5).std(ddof=1), rel=1e-6)   # the 30 rows' SD
+    assert "refitted without it" in est["method"]
+    assert est["blup_z"] == {f"sp{i}": 0.0 for i in range(5)}
+
+
+def test_mixed_effects_with_no_specimen_variance_and_repeated_runs():
+    """As above with two runs per piece (REML lands at or next to the boundary): the sample component and the
+    within-piece residual are still those of the data."""
+    rng = np.random.default_rng(8)
+    pieces = np.log(300.0) + rng.normal(0.0, 0.12, 6)
+    runs = rng.normal(0.0, 0.03, (6, 2))
+    table = pd.DataFrame([{"specimen": f"sp{i}", "sample": f"s{j}", "log_g0": pieces[k] + runs[k, r]}
+                          for i in range(5) for j, k in enumerate(rng.permutation(6)) for r in range(2)])
+    est = mixed_effects(table, "log_g0")
+    assert est["n_pieces"] == 30 and est["sd_specimen"] < 1e-3
+    assert est["mean"] == pytest.approx(table["log_g0"].mean(), abs=1e-6)   # balanced: GLS mean = mean
+    within = np.sqrt(np.mean((runs[:, 0] - runs[:, 1]) ** 2 / 2.0))        # pooled within-piece SD (balanced)
+    assert est["sd_residual"] == pytest.approx(within, rel=1e-3)
+    assert abs(est["sd_sample"] - pieces.std(ddof=1)) < 3 * est["sd_sample_se"]
+
+
 def test_mixed_effects_with_repeated_runs_separates_sample_from_within_piece():
     rng = np.random.default_rng(5)
     est = mixed_effects(_hierarchical(rng, n_spec=6, n_samp=5, n_rep=3), "log_g0")

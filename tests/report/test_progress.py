@@ -3,7 +3,9 @@ from __future__ import annotations
 
 import io
 import logging
+import subprocess
 import sys
+import textwrap
 
 import pytest
 
@@ -65,3 +67,43 @@ def test_job_log_ends_with_the_jobs_cpu_seconds_and_memory(tmp_path):
     match = re.search(r"job cost: cpu_s=([0-9.]+) children_cpu_s=([0-9.]+) max_rss_mb=([0-9]+)", log_file.read_text())
     assert match, log_file.read_text()
     assert float(match.group(1)) >= 0.3 and int(match.group(3)) > 10
+
+
+def _run_job_script(tmp_path, body: str):
+    script = tmp_path / "job.py"
+    script.write_text(textwrap.dedent(f"""
+        import atexit, sys
+        from tissuemech.pipeline import job_log
+        atexit.register(lambda: open({str(tmp_path / 'teardown')!r}, "w").close())
+        print("stdout before the job")
+        with job_log({str(tmp_path / 'job.log')!r}, end_process=True) as log:
+            log.info("job body")
+            print("stdout in the job")
+        {body}
+        open({str(tmp_path / 'after')!r}, "w").close()
+        """))
+    return subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+
+
+def test_a_finished_script_job_ends_its_process_without_teardown(tmp_path):
+    done = _run_job_script(tmp_path, "")
+    assert done.returncode == 0, done.stderr
+    text = (tmp_path / "job.log").read_text()
+    assert "job body" in text and "job cost: cpu_s=" in text
+    assert done.stdout.splitlines() == ["stdout before the job", "stdout in the job"]  # flushed, not lost
+    assert not (tmp_path / "after").exists()       # nothing after the job block runs
+    assert not (tmp_path / "teardown").exists()    # nor the interpreter's exit handlers
+
+
+def test_a_failed_script_job_still_fails_with_its_traceback(tmp_path):
+    script = tmp_path / "job.py"
+    script.write_text(textwrap.dedent(f"""
+        from tissuemech.pipeline import job_log
+        with job_log({str(tmp_path / 'job.log')!r}, end_process=True):
+            raise ValueError("bad sample sheet")
+        """))
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1
+    assert "ValueError: bad sample sheet" in done.stderr
+    text = (tmp_path / "job.log").read_text()
+    assert "job failed" in text and "ValueError: bad sample sheet" in text and "job cost" in text

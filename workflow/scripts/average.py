@@ -8,7 +8,7 @@ from tissuemech.pipeline import job_log, load_runs
 from tissuemech.plots import plot_all_averages, plot_all_lve
 from tissuemech.spectra import run_spectrum
 
-with job_log(snakemake.log[0]) as log:
+with job_log(snakemake.log[0], end_process=True) as log:
     out = snakemake.output
     runs = load_runs(snakemake.input.runs)
     averages = average_runs(runs, exclude_flagged=snakemake.params.exclude_flagged)

@@ -2,7 +2,7 @@
 from tissuemech.diagnosis.report import run_diagnosis
 from tissuemech.pipeline import job_log
 
-with job_log(snakemake.log[0]) as log:
+with job_log(snakemake.log[0], end_process=True) as log:
     result = run_diagnosis(snakemake.input.runs, snakemake.input.fits, snakemake.output.json,
                            snakemake.output.residuals, snakemake.output.figures, dataset=snakemake.wildcards.dataset,
                            alpha=snakemake.params.alpha, ranking=snakemake.input.ranking)

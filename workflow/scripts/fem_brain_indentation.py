@@ -11,7 +11,7 @@ from tissuemech.fem.mesh import read_mesh
 from tissuemech.pipeline import job_log
 from tissuemech.stages import card_for_fem, select_cards
 
-with job_log(snakemake.log[0]) as log:
+with job_log(snakemake.log[0], end_process=True) as log:
     card_path = Path(select_cards(snakemake.input.ranking, snakemake.params.cards_root)[0])
     mesh = read_mesh(snakemake.input.brain_mesh)[0]
     Path(snakemake.output.vtu).mkdir(parents=True, exist_ok=True)

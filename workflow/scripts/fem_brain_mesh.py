@@ -5,7 +5,7 @@ from pathlib import Path
 from tissuemech.fem.mesh import MNI_GM, MNI_WM, brain_mesh, mesh_quality, write_mesh
 from tissuemech.pipeline import job_log
 
-with job_log(snakemake.log[0]) as log:
+with job_log(snakemake.log[0], end_process=True) as log:
     mesh = brain_mesh(num_threads=1)
     write_mesh(snakemake.output.mesh, mesh)
     quality = {**mesh_quality(mesh), "source": [MNI_GM, MNI_WM],

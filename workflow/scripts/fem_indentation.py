@@ -4,7 +4,7 @@ from pathlib import Path
 from tissuemech.pipeline import job_log
 from tissuemech.stages import run_fem_indentation, select_cards
 
-with job_log(snakemake.log[0]) as log:
+with job_log(snakemake.log[0], end_process=True) as log:
     cards = select_cards(snakemake.input.ranking, snakemake.params.cards_root)
     log.info("indentation with cards: %s", [str(c) for c in cards])
     Path(snakemake.output.vtu).mkdir(parents=True, exist_ok=True)

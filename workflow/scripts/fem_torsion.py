@@ -2,7 +2,7 @@
 from tissuemech.pipeline import job_log
 from tissuemech.stages import run_fem_torsion, select_cards
 
-with job_log(snakemake.log[0]) as log:
+with job_log(snakemake.log[0], end_process=True) as log:
     cards = select_cards(snakemake.input.ranking, snakemake.params.cards_root)
     log.info("torsion with cards: %s", [str(c) for c in cards])
     table = run_fem_torsion(cards, snakemake.input.averages, snakemake.output.data, snakemake.output.table,

@@ -3,7 +3,7 @@ from tissuemech.pipeline import job_log
 from tissuemech.stages import run_fit_scope
 from tissuemech.summary import plot_scope_fits
 
-with job_log(snakemake.log[0]) as log:
+with job_log(snakemake.log[0], end_process=True) as log:
     table = run_fit_scope(
         snakemake.input.averages, snakemake.wildcards.scope, snakemake.params.spec,
         target=snakemake.params.target, seed=snakemake.params.seed, multistart=snakemake.params.multistart,

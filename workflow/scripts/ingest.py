@@ -4,7 +4,7 @@ from pathlib import Path
 from tissuemech.io.ingest import ingest_dataset
 from tissuemech.pipeline import job_log
 
-with job_log(snakemake.log[0]) as log:
+with job_log(snakemake.log[0], end_process=True) as log:
     Path(snakemake.output.runs).mkdir(parents=True, exist_ok=True)
     report = ingest_dataset(snakemake.params.folder, snakemake.output.runs, snakemake.output.report)
     bad = report[report["status"] != "ok"]

@@ -2,6 +2,6 @@
 from tissuemech.pipeline import job_log
 from tissuemech.summary import plot_meshes
 
-with job_log(snakemake.log[0]) as log:
+with job_log(snakemake.log[0], end_process=True) as log:
     written = plot_meshes(snakemake.params.vtu_dirs, snakemake.output.figures)
     log.info("%s: %d mesh pictures", snakemake.wildcards.dataset, len(written))

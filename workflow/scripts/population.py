@@ -3,7 +3,7 @@ distribution of the log initial shear modulus, written into a copy of the recomm
 from tissuemech.pipeline import job_log
 from tissuemech.uq import run_population
 
-with job_log(snakemake.log[0]) as log:
+with job_log(snakemake.log[0], end_process=True) as log:
     p = snakemake.params
     pop = run_population(snakemake.input.ranking, snakemake.input.runs, snakemake.input.fits,
                          snakemake.input.cards, snakemake.wildcards.scope, p.tests, snakemake.output.card,

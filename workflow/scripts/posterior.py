@@ -6,7 +6,7 @@ from tissuemech.pipeline import job_log
 from tissuemech.summary import plot_posterior_fit
 from tissuemech.uq import run_posterior
 
-with job_log(snakemake.log[0]) as log:
+with job_log(snakemake.log[0], end_process=True) as log:
     p, w = snakemake.params, snakemake.wildcards
     table = run_posterior(snakemake.input.averages, snakemake.input.fits, w.scope, w.model, p.tests,
                           snakemake.output.idata, snakemake.output.table, walkers=p.walkers, steps=p.steps,

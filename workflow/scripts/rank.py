@@ -4,7 +4,7 @@ from tissuemech.pipeline import job_log
 from tissuemech.stages import collect_scopes, write_fits_table
 from tissuemech.summary import plot_cards
 
-with job_log(snakemake.log[0]) as log:
+with job_log(snakemake.log[0], end_process=True) as log:
     ranking = collect_scopes(snakemake.input.rankings, snakemake.output.ranking, figure_out=snakemake.output.figure)
     log.info("ranking with %d rows", len(ranking))
     table = write_fits_table(snakemake.input.fits, snakemake.wildcards.dataset, snakemake.output.fits,

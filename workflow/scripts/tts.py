@@ -3,7 +3,7 @@ from tissuemech.diagnosis.temperature import leave_one_temperature_out
 from tissuemech.pipeline import job_log
 from tissuemech.tts import run_tts
 
-with job_log(snakemake.log[0]) as log:
+with job_log(snakemake.log[0], end_process=True) as log:
     out = snakemake.output
     ds = run_tts(snakemake.input.runs, out.tts, out.card, out.abaqus, out.figure, dataset=snakemake.wildcards.dataset,
                  t_ref_c=snakemake.params.t_ref_c, vertical=snakemake.params.vertical,

@@ -3,7 +3,7 @@ rule uq_torsion: rheometer torque-rim strain against the measured torque), netCD
 from tissuemech.pipeline import job_log
 from tissuemech.uq import run_uq_indentation, run_uq_torsion
 
-with job_log(snakemake.log[0]) as log:
+with job_log(snakemake.log[0], end_process=True) as log:
     i, p = snakemake.input, snakemake.params
     common = dict(n_draws=p.n_draws, element_size_m=p.element_size_m, seed=p.seed, n_threads=snakemake.threads)
     if snakemake.rule == "uq_torsion":

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import xarray as xr
-from scipy.optimize import nnls
+import scipy
 
 from .. import fitting
 from ..models.base import ConstitutiveModel, ResponseNotSupported
@@ -369,7 +369,7 @@ def nnls_relaxation_times(runs: Sequence[xr.Dataset], target: str, relaxation: s
     level = {u: 1.0 for u in names}
     for _ in range(LEVEL_ITERATIONS):
         c_row = np.array([level[u] for u in row_unit])
-        coef, _ = nnls(design * c_row[:, None] / norm, rhs, maxiter=100 * design.shape[1])
+        coef, _ = scipy.optimize.nnls(design * c_row[:, None] / norm, rhs, maxiter=100 * design.shape[1])
         pred = design @ (coef / norm)
         if not coef.sum() > 0 or len(names) < 2:
             break

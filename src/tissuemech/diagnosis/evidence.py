@@ -39,7 +39,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import pandas as pd
 import xarray as xr
-from scipy.optimize import nnls
+import scipy
 from scipy.special import comb
 
 from ..models.recursion import prony_branch_histories
@@ -228,7 +228,7 @@ def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
                     rows.append([1.0, 1.0 / np.median(mag[sel]) ** 2])
                     rhs.append(s_b ** 2)
             if len(rows) >= 3:
-                coef, _ = nnls(np.asarray(rows), np.asarray(rhs))
+                coef, _ = scipy.optimize.nnls(np.asarray(rows), np.asarray(rhs))
                 entry.update(relative=float(np.sqrt(coef[0])), absolute=float(np.sqrt(coef[1])),
                              source="within-curve scatter (relative differences of order 2-4), binned by |y|: "
                                     "SD = sqrt(absolute^2 + (relative |y|)^2)")
@@ -455,7 +455,7 @@ def fit_prony_relaxation(time_s: np.ndarray, stress_pa: np.ndarray, strain: np.n
         A = np.column_stack([np.full(tt.size, gamma0)] + [gamma0 * np.exp(-tt / tau) for tau in taus])
     y = s[mask]
     w = np.ones_like(y) if weights is None else np.asarray(weights, float)[mask]
-    coef, _ = nnls(A * w[:, None], y * w)
+    coef, _ = scipy.optimize.nnls(A * w[:, None], y * w)
     pred = A @ coef
     return {"g_inf_pa": float(coef[0]), "g_pa": coef[1:], "taus_s": taus,
             "rss": float(np.sum(((y - pred) * w) ** 2)), "n": int(y.size), "k": int(np.count_nonzero(coef)),

@@ -49,9 +49,8 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-from scipy import stats as sps
+import scipy
 from scipy.linalg import block_diag
-from scipy.optimize import minimize
 
 from ..io.quality import RAW_PHASE_LIMIT_RAD
 from .. import stats as st
@@ -138,7 +137,7 @@ def detect_inertia_dominated_points(ctx: DiagnosisContext) -> dict:
     if np.allclose(d, 0):
         test = {"statistic": 0.0, "p_value": 1.0, "log10_p": 0.0}
     else:
-        w = sps.wilcoxon(eb ** 2, ea ** 2, alternative="greater")
+        w = scipy.stats.wilcoxon(eb ** 2, ea ** 2, alternative="greater")
         p = float(max(w.pvalue, 1e-300))
         test = {"statistic": float(w.statistic), "p_value": p, "log10_p": float(np.log10(p))}
     before, after = float(np.sqrt(np.mean(eb ** 2))), float(np.sqrt(np.mean(ea ** 2)))
@@ -289,7 +288,7 @@ def _refine(curves, start: tuple[float, float]) -> tuple[float, float]:
         explained = np.where(ok, (a22 * b1 ** 2 - 2 * a12 * b1 * b2 + a11 * b2 ** 2) / np.where(ok, det, 1.0), 0.0)
         return total - float(explained.sum())
 
-    res = minimize(cost, np.log(start), method="Nelder-Mead", options={"xatol": 1e-3, "fatol": 1e-12})
+    res = scipy.optimize.minimize(cost, np.log(start), method="Nelder-Mead", options={"xatol": 1e-3, "fatol": 1e-12})
     return tuple(np.exp(res.x)) if res.success and cost(res.x) <= cost(np.log(start)) else start
 
 
@@ -371,7 +370,7 @@ def detect_inertial_ringing(ctx: DiagnosisContext) -> dict:
     # (no relaxing material does); a coherent residual bump over a monotone measured stress is a misfit of
     # the baseline's spectrum near the step, shared by every curve, not ringing. Per curve the rise is
     # compared with the Bonferroni normal quantile over its hold points at ALPHA.
-    rising = [r >= sps.norm.isf(st.ALPHA / (2.0 * max(n, 1))) for r, n in rises]
+    rising = [r >= scipy.stats.norm.isf(st.ALPHA / (2.0 * max(n, 1))) for r, n in rises]
     share = float(np.mean(rising)) if rising else 0.0
     evidence += (f" The measured stress rises again during the hold (beyond noise) in {sum(rising)} of "
                  f"{len(rising)} curves" + ("." if share >= 0.5 else

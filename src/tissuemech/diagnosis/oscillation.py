@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import least_squares, nnls
+import scipy
 
 from .. import stats as st
 from ..spectra import log_spaced_taus, prony_oscillation_basis, tau_window_from_frequency
@@ -57,7 +57,7 @@ def sweep_inertia_fit(sweep: pd.DataFrame, delta_i: float | None = None) -> dict
     a = design / sd[:, None]
     scale = np.linalg.norm(a, axis=0)
     scale = np.where(scale > 0, scale, 1.0)
-    coef, _ = nnls(a / scale, y / sd, maxiter=50 * a.shape[1])
+    coef, _ = scipy.optimize.nnls(a / scale, y / sd, maxiter=50 * a.shape[1])
     coef = coef / scale
     fitted = design[:n] @ coef
     if delta_i is None:
@@ -278,7 +278,7 @@ def detect_amplitude_softening(ctx: DiagnosisContext) -> dict:
         def resid(p):
             return train["y"].to_numpy() - kraus_centred(train, p)
         lg = train["log_g0"].to_numpy()
-        sol = least_squares(resid, [0.7, float(np.quantile(lg, 0.7)), 0.8],
+        sol = scipy.optimize.least_squares(resid, [0.7, float(np.quantile(lg, 0.7)), 0.8],
                             bounds=([0.05, lg.min() - 1, 0.2], [1.0, lg.max() + 1, 3.0]))
         return sol.x
 

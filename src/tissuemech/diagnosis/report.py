@@ -60,7 +60,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import xarray as xr
-from scipy import stats as sps
+import scipy
 from statsmodels.tools.sm_exceptions import MissingDataError
 
 from .. import fitting
@@ -150,7 +150,7 @@ def fix_margin(fix: dict | None, eps: float, alpha: float = st.ALPHA, n_default:
     n = float(n) if n is not None and np.isfinite(n) and n > 0 else float(n_default)
     if not (np.isfinite(eps) and np.isfinite(n) and n > 0):
         return np.nan
-    return float(sps.norm.ppf(1.0 - alpha) * eps / np.sqrt(2.0 * n))
+    return float(scipy.stats.norm.ppf(1.0 - alpha) * eps / np.sqrt(2.0 * n))
 
 
 def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "model", fit_info: dict | None = None,

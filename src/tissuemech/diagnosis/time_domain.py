@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+import scipy
 import statsmodels.api as sm
 
 from .. import stats as st
@@ -337,7 +338,7 @@ def detect_rim_stress_nonlinearity(ctx: DiagnosisContext) -> dict:
     bias = 4.0 / (n_mean + 3.0) - 1.0
     # practical null: |n - 1| <= 0.2, i.e. a rim-stress bias within 5 %
     tval = (abs(n_mean - 1.0) - 0.2) / se if se > 0 else np.inf
-    lp = float(np.log10(max(st.sps.t.sf(tval, ns.size - 1), 1e-300)))
+    lp = float(np.log10(max(scipy.stats.t.sf(tval, ns.size - 1), 1e-300)))
     t = st.statistic_result(tval, lp)
     if target not in RIM_BIASED_TARGETS:
         evidence = (f"n = dlnM/dln(gamma_R) = {n_mean:.2f} +- {se:.2f} at {100 * gmax:.0f} % ({source}), but the "

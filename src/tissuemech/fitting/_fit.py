@@ -9,7 +9,7 @@ import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
-import lmfit
+import lazy_loader
 import numpy as np
 import pandas as pd
 import xarray as xr
@@ -20,6 +20,9 @@ from ..records import FitRecord
 from ..stats import effective_sample_size, information_criteria
 from ._data import Curve, curve_ranges
 from ._problem import FitProblem, NoiseModel
+
+# loaded on first use (why: tissuemech.fitting._problem)
+lmfit = lazy_loader.load("lmfit")
 
 #: relative chi-square difference under which two starts count as the same optimum (see :func:`fit`)
 EQUIVALENT_CHISQR_RTOL = 1e-7

@@ -6,12 +6,16 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
-import lmfit
+import lazy_loader
 import numpy as np
 
 from ..models.base import ConstitutiveModel, ParamSpec, ResponseNotSupported
 from ..models.plate import PlateHistories, forward_plate, forward_plate_batch, rabinowitsch_rim_stress
 from ._data import Curve
+
+# loaded on first use: jobs that read fit records without fitting skip lmfit's import (~0.5 CPU s with
+# scipy.stats and emcee; issue 17)
+lmfit = lazy_loader.load("lmfit")
 
 PLATE_TARGETS: tuple[str, ...] = ("thesis", "apparent_stress", "corrected_stress", "torque", "none")
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 import numpy as np
-from scipy.optimize import nnls
+import scipy
 
 from ..models.base import ConstitutiveModel
 from ..models.recursion import prony_branch_histories
@@ -66,7 +66,7 @@ def prony_nnls(curves: Sequence[Curve], taus: np.ndarray, elastic: Callable[[np.
     b = np.concatenate(rhs)
     scale = np.linalg.norm(A, axis=0)
     scale = np.where(scale > 0, scale, 1.0)
-    coef, rnorm = nnls(A / scale, b, maxiter=50 * A.shape[1])
+    coef, rnorm = scipy.optimize.nnls(A / scale, b, maxiter=50 * A.shape[1])
     coef = coef / scale
     a0 = float(coef.sum())
     return {"taus": taus, "a_inf": float(coef[0]), "a": coef[1:], "a0": a0,

@@ -51,7 +51,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from pymittagleffler import mittag_leffler as garrappa_mittag_leffler
-from scipy.interpolate import CubicSpline
+import scipy
 from scipy.special import gamma as gamma_fn
 
 from .base import ConstitutiveModel, InstantaneousLawModel, ParamSpec, Params, initial_shear_modulus
@@ -137,7 +137,7 @@ def _mittag_leffler_negative_spline(z: np.ndarray, alpha: float, beta: float) ->
         return None
     nodes = np.linspace(lo, hi, n_nodes)
     values = _garrappa(-(10.0 ** nodes), alpha, beta)
-    spline = CubicSpline(nodes, values)
+    spline = scipy.interpolate.CubicSpline(nodes, values)
     checks = 0.5 * (nodes[:-1] + nodes[1:])[::4]
     error = np.max(np.abs(spline(checks) - _garrappa(-(10.0 ** checks), alpha, beta)))
     if not error <= _ML_SPLINE_TOLERANCE * np.max(np.abs(values)):

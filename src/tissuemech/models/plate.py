@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy.signal import savgol_filter
+import scipy
 
 from .base import ConstitutiveModel
 from .qlv import stress_controlled_strain, stress_controlled_strain_by_history
@@ -128,7 +128,7 @@ def n_exponent(torque_nm: np.ndarray, rim_strain: np.ndarray, window: int = 7, p
     lm_grid = np.interp(grid, lg, lm)
     win = min(window if window % 2 else window + 1, npts if npts % 2 else npts - 1)
     poly = min(polyorder, win - 1)
-    slope = savgol_filter(lm_grid, win, poly, deriv=1, delta=grid[1] - grid[0], mode="interp")
+    slope = scipy.signal.savgol_filter(lm_grid, win, poly, deriv=1, delta=grid[1] - grid[0], mode="interp")
     out[ok] = np.interp(np.log(g[ok]), grid, slope)
     return out
 

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy.optimize import brentq
+import scipy
 
 from . import hyperelastic
 from .base import ConstitutiveModel, InstantaneousLawModel, ParamSpec, Params, initial_shear_modulus
@@ -253,7 +253,7 @@ def _solve_scalar(fun: Callable[[float], float], x0: float, x1: float, tol: floa
         width *= 2.0
         if width > 1e6:
             raise ValueError("stress-controlled step: no bracket found (non-monotone law?)")
-    return brentq(fun, lo, hi, xtol=1e-15, rtol=4.5e-16)
+    return scipy.optimize.brentq(fun, lo, hi, xtol=1e-15, rtol=4.5e-16)
 
 
 # ----------------------------------------------------------------------------------------------------------
