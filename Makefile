@@ -4,7 +4,11 @@
 PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
+# `make run` installs what the pipeline needs (extras mesh, uq); `make test` adds the test tools (extra test:
+# pytest, felupe, snakefmt and the SLURM executor plugin, whose import runs `scontrol show config`, i.e. every
+# snakemake command waits up to 10 s on a machine with SLURM's client tools and no reachable controller)
 STAMP := $(VENV)/.tissuemech-installed
+TEST_STAMP := $(VENV)/.tissuemech-installed-test
 CORES ?= all
 # numba keys its cache on the source file of each jitted function only; the TLED kernels inline material laws
 # from other modules, so the cache folder is named after the numba-compiled sources (a stale kernel is never reused)
@@ -13,28 +17,34 @@ export NUMBA_CACHE_DIR ?= $(CURDIR)/.numba_cache/$(NUMBA_SOURCES_HASH)
 export MPLBACKEND ?= Agg
 export HDF5_USE_FILE_LOCKING ?= FALSE
 
-.PHONY: install run test test-fast lint regression-update lock clean
+.PHONY: install install-test run test test-fast lint regression-update lock clean
 
 install: $(STAMP)
+
+install-test: $(TEST_STAMP)
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "Python >= 3.11 required"'
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade "pip>=24"
-	$(PY) -m pip install --quiet -c constraints.txt -e ".[test,mesh]"
+	$(PY) -m pip install --quiet -c constraints.txt -e ".[mesh,uq]"
 	touch $(STAMP)
+
+$(TEST_STAMP): $(STAMP)
+	$(PY) -m pip install --quiet -c constraints.txt -e ".[test,mesh,uq]"
+	touch $(TEST_STAMP)
 
 run: install
 	$(VENV)/bin/snakemake --cores $(CORES)
 	$(VENV)/bin/snakemake --report results/report.html
 
-test: install
+test: install-test
 	$(PY) -m pytest -q -n 2 --dist loadgroup --durations=25
 
-test-fast: install
+test-fast: install-test
 	$(PY) -m pytest -q -m "not slow"
 
-lint: install
+lint: install-test
 	$(VENV)/bin/snakefmt --check Snakefile workflow/
 	$(VENV)/bin/snakemake -n --quiet
 
@@ -43,7 +53,7 @@ regression-update: install
 	$(PY) -m tissuemech.regression --update
 
 # Regenerate the pinned constraints from the current environment.
-lock: install
+lock: install-test
 	$(PY) -m pip freeze --exclude-editable | grep -v '^tissuemech' > constraints.txt
 
 clean:
