@@ -104,10 +104,12 @@ def save_figure(fig: Figure, path: str | Path, dpi: int = 150) -> list[Path]:
     plain_text_log_ticks(fig)
     with matplotlib.rc_context({"svg.hashsalt": "tissuemech", "svg.fonttype": "none"}):
         if fig.get_layout_engine() is not None:
-            # lay the figure out once (a draw without rendering), then drop the engine: with an engine attached,
-            # even a placeholder one, every savefig draws the figure twice (layout pass + output)
+            # lay the figure out once, then drop the engine: with an engine attached, even a placeholder one,
+            # every savefig lays it out again. The engine runs on its own (what Figure.draw runs first), not
+            # through draw_without_rendering, whose draw after the layout is wasted (same PNG bytes, ~8 % less
+            # figure time, issue 17)
             fig.set_dpi(dpi)      # text extents (hence the layout) as in the PNG
-            fig.draw_without_rendering()
+            fig.get_layout_engine().execute(fig)
             fig.set_layout_engine(None)
             if fig.get_layout_engine() is not None:  # rcParams ask for a default engine: keep the layout frozen
                 fig.set_layout_engine("none")
