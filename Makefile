@@ -34,7 +34,10 @@ $(TEST_STAMP): $(STAMP)
 	$(PY) -m pip install --quiet -c constraints.txt -e ".[test,mesh,uq]"
 	touch $(TEST_STAMP)
 
+# the package's bytecode is written once before the ~80 job processes import it: where PYTHONDONTWRITEBYTECODE is
+# set (containers, CI) each of them would compile every module it imports again (~0.15 CPU s per job)
 run: install
+	$(PY) -m compileall -q src
 	$(VENV)/bin/snakemake --cores $(CORES)
 	$(VENV)/bin/snakemake --report results/report.html
 

@@ -34,7 +34,8 @@ import warnings
 
 import numpy as np
 import pandas as pd
-import statsmodels.api as sm
+from statsmodels.regression.linear_model import OLS
+from statsmodels.tools.tools import add_constant
 
 from ..tts import run_temperature_c
 from .. import stats as st
@@ -365,11 +366,11 @@ def confounded_covariates(table: pd.DataFrame, runs=(), r2_limit: float = CONFOU
         joint = {"statistic": np.nan, "p_value": np.nan}
         unique = {}
         if numeric and len(f) > len(numeric) + 2:
-            X = sm.add_constant(f[numeric].astype(float), has_constant="add")
+            X = add_constant(f[numeric].astype(float), has_constant="add")
             with warnings.catch_warnings():
                 # the members are collinear by construction: the joint test uses the design's rank (pinv)
                 warnings.simplefilter("ignore")
-                fit = sm.OLS(f["y"].to_numpy(float), X).fit()
+                fit = OLS(f["y"].to_numpy(float), X).fit()
             if np.isfinite(fit.fvalue):
                 joint = {"statistic": float(fit.fvalue), "p_value": float(fit.f_pvalue)}
             unique = {m: float(fit.pvalues[m]) for m in numeric if m in fit.pvalues}

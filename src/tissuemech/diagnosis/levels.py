@@ -8,7 +8,8 @@ from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
-import statsmodels.api as sm
+from statsmodels.regression.linear_model import OLS
+from statsmodels.tools.tools import add_constant
 import xarray as xr
 
 from .. import stats as st
@@ -49,7 +50,7 @@ def level_regression(levels: pd.DataFrame, y: str, columns: Sequence[str], requi
         X = X.loc[:, (X.std() > 0) | X.columns.isin(columns)]
         if any(X[c].std() == 0 for c in columns) or len(levels) - X.shape[1] - 1 < 3:
             continue
-        Xc = sm.add_constant(X, has_constant="add").to_numpy(float)
+        Xc = add_constant(X, has_constant="add").to_numpy(float)
         if np.linalg.matrix_rank(Xc) == Xc.shape[1]:
             groups = levels["sample"].to_numpy() if "sample" in levels else None
             res = st.cluster_regression(levels[y].to_numpy(float), X, groups=groups)
@@ -84,9 +85,9 @@ def between_sample_test(levels: pd.DataFrame, y: str, column: str) -> dict | Non
             if agg["x"].std() == 0:
                 return None
         X = fixed_effect_design(agg.rename(columns={"x": column}), [column], fes)
-        Xc = sm.add_constant(X, has_constant="add").to_numpy(float)
+        Xc = add_constant(X, has_constant="add").to_numpy(float)
         if len(agg) - Xc.shape[1] >= 3 and np.linalg.matrix_rank(Xc) == Xc.shape[1] and X[column].std() > 0:
-            res = sm.OLS(agg["r"].to_numpy(float), Xc).fit()
+            res = OLS(agg["r"].to_numpy(float), Xc).fit()
             k = list(X.columns).index(column) + 1
             est, se = float(res.params[k]), float(res.bse[k])
             tval = est / se if se > 0 else 0.0

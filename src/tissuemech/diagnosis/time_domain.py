@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import scipy
-import statsmodels.api as sm
+from statsmodels.regression.linear_model import OLS
 
 from .. import stats as st
 from ..spectra import decade_aligned_taus, prony_complex_modulus
@@ -222,8 +222,8 @@ def detect_nonseparable_relaxation(ctx: DiagnosisContext) -> dict:
             cell = sr.groupby(["curve", "bin"]).agg(y=("log_ratio", "mean"), level=("level", "first"),
                                                     inv_stress=("inv_stress", "mean")).reset_index()
             # 1/stress: a torque offset also makes small-strain holds decay differently; it is not this cause
-            r0 = sm.OLS.from_formula("y ~ C(curve) + C(bin) + inv_stress", cell).fit()
-            r1 = sm.OLS.from_formula("y ~ C(curve) + C(bin) + C(level):C(bin) + inv_stress", cell).fit()
+            r0 = OLS.from_formula("y ~ C(curve) + C(bin) + inv_stress", cell).fit()
+            r1 = OLS.from_formula("y ~ C(curve) + C(bin) + C(level):C(bin) + inv_stress", cell).fit()
             dk = int(r1.df_model - r0.df_model)
             if dk > 0 and r1.df_resid > 0:
                 f = st.nested_f_test(r0.ssr, r1.ssr, r1.nobs, int(r1.df_model) + 1, dk)
