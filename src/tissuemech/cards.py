@@ -34,6 +34,10 @@ forms, against the fitted model):
   ``*UNIAXIAL TEST DATA`` generated from the *fitted simple-shear law* through the I1-only equivalence
   W'(I1 = 3 + gamma^2) = sigma(gamma) / (2 gamma), P(lambda) = 2 (lambda - lambda^-2) W'(lambda^2 + 2/lambda):
   exact in simple shear over the validity range; an I2 dependence of the original law is not carried over.
+  A fit that gives no strain range (sweeps, relaxation moduli) gets no MARLOW table, no strain validity
+  (``marlow_strain_max`` None) and, for a law with an unbounded initial tangent, no secant modulus; a linear
+  viscoelastic or fractional model fitted without a time or frequency window gets no Prony series. Nothing is
+  assumed in their place (the card's notes say what is not given).
 * A generalized Kelvin-Voigt model (retardation spectrum) is written through its exactly interconverted
   relaxation spectrum: ``*HYPERELASTIC, NEO HOOKE, MODULI=INSTANTANEOUS`` with C10 = G0/2 plus
   ``*VISCOELASTIC, TIME=PRONY`` on the relaxation times (which interlace the retardation times).
@@ -328,14 +332,21 @@ def parameter_uncertainty(result: FitResult, law: ConstitutiveModel | None = Non
     return out
 
 
-def fitted_strain_max(ranges: Mapping) -> float:
-    """The largest fitted shear strain of a fit's (or a card's ``validity``) ranges, 0.5 where not given."""
+#: largest shear strain of the grid on which a card's Abaqus and FEBio constants are checked against the fitted law
+#: when the fit gives no strain range (sweeps, relaxation moduli): a check of the conversion only; such a card states
+#: no strain validity (``marlow_strain_max`` None) and no secant modulus
+CONVERSION_CHECK_STRAIN_MAX = 0.5
+
+
+def fitted_strain_max(ranges: Mapping) -> float | None:
+    """The largest fitted shear strain of a fit's (or a card's ``validity``) ranges; None where they do not give
+    it."""
     strain_max = ranges.get("strain_max", float("nan"))
-    return float(strain_max) if strain_max is not None and np.isfinite(strain_max) else 0.5
+    return float(strain_max) if strain_max is not None and np.isfinite(strain_max) else None
 
 
 def material_fields(law: ConstitutiveModel | None, lp: Mapping[str, float], poisson_ratio: float,
-                    prony: dict | None = None, strain_max: float = 0.5) -> tuple[dict, list[str], bool]:
+                    prony: dict | None = None, strain_max: float | None = None) -> tuple[dict, list[str], bool]:
     """The material part of a card, the one place it is assembled (:func:`make_card` and the cards of posterior
     draws, ``uq.elastic_card``): from the elastic law, its parameters ``lp``, the Poisson ratio and the Prony
     series (``g``, ``tau``, ``g_inf``, ``source``, ... or None).
@@ -343,8 +354,9 @@ def material_fields(law: ConstitutiveModel | None, lp: Mapping[str, float], pois
     Returns ``(fields, notes, singular_origin)``: ``fields`` = ``prony`` (with its ``normalisation`` statement),
     ``elastic_law``, ``elastic_parameters``, ``initial_shear_modulus``, ``poisson_ratio`` and ``bulk_modulus``
     (``models.base.bulk_modulus(G0, nu)``). A law whose tangent still grows as gamma -> 0 (``singular_origin``)
-    gets the secant modulus at ``strain_max / 20`` as its initial shear modulus; a linear elastic shear law is
-    written as the neo-Hookean law with mu = G0. ``law`` None (no solid law): NaN moduli, ``elastic_law`` None.
+    gets the secant modulus at ``strain_max / 20`` as its initial shear modulus (NaN, with a note, when
+    ``strain_max`` -- the fit's largest strain -- is not given); a linear elastic shear law is written as the
+    neo-Hookean law with mu = G0. ``law`` None (no solid law): NaN moduli, ``elastic_law`` None.
     """
     notes: list[str] = []
     if prony is not None:
@@ -356,7 +368,11 @@ def material_fields(law: ConstitutiveModel | None, lp: Mapping[str, float], pois
     mu0 = initial_shear_modulus(law, lp) if law is not None else float("nan")
     singular_origin = law is not None and np.isfinite(mu0) and not math.isclose(
         mu0, initial_shear_modulus(law, lp, step=1e-4), rel_tol=1e-3)
-    if singular_origin:
+    if singular_origin and strain_max is None:
+        mu0 = float("nan")
+        notes.append("the law has an unbounded initial tangent modulus and the fit gives no strain range: no "
+                     "secant modulus, so initial_shear_modulus and bulk_modulus are not given")
+    elif singular_origin:
         # tangent still growing as gamma -> 0 (Nunes, Amin with a negative exponent): the law has no finite
         # initial modulus, so the bulk modulus is based on the secant modulus at the smallest checked strain
         gamma_ref = strain_max / 20.0
@@ -415,8 +431,10 @@ def _spectrum_material(model: ConstitutiveModel, p: Mapping[str, float], ranges:
     w_rng = (ranges.get("omega_min_rad_per_s", np.nan), ranges.get("omega_max_rad_per_s", np.nan))
     if not np.isfinite(t_lo) and np.all(np.isfinite(w_rng)):  # frequency-sweep fits: times = 1/omega
         t_lo, t_hi = 1.0 / w_rng[1], 1.0 / w_rng[0]
-    t_lo = float(t_lo) if np.isfinite(t_lo) and t_lo > 0 else 1e-2
-    t_hi = float(t_hi) if np.isfinite(t_hi) and t_hi > t_lo else 1e3
+    if not (np.isfinite(t_lo) and np.isfinite(t_hi) and 0 < t_lo < t_hi):
+        return None, {}, None, ["the fit gives no time or frequency window: no Prony series is derived (the "
+                                "model is not sampled over an assumed window), so the card has no solid law"]
+    t_lo, t_hi = float(t_lo), float(t_hi)
     if taus is None:
         taus = np.geomspace(t_lo, t_hi, max(int(round(math.log10(t_hi / t_lo))) + 1, 2))
     if model.supports("shear_history"):
@@ -462,6 +480,7 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float,
     card = {"model": result.model_key, "family": result.family, "parameters": dict(p), "units": dict(result.units),
             "standard_errors": dict(result.stderr), "structure": result.structure}
     strain_max = fitted_strain_max(result.ranges)
+    check_max = strain_max if strain_max is not None else CONVERSION_CHECK_STRAIN_MAX
     law, lp, prony, family_notes = family_material(model, p, result.ranges)
     notes += family_notes
     fields, law_notes, singular_origin = material_fields(law, lp, poisson_ratio, prony, strain_max)
@@ -469,7 +488,10 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float,
     notes += law_notes
     prony = card["prony"]
     card["validity"] = {**result.ranges, "plate_target": result.target,
-                        "marlow_strain_max": strain_max * strain_margin}
+                        "marlow_strain_max": strain_max * strain_margin if strain_max is not None else None}
+    if strain_max is None and law is not None:
+        notes.append(f"the fit gives no strain range: the card states no strain validity; its Abaqus/FEBio "
+                     f"constants were checked against the law up to gamma = {check_max:g}")
     if singular_origin:
         card["validity"]["marlow_spacing"] = "geometric"
     card["provenance"] = {"dataset": dataset, "scope": result.scope, "target": result.target,
@@ -494,8 +516,8 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float,
                 # a classical-form Ogden law W = sum mu_i/alpha_i (...) converts with mu_i alpha_i / 2
                 c = list(native[1])
                 options.append((native[0], [c[k] * c[k + 1] / 2.0 if k % 2 == 0 else c[k] for k in range(len(c))]))
-        card["abaqus_form"], card["abaqus_constants"] = "MARLOW", []
-        gamma = np.linspace(strain_max / 20.0, strain_max, 20)
+        card["abaqus_form"], card["abaqus_constants"] = ("MARLOW" if strain_max is not None else None), []
+        gamma = np.linspace(check_max / 20.0, check_max, 20)
         target = np.asarray(law.elastic_shear_stress(lp, gamma), float)
         for form, consts in options:
             # self-check: the Abaqus energy with these constants must reproduce the fitted law (1 %)
@@ -508,13 +530,15 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float,
             notes.append(f"native {form} constants do not reproduce the law ({100 * err:.2g} % off); not used")
         if card["abaqus_form"] == "MARLOW":
             notes.append("no native Abaqus form: MARLOW with uniaxial data equivalent in simple shear (I1-only)")
+        elif card["abaqus_form"] is None:
+            notes.append("no native Abaqus form, and no fitted strain range for a MARLOW table: no Abaqus block")
     if law is None:
         card.update(febio_form=None, febio_parameters=None, febio_check_max_rel_error=None,
                     febio_reason=notes[-1] if notes else "no solid elastic law")
     else:
         ogden = card["abaqus_constants"] if str(card["abaqus_form"]).startswith("OGDEN") else None
         card.update(febio_card_material(card["elastic_law"], card["elastic_parameters"], card["bulk_modulus"],
-                                        prony, lambda g: law.elastic_shear_stress(lp, g), strain_max,
+                                        prony, lambda g: law.elastic_shear_stress(lp, g), check_max,
                                         ogden_constants=ogden))
         if card["febio_form"] is None:
             notes.append(f"no FEBio block: {card['febio_reason']}")
@@ -692,7 +716,7 @@ def write_card_files(card: Mapping, folder, stem: str | None = None) -> dict[str
     return out
 
 
-__all__ = ["make_card", "family_material", "material_fields", "fitted_strain_max", "card_json", "abaqus_block", "parse_abaqus_block",
+__all__ = ["make_card", "family_material", "material_fields", "fitted_strain_max", "CONVERSION_CHECK_STRAIN_MAX", "card_json", "abaqus_block", "parse_abaqus_block",
            "abaqus_simple_shear_stress",
            "abaqus_hyperelastic_form", "marlow_uniaxial_table", "febio_block", "febio_file_text",
            "febio_simple_shear_stress", "valid_range", "parameter_uncertainty",

@@ -378,6 +378,43 @@ def test_nunes_card_has_no_finite_initial_modulus_and_a_log_spaced_marlow_table(
     assert "marlow_spacing" not in rp_card["validity"]
 
 
+def _without_strain_range(result):
+    """The same fit as if its data gave no strain range (a sweep or a relaxation modulus)."""
+    result.ranges = {k: v for k, v in result.ranges.items() if k != "strain_max"}
+    return result
+
+
+def test_a_card_without_a_fitted_strain_range_states_no_strain_validity():
+    model = get_model("neo_hookean")
+    card = C.make_card(_without_strain_range(fitted(model, {"mu": 500.0}, "neo_hookean")), model, poisson_ratio=0.49)
+    assert card["validity"]["marlow_strain_max"] is None
+    assert any("no strain range" in n and f"gamma = {C.CONVERSION_CHECK_STRAIN_MAX:g}" in n for n in card["notes"])
+    # the conversion is still checked and written (neo-Hookean has a native form in both codes)
+    assert card["abaqus_form"] == "NEO HOOKE" and card["abaqus_check_max_rel_error"] < 1e-6
+    assert card["initial_shear_modulus"] == pytest.approx(500.0, rel=1e-9)
+
+
+def test_a_law_without_a_native_form_and_without_a_strain_range_gets_no_marlow_table():
+    model = get_model("nunes")   # unbounded initial tangent, no native Abaqus form
+    card = C.make_card(_without_strain_range(fitted(model, {"C1": 60.0, "C2": 15.0}, "nunes")), model,
+                       poisson_ratio=0.49)
+    assert card["abaqus_form"] is None and C.abaqus_block(card) is None
+    assert np.isnan(card["initial_shear_modulus"]) and np.isnan(card["bulk_modulus"])
+    assert any("no secant modulus" in n for n in card["notes"])
+    assert any("no fitted strain range for a MARLOW table" in n for n in card["notes"])
+
+
+def test_a_spectrum_model_without_a_time_or_frequency_window_gets_no_prony_series():
+    model = get_model("fractional_zener")
+    p = {spec.name: spec.init for spec in model.param_specs}
+    law, lp, prony, notes = C.family_material(model, p, {})
+    assert law is None and prony is None and lp == {}
+    assert any("no time or frequency window" in n for n in notes)
+    # with the window of a sweep it has both
+    law, _, prony, _ = C.family_material(model, p, {"omega_min_rad_per_s": 0.1, "omega_max_rad_per_s": 100.0})
+    assert law is not None and len(prony["g"]) > 0 and "over [0.01, 10] s" in prony["source"]   # 1/omega
+
+
 def test_gkv_card_prony_series_is_the_exact_relaxation_spectrum():
     model = get_model("gkv3")
     truth = {"G0": 800.0, "G_1": 300.0, "G_2": 150.0, "G_3": 400.0, "tau_ret_1": 0.05, "tau_ret_2": 2.0,
