@@ -1,4 +1,5 @@
 # Shared helpers: dataset discovery, package source hashes (rerun triggers), target lists.
+import functools
 import sys
 from pathlib import Path
 
@@ -78,8 +79,15 @@ def dataset_files(wildcards):
     return files
 
 
+@functools.cache
+def sample_sheet(name):
+    """A dataset's sample sheet, read once per Snakemake process (raw/ does not change during a run; the target
+    and input functions asked for it ~350 times per DAG). Callers must not modify it."""
+    return pd.read_csv(Path(DATASETS[name]) / "samples.csv", dtype=str)
+
+
 def dataset_tests(name):
-    sheet = pd.read_csv(Path(DATASETS[name]) / "samples.csv", dtype=str)
+    sheet = sample_sheet(name)
     return sorted(set(sheet["test"].dropna())) if "test" in sheet else []
 
 
@@ -168,7 +176,7 @@ def tts_temperatures(name):
     """Distinct nominal temperatures (sample sheet ``temperature_c``) of a dataset's frequency sweeps."""
     from tissuemech.curves import distinct_temperatures
 
-    sheet = pd.read_csv(Path(DATASETS[name]) / "samples.csv", dtype=str)
+    sheet = sample_sheet(name)
     if "test" not in sheet or "temperature_c" not in sheet:
         return []
     sweeps = sheet[sheet["test"] == "frequency_sweep"]
