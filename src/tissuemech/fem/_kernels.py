@@ -412,6 +412,31 @@ def contact_force(fint, contact_nodes, in_contact, out):
             out[2] += fint[n, 2]
 
 
+@njit(cache=True)
+def central_difference_coefficients(mass, damping, dt):
+    """Per-node coefficients ``(a, b, c)`` of the central-difference update with mass-proportional damping
+    (:func:`central_difference_dof`): ``a = 1 / (m/dt^2 + D m/(2 dt))``, ``b = 2 m a / dt^2``,
+    ``c = D m a / (2 dt) - b / 2``."""
+    nn = mass.size
+    coef_a = np.empty(nn)
+    coef_b = np.empty(nn)
+    coef_c = np.empty(nn)
+    for n in range(nn):
+        m = mass[n]
+        a = 1.0 / (m / dt**2 + damping * m / (2.0 * dt))
+        coef_a[n] = a
+        coef_b[n] = 2.0 * m * a / dt**2
+        coef_c[n] = damping * m * a / (2.0 * dt) - 0.5 * coef_b[n]
+    return coef_a, coef_b, coef_c
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def central_difference_dof(a, b, c, f_ext, f_int, u, u_old):
+    """Next displacement of one free dof: ``a (f_ext - f_int) + b u + c u_old`` (coefficients of
+    :func:`central_difference_coefficients`)."""
+    return a * (f_ext - f_int) + b * u + c * u_old
+
+
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _cd_node_pass(fbuf, fint, fext_ref, s_ext, u, u_old, u_new, coef_a, coef_b, coef_c, free, vec):
     """Collect the internal forces into ``fint`` (reduce the chunk force buffers and clear them, or with
@@ -434,7 +459,7 @@ def _cd_node_pass(fbuf, fint, fext_ref, s_ext, u, u_old, u_new, coef_a, coef_b, 
             else:
                 f = fint[n, i]
             if free[n, i]:
-                u_new[n, i] = a * (s_ext * fext_ref[n, i] - f) + b * u[n, i] + cc * u_old[n, i]
+                u_new[n, i] = central_difference_dof(a, b, cc, s_ext * fext_ref[n, i], f, u[n, i], u_old[n, i])
             else:
                 u_new[n, i] = u[n, i]
 
@@ -536,15 +561,7 @@ def explicit_loop(mesh, mat, laws, loads, mass, h_state, s_prev, w_prev, dt, n_s
     force_g = np.zeros((n_groups, 3))
     torque_g = np.zeros(n_groups)
     cforce = np.zeros(3)
-    coef_a = np.empty(nn)
-    coef_b = np.empty(nn)
-    coef_c = np.empty(nn)
-    for n in range(nn):
-        m = mass[n]
-        a = 1.0 / (m / dt**2 + damping * m / (2.0 * dt))
-        coef_a[n] = a
-        coef_b[n] = 2.0 * m * a / dt**2
-        coef_c[n] = damping * m * a / (2.0 * dt) - 0.5 * coef_b[n]
+    coef_a, coef_b, coef_c = central_difference_coefficients(mass, damping, dt)
     nterm = prony_g.size
     prony_e = np.empty(nterm)
     prony_f = np.empty(nterm)

@@ -48,14 +48,15 @@ import numpy as np
 from numba import njit, prange
 
 from ..models.recursion import relaxation_factors
-from ._kernels import (STATUS_INVERTED, STATUS_NOT_FINITE, STATUS_OK, constrain_explicit_step, history_values,
-                       record_explicit_output)
+from ._kernels import (STATUS_INVERTED, STATUS_NOT_FINITE, STATUS_OK, central_difference_coefficients,
+                       central_difference_dof, constrain_explicit_step, history_values, record_explicit_output)
 from .kinematics import FASTMATH, cofactor, left_cauchy_green, push_forward
 from .materials import KIND_INVARIANT, j_minus_two_thirds
 from .mesh import TetMesh
 from .vectorised import (JM23_NEWTON_MAX, JM23_NEWTON_MIN, MAX_PRONY_TERMS, element_pressure,
                          gathered_deformation_gradient, isochoric_kirchhoff, isochoric_pk2, nodal_forces,
-                         prony_update, store_element_kinematics, store_nodal_forces, first_inverted_element_of)
+                         prony_update, store_element_kinematics, store_law_derivatives, store_nodal_forces,
+                         first_inverted_element_of)
 
 _REGION = dict(parallel=True, cache=True, fastmath=FASTMATH, error_model="numpy")
 
@@ -275,19 +276,8 @@ def fused_step(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, f
             if not constant:
                 # (as vectorised.invariant_law_pass) the law's derivatives through its function pointers (scalar)
                 for e in range(e_lo, e_mid):
-                    f11, f12, f13 = 1.0 + g0[e], g1[e], g2[e]
-                    f21, f22, f23 = g3[e], 1.0 + g4[e], g5[e]
-                    f31, f32, f33 = g6[e], g7[e], 1.0 + g8[e]
-                    b11, b22, b33, b12, b23, b13 = left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-                    jm23 = jm23a[e]
-                    i1 = jm23 * (b11 + b22 + b33)
-                    if i2_dependent:
-                        q = b11 * b11 + b22 * b22 + b33 * b33 + 2.0 * (b12 * b12 + b23 * b23 + b13 * b13)
-                        i2 = 0.5 * (i1 * i1 - jm23 * jm23 * q)
-                        w1a[e] = w1fn(params, i1, i2)
-                        w2a[e] = w2fn(params, i1, i2)
-                    else:
-                        w1a[e] = w1fn(params, i1, 3.0)
+                    store_law_derivatives(e, g0, g1, g2, g3, g4, g5, g6, g7, g8, jm23a, w1fn, w2fn, params,
+                                          i2_dependent, w1a, w2a)
             off = np.uint64(c) * np.uint64(n_nodes)
             if use_anp:
                 # (as vectorised.nodal_pressure_pass) average nodal pressure of the nodes of E1, into this part's slice
@@ -374,42 +364,35 @@ def fused_step(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, f
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
+def _add_local_node_forces(fx, fy, fz, lo, hi, gel, fa, fb, fc):
+    """``(fx, fy, fz)`` plus the force components ``fa, fb, fc`` of the elements ``gel[lo:hi]`` (one local node
+    of each), summed in that order."""
+    for j in range(lo, hi):
+        e = gel[j]
+        fx += fa[e]
+        fy += fb[e]
+        fz += fc[e]
+    return fx, fy, fz
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
 def _gather_and_advance(n, u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, free, gptr, gel,
                         fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11):
     """Internal force of node ``n``, the sum of its element forces (``gel[gptr[4 n + a]:gptr[4 n + a + 1]]``: the
     elements whose local node ``a`` is ``n``, whose force components are rows ``3 a``...``3 a + 2``), and its
     central-difference update (as ``_kernels._cd_node_pass``)."""
     k = np.uint64(4) * n
-    fx = 0.0
-    fy = 0.0
-    fz = 0.0
-    for j in range(gptr[k], gptr[k + 1]):
-        e = gel[j]
-        fx += fe0[e]
-        fy += fe1[e]
-        fz += fe2[e]
-    for j in range(gptr[k + 1], gptr[k + 2]):
-        e = gel[j]
-        fx += fe3[e]
-        fy += fe4[e]
-        fz += fe5[e]
-    for j in range(gptr[k + 2], gptr[k + 3]):
-        e = gel[j]
-        fx += fe6[e]
-        fy += fe7[e]
-        fz += fe8[e]
-    for j in range(gptr[k + 3], gptr[k + 4]):
-        e = gel[j]
-        fx += fe9[e]
-        fy += fe10[e]
-        fz += fe11[e]
+    fx, fy, fz = _add_local_node_forces(0.0, 0.0, 0.0, gptr[k], gptr[k + 1], gel, fe0, fe1, fe2)
+    fx, fy, fz = _add_local_node_forces(fx, fy, fz, gptr[k + 1], gptr[k + 2], gel, fe3, fe4, fe5)
+    fx, fy, fz = _add_local_node_forces(fx, fy, fz, gptr[k + 2], gptr[k + 3], gel, fe6, fe7, fe8)
+    fx, fy, fz = _add_local_node_forces(fx, fy, fz, gptr[k + 3], gptr[k + 4], gel, fe9, fe10, fe11)
     fint[n, 0] = fx
     fint[n, 1] = fy
     fint[n, 2] = fz
     a, b, cc = coef_a[n], coef_b[n], coef_c[n]
     for i in range(3):
         if free[n, i]:
-            u_new[n, i] = a * (s_ext * fext_ref[n, i] - fint[n, i]) + b * u[n, i] + cc * u_old[n, i]
+            u_new[n, i] = central_difference_dof(a, b, cc, s_ext * fext_ref[n, i], fint[n, i], u[n, i], u_old[n, i])
         else:
             u_new[n, i] = u[n, i]
 
@@ -452,15 +435,7 @@ def fused_explicit_loop(mesh, mat, laws, loads, mass, dt, n_steps, damping, out_
     force_g = np.zeros((n_groups, 3))
     torque_g = np.zeros(n_groups)
     cforce = np.zeros(3)
-    coef_a = np.empty(nn)
-    coef_b = np.empty(nn)
-    coef_c = np.empty(nn)
-    for n in range(nn):
-        m = mass[n]
-        a = 1.0 / (m / dt**2 + damping * m / (2.0 * dt))
-        coef_a[n] = a
-        coef_b[n] = 2.0 * m * a / dt**2
-        coef_c[n] = damping * m * a / (2.0 * dt) - 0.5 * coef_b[n]
+    coef_a, coef_b, coef_c = central_difference_coefficients(mass, damping, dt)
     nterm = prony_g.size
     decay = np.zeros(MAX_PRONY_TERMS)
     gain = np.zeros(MAX_PRONY_TERMS)
