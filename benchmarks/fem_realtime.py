@@ -1,6 +1,6 @@
 """Real-time factor of the TLED explicit step on the MNI brain (issue 17 targets), with float32 vs float64 agreement.
 
-For each brain mesh given (e.g. the fTetWild mesh as meshed and after ``mesh.improve_min_altitude``) and each law
+For each brain mesh given (e.g. the pipeline's ``results/fem/brain_mesh.vtu`` and an older or finer one) and each law
 (neo-Hookean, QLV with 4 Prony terms on neo-Hookean; mu = 1 kPa, nu = 0.49, rho = 1040 kg/m^3, ANP, the lowest
 5 % of the brain fixed, an initial shear-velocity field), the explicit step runs at the critical step
 ``0.7 min altitude / c_d`` on 1 and 2 threads (alternating, ``--repeats`` times, median kept) in float64 and float32
