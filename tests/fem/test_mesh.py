@@ -147,3 +147,17 @@ def test_improve_min_altitude_raises_the_worst_element_and_keeps_the_boundary():
     np.testing.assert_array_equal(x1[feature], x0[feature])  # edge and corner nodes do not move
     assert element_volumes(slid.nodes, slid.elements).sum() == pytest.approx(27e-9, rel=1e-12)
     assert element_volumes(slid.nodes, slid.elements).min() > 0
+
+
+def test_surface_deviation_of_a_block_against_a_larger_box():
+    """Known truth: the boundary of a 10 mm cube against the surface of a 12 mm box with the same centre lies
+    1 mm away everywhere on the faces; the box's corners are sqrt(3) mm from the cube's."""
+    pv = pytest.importorskip("pyvista")
+    from tissuemech.fem.mesh import surface_deviation
+
+    mesh = block_mesh((10e-3, 10e-3, 10e-3), (4, 4, 4))
+    box = pv.Box(bounds=(-1.0, 11.0, -1.0, 11.0, -1.0, 11.0), level=6).triangulate()  # mm
+    deviation = surface_deviation(mesh, box)
+    assert deviation["face_centroid_max_m"] == pytest.approx(1e-3, rel=1e-6)
+    assert deviation["max_m"] == pytest.approx(np.sqrt(3.0) * 1e-3, rel=1e-6)
+    assert 1e-3 <= deviation["mean_m"] < 1.2e-3
