@@ -16,7 +16,7 @@ from numba import njit, prange
 
 from ..models.recursion import relaxation_factors
 from . import vectorised
-from .kinematics import cofactor, left_cauchy_green, pull_back, push_forward
+from .kinematics import cofactor, determinant, left_cauchy_green, pull_back, push_forward
 from .materials import FASTMATH, KIND_INVARIANT, KIND_SVK, j_minus_two_thirds, kirchhoff_deviatoric
 
 STATUS_OK = 0
@@ -51,6 +51,26 @@ def NO():
 # --------------------------------------------------------------------------------------------------
 # compiled passes
 # --------------------------------------------------------------------------------------------------
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def element_deformation_gradient(u, dndx, e, n0, n1, n2, n3):
+    """``F = I + sum_a u_a (x) dN_a/dX`` of element ``e`` (nodes ``n0..n3``; ``dndx[e, 3 a + j]`` = ``dN_a/dX_j``,
+    the generic kernel's row-per-element layout; the vectorised kernel's is
+    ``vectorised.gathered_deformation_gradient``)."""
+    ux0, ux1, ux2, ux3 = u[n0, 0], u[n1, 0], u[n2, 0], u[n3, 0]
+    uy0, uy1, uy2, uy3 = u[n0, 1], u[n1, 1], u[n2, 1], u[n3, 1]
+    uz0, uz1, uz2, uz3 = u[n0, 2], u[n1, 2], u[n2, 2], u[n3, 2]
+    d0x, d0y, d0z = dndx[e, 0], dndx[e, 1], dndx[e, 2]
+    d1x, d1y, d1z = dndx[e, 3], dndx[e, 4], dndx[e, 5]
+    d2x, d2y, d2z = dndx[e, 6], dndx[e, 7], dndx[e, 8]
+    d3x, d3y, d3z = dndx[e, 9], dndx[e, 10], dndx[e, 11]
+    return (1.0 + ux0 * d0x + ux1 * d1x + ux2 * d2x + ux3 * d3x, ux0 * d0y + ux1 * d1y + ux2 * d2y + ux3 * d3y,
+            ux0 * d0z + ux1 * d1z + ux2 * d2z + ux3 * d3z,
+            uy0 * d0x + uy1 * d1x + uy2 * d2x + uy3 * d3x, 1.0 + uy0 * d0y + uy1 * d1y + uy2 * d2y + uy3 * d3y,
+            uy0 * d0z + uy1 * d1z + uy2 * d2z + uy3 * d3z,
+            uz0 * d0x + uz1 * d1x + uz2 * d2x + uz3 * d3x, uz0 * d0y + uz1 * d1y + uz2 * d2y + uz3 * d3y,
+            1.0 + uz0 * d0z + uz1 * d1z + uz2 * d2z + uz3 * d3z)
+
+
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _anp_element_pass(u, elements, dndx, vol0, chunk_lo, pbuf, kappa, bad):
     """Accumulate ``kappa (J_e - 1) V0_e`` into per-chunk nodal pressure buffers."""
@@ -58,16 +78,8 @@ def _anp_element_pass(u, elements, dndx, vol0, chunk_lo, pbuf, kappa, bad):
     for c in prange(nchunk):
         for e in range(chunk_lo[c], chunk_lo[c + 1]):
             n0, n1, n2, n3 = elements[e, 0], elements[e, 1], elements[e, 2], elements[e, 3]
-            f11 = 1.0 + u[n0, 0] * dndx[e, 0] + u[n1, 0] * dndx[e, 3] + u[n2, 0] * dndx[e, 6] + u[n3, 0] * dndx[e, 9]
-            f12 = u[n0, 0] * dndx[e, 1] + u[n1, 0] * dndx[e, 4] + u[n2, 0] * dndx[e, 7] + u[n3, 0] * dndx[e, 10]
-            f13 = u[n0, 0] * dndx[e, 2] + u[n1, 0] * dndx[e, 5] + u[n2, 0] * dndx[e, 8] + u[n3, 0] * dndx[e, 11]
-            f21 = u[n0, 1] * dndx[e, 0] + u[n1, 1] * dndx[e, 3] + u[n2, 1] * dndx[e, 6] + u[n3, 1] * dndx[e, 9]
-            f22 = 1.0 + u[n0, 1] * dndx[e, 1] + u[n1, 1] * dndx[e, 4] + u[n2, 1] * dndx[e, 7] + u[n3, 1] * dndx[e, 10]
-            f23 = u[n0, 1] * dndx[e, 2] + u[n1, 1] * dndx[e, 5] + u[n2, 1] * dndx[e, 8] + u[n3, 1] * dndx[e, 11]
-            f31 = u[n0, 2] * dndx[e, 0] + u[n1, 2] * dndx[e, 3] + u[n2, 2] * dndx[e, 6] + u[n3, 2] * dndx[e, 9]
-            f32 = u[n0, 2] * dndx[e, 1] + u[n1, 2] * dndx[e, 4] + u[n2, 2] * dndx[e, 7] + u[n3, 2] * dndx[e, 10]
-            f33 = 1.0 + u[n0, 2] * dndx[e, 2] + u[n1, 2] * dndx[e, 5] + u[n2, 2] * dndx[e, 8] + u[n3, 2] * dndx[e, 11]
-            J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
+            f11, f12, f13, f21, f22, f23, f31, f32, f33 = element_deformation_gradient(u, dndx, e, n0, n1, n2, n3)
+            J = determinant(f11, f12, f13, f21, f22, f23, f31, f32, f33)
             if not J > 0.0:
                 bad[c] = e
             pv = kappa * (J - 1.0) * vol0[e]
@@ -108,22 +120,7 @@ def _element_force_pass(u, elements, dndx, vol0, chunk_lo, fbuf, kind, w1fn, w2f
     for c in prange(nchunk):
         for e in range(chunk_lo[c], chunk_lo[c + 1]):
             n0, n1, n2, n3 = elements[e, 0], elements[e, 1], elements[e, 2], elements[e, 3]
-            d0x, d0y, d0z = dndx[e, 0], dndx[e, 1], dndx[e, 2]
-            d1x, d1y, d1z = dndx[e, 3], dndx[e, 4], dndx[e, 5]
-            d2x, d2y, d2z = dndx[e, 6], dndx[e, 7], dndx[e, 8]
-            d3x, d3y, d3z = dndx[e, 9], dndx[e, 10], dndx[e, 11]
-            ux0, ux1, ux2, ux3 = u[n0, 0], u[n1, 0], u[n2, 0], u[n3, 0]
-            uy0, uy1, uy2, uy3 = u[n0, 1], u[n1, 1], u[n2, 1], u[n3, 1]
-            uz0, uz1, uz2, uz3 = u[n0, 2], u[n1, 2], u[n2, 2], u[n3, 2]
-            f11 = 1.0 + ux0 * d0x + ux1 * d1x + ux2 * d2x + ux3 * d3x
-            f12 = ux0 * d0y + ux1 * d1y + ux2 * d2y + ux3 * d3y
-            f13 = ux0 * d0z + ux1 * d1z + ux2 * d2z + ux3 * d3z
-            f21 = uy0 * d0x + uy1 * d1x + uy2 * d2x + uy3 * d3x
-            f22 = 1.0 + uy0 * d0y + uy1 * d1y + uy2 * d2y + uy3 * d3y
-            f23 = uy0 * d0z + uy1 * d1z + uy2 * d2z + uy3 * d3z
-            f31 = uz0 * d0x + uz1 * d1x + uz2 * d2x + uz3 * d3x
-            f32 = uz0 * d0y + uz1 * d1y + uz2 * d2y + uz3 * d3y
-            f33 = 1.0 + uz0 * d0z + uz1 * d1z + uz2 * d2z + uz3 * d3z
+            f11, f12, f13, f21, f22, f23, f31, f32, f33 = element_deformation_gradient(u, dndx, e, n0, n1, n2, n3)
             c11, c12, c13, c21, c22, c23, c31, c32, c33, J = cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
             if not J > 0.0:
                 bad[c] = e

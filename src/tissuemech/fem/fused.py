@@ -50,7 +50,7 @@ from numba import njit, prange
 from ..models.recursion import relaxation_factors
 from ._kernels import (STATUS_INVERTED, STATUS_NOT_FINITE, STATUS_OK, central_difference_coefficients,
                        central_difference_dof, constrain_explicit_step, history_values, record_explicit_output)
-from .kinematics import FASTMATH, cofactor, left_cauchy_green, push_forward
+from .kinematics import FASTMATH, cofactor, determinant, left_cauchy_green, push_forward
 from .materials import KIND_INVARIANT, j_minus_two_thirds
 from .mesh import TetMesh
 from .vectorised import (JM23_NEWTON_MAX, JM23_NEWTON_MIN, MAX_PRONY_TERMS, element_pressure,
@@ -258,7 +258,7 @@ def fused_step(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, f
             far += 0 if (J > JM23_NEWTON_MIN) & (J < JM23_NEWTON_MAX) else 1
         for e in range(e_mid, e_hi):
             f11, f12, f13, f21, f22, f23, f31, f32, f33 = gathered_deformation_gradient(u, conn, d9, e)
-            J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
+            J = determinant(f11, f12, f13, f21, f22, f23, f31, f32, f33)
             pe[e] = kappa * (J - 1.0) * vol0[e]
         # (a halo element is in another part's E1, which counts it)
         n_bad[c] = bad
@@ -270,7 +270,7 @@ def fused_step(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, f
                     f11, f12, f13 = 1.0 + g0[e], g1[e], g2[e]
                     f21, f22, f23 = g3[e], 1.0 + g4[e], g5[e]
                     f31, f32, f33 = g6[e], g7[e], 1.0 + g8[e]
-                    J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
+                    J = determinant(f11, f12, f13, f21, f22, f23, f31, f32, f33)
                     if not (J > JM23_NEWTON_MIN and J < JM23_NEWTON_MAX):
                         jm23a[e] = j_minus_two_thirds(J)
             if not constant:

@@ -15,6 +15,12 @@ FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
+def determinant(f11, f12, f13, f21, f22, f23, f31, f32, f33):
+    """``J = det F`` by expansion along the first row (the passes that need ``J`` without the cofactor)."""
+    return f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
 def cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33):
     """Cofactor matrix ``cof F = J F^-T`` (nine components, row by row) and ``J = det F``."""
     c11 = f22 * f33 - f23 * f32

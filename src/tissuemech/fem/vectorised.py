@@ -42,7 +42,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .kinematics import FASTMATH, cofactor, left_cauchy_green, pull_back, push_forward
+from .kinematics import FASTMATH, cofactor, determinant, left_cauchy_green, pull_back, push_forward
 from .materials import isochoric_kirchhoff_invariant, j_minus_two_thirds, svk_kirchhoff
 
 #: ``J`` range of the branch-free ``J^(-2/3)`` (:func:`jm23_newton` is within 1e-15 of ``J**(-2/3)`` on
@@ -120,7 +120,7 @@ def store_element_kinematics(u, conn, d9, vol0, kappa, e, pe, jm23a, f11a, f12a,
     """Kinematics of element ``e`` into the pass arrays: ``F - I`` (9 arrays), ``pe = kappa (J-1) V0`` and the
     branch-free ``J^(-2/3)``; returns ``J``. Shared by :func:`kinematics_pass` and the fused step (:mod:`.fused`)."""
     f11, f12, f13, f21, f22, f23, f31, f32, f33 = gathered_deformation_gradient(u, conn, d9, e)
-    J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
+    J = determinant(f11, f12, f13, f21, f22, f23, f31, f32, f33)
     pe[e] = kappa * (J - 1.0) * vol0[e]
     jm23a[e] = jm23_newton(J)
     # the displacement gradient F - I is stored: in float32 storage F itself would lose the strain
@@ -169,7 +169,7 @@ def exact_far_jm23(grad_u, jm23a, n_elements):
         f11, f12, f13 = 1.0 + grad_u[0, e], grad_u[1, e], grad_u[2, e]
         f21, f22, f23 = grad_u[3, e], 1.0 + grad_u[4, e], grad_u[5, e]
         f31, f32, f33 = grad_u[6, e], grad_u[7, e], 1.0 + grad_u[8, e]
-        J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
+        J = determinant(f11, f12, f13, f21, f22, f23, f31, f32, f33)
         if not (J > JM23_NEWTON_MIN and J < JM23_NEWTON_MAX):
             jm23a[e] = j_minus_two_thirds(J)
 
@@ -436,7 +436,7 @@ def first_inverted_element_of(u, conn, d9, n_elements):
     """Smallest element id with ``J <= 0`` (or NaN) of the displacement ``u``; -1 if none."""
     for e in range(np.uint64(n_elements)):
         f11, f12, f13, f21, f22, f23, f31, f32, f33 = gathered_deformation_gradient(u, conn, d9, e)
-        J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
+        J = determinant(f11, f12, f13, f21, f22, f23, f31, f32, f33)
         if not J > 0.0:
             return np.int64(e)
     return np.int64(-1)
@@ -493,7 +493,7 @@ def first_inverted_element(grad_u, lo):
         f11, f12, f13 = 1.0 + grad_u[0, e], grad_u[1, e], grad_u[2, e]
         f21, f22, f23 = grad_u[3, e], 1.0 + grad_u[4, e], grad_u[5, e]
         f31, f32, f33 = grad_u[6, e], grad_u[7, e], 1.0 + grad_u[8, e]
-        J = f11 * (f22 * f33 - f23 * f32) - f12 * (f21 * f33 - f23 * f31) + f13 * (f21 * f32 - f22 * f31)
+        J = determinant(f11, f12, f13, f21, f22, f23, f31, f32, f33)
         if not J > 0.0:
             return np.int64(e)
     return np.int64(-1)
