@@ -548,12 +548,30 @@ def _uniform_surface(surface, n_points: int):
         return clustering.create_mesh()
 
 
+#: system packages (Debian/Ubuntu names) that the shared library of gmsh's PyPI wheel links to and that minimal
+#: images lack; the wheel bundles the rest
+GMSH_SYSTEM_PACKAGES = ("libglu1-mesa", "libxcursor1", "libxft2", "libxinerama1")
+
+
+def import_gmsh():
+    """The ``gmsh`` module, or an ``ImportError`` that says what to install: gmsh's wheel loads its shared library
+    when imported, and that library links to X11/OpenGL client libraries (:data:`GMSH_SYSTEM_PACKAGES`) even
+    though no window is ever opened here."""
+    try:
+        import gmsh
+    except OSError as exc:
+        raise ImportError(
+            f"gmsh is installed but its shared library cannot be loaded ({exc}); it needs the X11/OpenGL client "
+            f"libraries: apt-get install {' '.join(GMSH_SYSTEM_PACKAGES)} (or set fem.brain_mesh: false in the "
+            f"configuration to run the pipeline without the brain mesh)") from exc
+    return gmsh
+
+
 def _gmsh_volume(points_mm: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Tetrahedra filling a closed triangulated surface that they keep as their boundary: gmsh's 3-D Delaunay
     (one thread, deterministic) followed by its own and Netgen's quality optimisation. Returns node
     coordinates (mm) and 0-based connectivity, unused nodes dropped."""
-    import gmsh
-
+    gmsh = import_gmsh()
     owner = not gmsh.isInitialized()
     if owner:
         gmsh.initialize(readConfigFiles=False, interruptible=False)
