@@ -100,7 +100,7 @@ def test_brain_mesh_from_wheel_data_is_sliver_free(tmp_path):
     assert surface.volume * 1e-9 == pytest.approx(q["volume_m3"], rel=0.02)
     deviation = fm.surface_deviation(mesh, surface)
     assert deviation["mean_m"] < 0.5e-3 and deviation["max_m"] < 3.5e-3
-    fresh = fm.brain_mesh()  # no cache: the same mesh again
+    fresh = fm.brain_mesh(surface=surface)  # no cache, the caller's surface: the same mesh again
     assert np.array_equal(fresh.elements, mesh.elements) and np.allclose(fresh.nodes, mesh.nodes, rtol=0, atol=1e-12)
     again = fm.brain_mesh(cache_dir=tmp_path)  # from the VTU cache
     assert again.n_elements == mesh.n_elements and np.allclose(again.nodes, mesh.nodes)

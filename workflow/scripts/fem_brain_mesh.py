@@ -6,9 +6,10 @@ from tissuemech.fem.mesh import MNI_GM, MNI_WM, brain_mesh, brain_surface, mesh_
 from tissuemech.pipeline import job_log
 
 with job_log(snakemake.log[0], end_process=True) as log:
-    mesh = brain_mesh()
+    surface = brain_surface()
+    mesh = brain_mesh(surface=surface)
     write_mesh(snakemake.output.mesh, mesh)
-    quality = {**mesh_quality(mesh), "surface_deviation": surface_deviation(mesh, brain_surface()),
+    quality = {**mesh_quality(mesh), "surface_deviation": surface_deviation(mesh, surface),
                "source": [MNI_GM, MNI_WM],
                "note": "MNI ICBM152-2009 GM+WM probability > 0.5, smoothed, marching cubes, remeshed to uniform "
                        "triangles (ACVD, pyacvd), filled by gmsh (Delaunay + Netgen optimisation), worst elements "

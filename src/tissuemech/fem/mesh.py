@@ -603,7 +603,7 @@ def _gmsh_volume(points_mm: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarr
 
 
 def brain_mesh(surface_points: int = 1400, smoothing_voxels: float = 4.0, cache_dir: str | Path | None = None,
-               boundary_slide_m: float | None = 0.5e-3) -> TetMesh:
+               boundary_slide_m: float | None = 0.5e-3, surface=None) -> TetMesh:
     """Whole-brain tetrahedral mesh (MNI ICBM152-2009 space, metres) from data shipped in the nilearn wheel.
 
     :func:`brain_surface` -> isotropic remeshing of that surface to ``surface_points`` vertices (ACVD,
@@ -622,7 +622,8 @@ def brain_mesh(surface_points: int = 1400, smoothing_voxels: float = 4.0, cache_
     coarser surface (largest deviation 2.5 mm instead of 0.8 mm, mean 0.27 instead of 0.23 mm), which a linear
     tet of ~12 mm edges cannot follow more closely on a curved surface anyway.
 
-    The result is cached as VTU in ``cache_dir`` when given. Needs ``nibabel``, ``pyvista``, ``pyacvd``,
+    ``surface``: the result of ``brain_surface(smoothing_voxels)`` when the caller already has it (it is computed
+    otherwise). The result is cached as VTU in ``cache_dir`` when given. Needs ``nibabel``, ``pyvista``, ``pyacvd``,
     ``gmsh`` and the nilearn wheel (the ``mesh`` extra; nilearn itself is not imported, its bundled template
     is read from the installed distribution, no network).
     """
@@ -631,9 +632,9 @@ def brain_mesh(surface_points: int = 1400, smoothing_voxels: float = 4.0, cache_
         cached = Path(cache_dir) / f"brain_mni_{key}.vtu"
         if cached.is_file():
             return read_mesh(cached)[0]
-    surface = _uniform_surface(brain_surface(smoothing_voxels), surface_points)
-    triangles = np.asarray(surface.faces).reshape(-1, 4)[:, 1:]
-    nodes_mm, elements = _gmsh_volume(np.asarray(surface.points, float), triangles)
+    uniform = _uniform_surface(brain_surface(smoothing_voxels) if surface is None else surface, surface_points)
+    triangles = np.asarray(uniform.faces).reshape(-1, 4)[:, 1:]
+    nodes_mm, elements = _gmsh_volume(np.asarray(uniform.points, float), triangles)
     nodes = nodes_mm * 1e-3
     mesh = TetMesh(nodes, orient_positive(nodes, elements))
     if boundary_slide_m is not None:
