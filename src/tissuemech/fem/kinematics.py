@@ -99,12 +99,12 @@ def _jacobi_rotation(app, aqq, apq):
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def symmetric_eigen3(a11, a22, a33, a12, a23, a13):
+def jacobi_eigen3(a11, a22, a33, a12, a23, a13):
     """Eigenvalues and unit eigenvectors of a symmetric 3x3 matrix by cyclic Jacobi rotations (Numerical
-    Recipes 11.1): ``(l1, l2, l3, v11, v21, v31, v12, v22, v32, v13, v23, v33)`` with eigenvector ``k`` =
-    ``(v1k, v2k, v3k)``. Exact for repeated eigenvalues (no division by eigenvalue gaps); a near-identity
-    ``bbar`` converges in one or two sweeps. About 3x faster per element than LAPACK ``eigh`` through numba
-    (call and workspace overhead dominate a 3x3 problem)."""
+    Recipes 11.1), in the output order of :func:`symmetric_eigen3`. Exact for repeated eigenvalues (no division by
+    eigenvalue gaps), but ~270 ns per matrix on the 2-core VM (three sweeps of three rotations, each a chain of
+    divisions and square roots), whatever the gaps: :func:`symmetric_eigen3` calls it only for close eigenvalues.
+    About 3x faster than LAPACK ``eigh`` through numba (call and workspace overhead dominate a 3x3 problem)."""
     v11, v12, v13 = 1.0, 0.0, 0.0
     v21, v22, v23 = 0.0, 1.0, 0.0
     v31, v32, v33 = 0.0, 0.0, 1.0
@@ -145,3 +145,75 @@ def symmetric_eigen3(a11, a22, a33, a12, a23, a13):
             v22, v23 = c * v22 - s * v23, s * v22 + c * v23
             v32, v33 = c * v32 - s * v33, s * v32 + c * v33
     return a11, a22, a33, v11, v21, v31, v12, v22, v32, v13, v23, v33
+
+
+#: relative eigenvalue gap (smallest gap / spread) below which :func:`symmetric_eigen3` leaves the closed form
+#: for Jacobi rotations: the closed-form eigenvectors are accurate to ~eps/gap, and at 0.05 the decomposition
+#: reconstructs random matrices as closely as the rotations do (docs/fem_timing.md, "Ogden")
+CLOSED_FORM_MIN_GAP = 0.05
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _eigenvector_by_cross_product(d11, d22, d33, d12, d23, d13, mu):
+    """Unit eigenvector of the symmetric ``D`` for its simple eigenvalue ``mu``: the longest of the three cross
+    products of two rows of ``D - mu I`` (each is orthogonal to both rows, i.e. in the null space)."""
+    r11, r22, r33 = d11 - mu, d22 - mu, d33 - mu
+    ax, ay, az = d12 * d23 - d13 * r22, d13 * d12 - r11 * d23, r11 * r22 - d12 * d12  # row 1 x row 2
+    bx, by, bz = d12 * r33 - d13 * d23, d13 * d13 - r11 * r33, r11 * d23 - d12 * d13  # row 1 x row 3
+    cx, cy, cz = r22 * r33 - d23 * d23, d23 * d13 - d12 * r33, d12 * d23 - r22 * d13  # row 2 x row 3
+    na, nb, nc = ax * ax + ay * ay + az * az, bx * bx + by * by + bz * bz, cx * cx + cy * cy + cz * cz
+    if na >= nb and na >= nc:
+        s = 1.0 / math.sqrt(na)
+        return ax * s, ay * s, az * s
+    if nb >= nc:
+        s = 1.0 / math.sqrt(nb)
+        return bx * s, by * s, bz * s
+    s = 1.0 / math.sqrt(nc)
+    return cx * s, cy * s, cz * s
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def symmetric_eigen3(a11, a22, a33, a12, a23, a13):
+    r"""Eigenvalues and unit eigenvectors of a symmetric 3x3 matrix ``A``:
+    ``(l1, l2, l3, v11, v21, v31, v12, v22, v32, v13, v23, v33)`` with eigenvector ``k`` = ``(v1k, v2k, v3k)``.
+
+    Closed form on the scaled deviator ``D = (A - m I) / s`` (``m = tr A / 3``, ``s`` its largest entry, so that
+    a near-identity ``bbar`` loses no digits to the trace):
+
+    .. math::
+
+        J_2 = \tfrac12 \operatorname{tr} D^2, \quad J_3 = \det D, \quad
+        \cos 3\theta = \frac{J_3}{2} \Big(\frac{3}{J_2}\Big)^{3/2}, \quad
+        \mu_k = 2 \sqrt{J_2 / 3}\, \cos\big(\theta - 2\pi k / 3\big),
+
+    eigenvalues ``m + s mu_k``; the eigenvectors of the largest and the smallest ``mu`` are cross products of two
+    rows of ``D - mu I``, the second is made orthogonal to the first, and the middle one is their cross product.
+    The cross products lose accuracy as ~eps/gap, so when the smallest eigenvalue gap is below
+    :data:`CLOSED_FORM_MIN_GAP` of the spread (repeated or close eigenvalues, e.g. uniaxial or axisymmetric
+    states) it returns :func:`jacobi_eigen3` instead. ~100 ns against Jacobi's ~270 ns per matrix (2-core VM).
+    """
+    m = (a11 + a22 + a33) / 3.0
+    d11, d22, d33 = a11 - m, a22 - m, a33 - m
+    s = max(abs(d11), abs(d22), abs(d33), abs(a12), abs(a23), abs(a13))
+    if s == 0.0:
+        return a11, a22, a33, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+    inv = 1.0 / s
+    d11, d22, d33, d12, d23, d13 = d11 * inv, d22 * inv, d33 * inv, a12 * inv, a23 * inv, a13 * inv
+    j2 = 0.5 * (d11 * d11 + d22 * d22 + d33 * d33) + d12 * d12 + d23 * d23 + d13 * d13
+    j3 = d11 * (d22 * d33 - d23 * d23) - d12 * (d12 * d33 - d23 * d13) + d13 * (d12 * d23 - d22 * d13)
+    rho = math.sqrt(j2 / 3.0)
+    cos3 = min(1.0, max(-1.0, 0.5 * j3 / (rho * rho * rho)))
+    theta = math.acos(cos3) / 3.0
+    mu1 = 2.0 * rho * math.cos(theta)
+    mu3 = 2.0 * rho * math.cos(theta + 2.0 * math.pi / 3.0)
+    mu2 = -mu1 - mu3
+    if min(mu1 - mu2, mu2 - mu3) < CLOSED_FORM_MIN_GAP * (mu1 - mu3):
+        return jacobi_eigen3(a11, a22, a33, a12, a23, a13)
+    x1, y1, z1 = _eigenvector_by_cross_product(d11, d22, d33, d12, d23, d13, mu1)
+    x3, y3, z3 = _eigenvector_by_cross_product(d11, d22, d33, d12, d23, d13, mu3)
+    p = x1 * x3 + y1 * y3 + z1 * z3
+    x3, y3, z3 = x3 - p * x1, y3 - p * y1, z3 - p * z1
+    q = 1.0 / math.sqrt(x3 * x3 + y3 * y3 + z3 * z3)
+    x3, y3, z3 = x3 * q, y3 * q, z3 * q
+    x2, y2, z2 = y3 * z1 - z3 * y1, z3 * x1 - x3 * z1, x3 * y1 - y3 * x1
+    return m + s * mu1, m + s * mu2, m + s * mu3, x1, y1, z1, x2, y2, z2, x3, y3, z3
