@@ -493,6 +493,9 @@ def average_runs(
         key = (test, condition_label(condition))
         groups[key].append(run)
         conditions[key] = condition
+    if not runs:
+        raise ValueError("no run to average: the dataset has no ingested run (every export was rejected at ingest: "
+                         "see the dataset's ingest report)")
     if not groups:
         raise ValueError("no run to average: none has a test with a grid rule " f"({sorted(GRID_SPECS)})")
 

@@ -135,6 +135,11 @@ def test_no_usable_run_is_an_error():
         curves.average_runs([make_run_dataset({"force": [1.0, 2.0]}, {"test": "unknown"})])
 
 
+def test_no_ingested_run_names_the_ingest_report():
+    with pytest.raises(ValueError, match="no ingested run .*rejected at ingest"):
+        curves.average_runs([])
+
+
 def test_real_rheocompass_replicates_average_into_one_curve(shared_real, tmp_path):
     folder = shared_real / "rheocompass_cnf_hydrogel"
     files = sorted(folder.glob("HC1_stressrelaxation_20C_*.csv"))

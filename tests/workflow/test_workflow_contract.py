@@ -242,6 +242,36 @@ def test_dropping_a_dataset_folder_schedules_only_its_jobs(tiny_run):
     assert by_dataset == {SECOND: Counter({"ingest": 1, "average": 1, "fit_scope": 1, "rank": 1})}
 
 
+
+def test_a_failed_job_stops_only_its_own_dataset(tiny_run):
+    # the workflow profile sets keep-going: a dataset whose exports are all unreadable fails its own jobs, the
+    # other dataset still reaches its ranking, and Snakemake exits non-zero naming the failed job
+    good, broken = tiny_run / "raw" / SECOND, tiny_run / "raw" / "broken_gel"
+    try:
+        generate_dataset(tiny_config(SECOND, tests=("amplitude_sweep",)), 5, good)
+        generate_dataset(tiny_config("broken_gel", tests=("amplitude_sweep",)), 6, broken)
+        for export in pd.read_csv(broken / "samples.csv")["file"]:
+            (broken / export).write_bytes(b"\x00\x01 not an instrument export\n")
+        # one core, the broken dataset's chain first: without keep-going nothing of the good one would run
+        cmd = [sys.executable, "-m", "snakemake", "--cores", "1", "--until", *UNTIL,
+               "--prioritize", "results/broken_gel/ranking.csv"]
+        done = subprocess.run(cmd, cwd=tiny_run, env=_env(tiny_run), capture_output=True, text=True, timeout=600)
+        output = done.stdout + done.stderr
+        assert done.returncode != 0, output[-3000:]
+        assert re.search(r"Error in rule \w+:", output), output[-3000:]
+        assert "broken_gel" in output[output.index("Error in rule"):], output[-3000:]
+        assert "every export was rejected at ingest" in output, output[-3000:]
+        assert (tiny_run / "results" / SECOND / "ranking.csv").is_file(), output[-3000:]
+        assert not (tiny_run / "results" / "broken_gel" / "ranking.csv").exists()
+    finally:
+        for folder in (good, broken):
+            shutil.rmtree(folder, ignore_errors=True)
+        for name in (SECOND, "broken_gel"):
+            shutil.rmtree(tiny_run / "results" / name, ignore_errors=True)
+            shutil.rmtree(tiny_run / "logs" / name, ignore_errors=True)
+            shutil.rmtree(tiny_run / "benchmarks" / "runs" / name, ignore_errors=True)
+
+
 # --- every package module a stage script imports is part of that rule's rerun hash ------------------------------
 
 
