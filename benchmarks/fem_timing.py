@@ -68,7 +68,7 @@ def setup(mesh, law: str, precision: str, anp: bool):
 
 def time_cpu(model, v0, n_steps: int, threads: int | None, kernel: str = "auto") -> tuple[float, float, str]:
     """Wall and process-CPU seconds of ``n_steps`` explicit steps (after a warm-up run that also compiles)
-    and the internal-force kernel that ran (``"fused"``, ``"fused2"``, ``"vectorised"`` or ``"generic"``)."""
+    and the internal-force kernel that ran (``"fused"``, ``"vectorised"`` or ``"generic"``)."""
     dt = critical_time_step(model, 0.7)
     with numba_threads(threads):
         run_explicit(model, 3 * dt, dt_s=dt, v0_m_s=v0, n_outputs=1, track_energy=False, kernel=kernel)
@@ -114,8 +114,8 @@ def main(argv=None) -> None:
     ap.add_argument("--precisions", default="float64,float32")
     ap.add_argument("--threads", type=int, default=None, help="numba threads (default: numba's setting)")
     ap.add_argument("--kernels", default="auto",
-                    help="internal-force kernels to time side by side: auto (fused or vectorised where the law "
-                         "allows), generic, vectorised, fused (one parallel region per step), fused2; comma separated")
+                    help="internal-force kernels to time side by side: auto (vectorised where the law allows, "
+                         "else generic), generic, vectorised, fused (one parallel region per step); comma separated")
     ap.add_argument("--no-anp", action="store_true", help="plain linear tets (no average nodal pressure)")
     ap.add_argument("--updates", type=float, default=2e7, help="element updates per measurement")
     ap.add_argument("--gpu", action="store_true", help="also time tissuemech.fem.cuda on the GPU")

@@ -51,10 +51,10 @@ def parts(request, monkeypatch):
     return request.param
 
 
-@pytest.fixture(params=["fused", "fused2"])
-def kernel(request):
-    """One region per step (overlapping parts) or two (partitioned elements, then the node gather)."""
-    return request.param
+@pytest.fixture
+def kernel():
+    """The fused kernel: one parallel region per step over overlapping node parts."""
+    return "fused"
 
 
 def _assert_same_run(a, b, rtol=1e-12, energy=True):
@@ -164,12 +164,11 @@ def test_inverted_element_is_reported_by_id(anp, parts, kernel):
 
 @pytest.mark.parametrize("anp", [True, False])
 @pytest.mark.parametrize("n_parts", [2, 3, 5])
-@pytest.mark.parametrize("two_regions", [False, True])
-def test_halo_layout_covers_what_each_part_needs(anp, n_parts, two_regions):
+def test_halo_layout_covers_what_each_part_needs(anp, n_parts):
     model = _model(_material("neo_hookean"), cells=(6, 5, 4))
     el = model.kernel_mesh.elements
     nn = model.kernel_mesh.n_nodes
-    lay = fused.halo_layout(el, nn, n_parts, anp, model.kernel_mesh.nodes, two_regions)
+    lay = fused.halo_layout(el, nn, n_parts, anp, model.kernel_mesh.nodes)
     owned = np.sort(lay.onode.astype(np.int64))
     np.testing.assert_array_equal(owned, np.arange(nn))  # every node owned by exactly one part
     for p in range(n_parts):
@@ -178,10 +177,7 @@ def test_halo_layout_covers_what_each_part_needs(anp, n_parts, two_regions):
         e1 = set(lay.glob[lay.ebeg[p]:lay.emid[p]].tolist())
         assert len(ext) == len(set(ext.tolist()))  # no element twice within a part
         need1 = set(np.flatnonzero(np.isin(el, nodes_p).any(axis=1)).tolist())
-        if two_regions:
-            need1 = e1  # the part's own elements (disjoint, checked below); pressure halo as for any element set
-        else:
-            assert e1 == need1
+        assert e1 == need1
         if anp:
             n1 = np.unique(el[sorted(need1)])
             need2 = set(np.flatnonzero(np.isin(el, n1).any(axis=1)).tolist())
@@ -189,9 +185,6 @@ def test_halo_layout_covers_what_each_part_needs(anp, n_parts, two_regions):
             assert set(lay.pnode[lay.plo[p]:lay.plo[p + 1]].tolist()) == set(n1.tolist())
         else:
             assert lay.eend[p] == lay.emid[p]
-    if two_regions:  # every element computed once
-        e1_all = np.concatenate([lay.glob[lay.ebeg[p]:lay.emid[p]] for p in range(n_parts)])
-        np.testing.assert_array_equal(np.sort(e1_all), np.arange(el.shape[0]))
     # every element's states are read back from an E1 copy
     assert np.all(lay.glob[lay.first] == np.arange(el.shape[0]))
     ext_part = np.searchsorted(lay.ebeg, lay.first, side="right") - 1
@@ -203,12 +196,13 @@ def test_kernel_choice():
     # "auto" keeps the vectorised passes (the fused step is opt-in: no faster on a free machine)
     assert run_explicit(nh, 1e-4, kernel="auto").kernel == "vectorised"
     assert run_explicit(nh, 1e-4, kernel="fused").kernel == "fused"
+    with pytest.raises(ValueError, match="kernel must be one of"):
+        run_explicit(nh, 1e-4, kernel="fused2")  # the two-region variant was measured and removed
     assert run_explicit(_model(_material("qlv4_nh"), anp=False, cells=(2, 2, 2)), 1e-4).kernel == "vectorised"
     svk = _model(make_material("saint_venant_kirchhoff", {"mu": 1000.0}, poisson_ratio=0.45), cells=(2, 2, 2))
     assert run_explicit(svk, 1e-4, kernel="auto").kernel == "vectorised"
     ogden = _model(make_material("ogden1", {"mu1": 1000.0, "alpha1": -5.0}, poisson_ratio=0.45), cells=(2, 2, 2))
     assert run_explicit(ogden, 1e-4, kernel="auto").kernel == "generic"
     for model in (svk, ogden):
-        for kernel in ("fused", "fused2"):
-            with pytest.raises(ValueError, match="fused kernel needs"):
-                run_explicit(model, 1e-4, kernel=kernel)
+        with pytest.raises(ValueError, match="fused kernel needs"):
+            run_explicit(model, 1e-4, kernel="fused")

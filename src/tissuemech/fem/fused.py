@@ -24,11 +24,11 @@ here the passes are made independent between threads instead (issue 17):
   region (the join) is the only synchronisation per step: the next step's kinematics read the neighbours' new
   displacements.
 
-``kernel="fused2"`` (``two_regions``) partitions the elements instead (each computed once) and gathers in a second
-region (:func:`fused_node_pass`), to measure the duplicated work against a region. Measured on the 2-core VM
-(docs/fem_timing.md, "Issue 17, fused step"): a region costs ~1.3 us while the second core is free, so on a quiet
-machine the fused step runs at the rate of the separate passes (the duplicated work costs what the regions saved),
-faster on small meshes, and it is much less slowed down when another process takes CPU time.
+Measured on the 2-core VM (docs/fem_timing.md, "Issue 17, fused step"): a region costs ~1.3 us while the second
+core is free, so on a quiet machine the fused step runs at the rate of the separate passes (the duplicated work costs
+what the regions saved), faster on small meshes, and it is much less slowed down when another process takes CPU
+time. A variant that partitioned the elements instead (each computed once) and gathered in a second region
+(``kernel="fused2"``) measured the same and was removed (issue 17: one path per concept).
 
 The element formulas are the inline functions of :mod:`.vectorised` (one definition each); the loops repeat
 the passes' loop bodies (numba refuses an inlined helper that takes the arrays and calls other inlined helpers
@@ -63,15 +63,12 @@ _REGION = dict(parallel=True, cache=True, fastmath=FASTMATH, error_model="numpy"
 #: the arrays of :func:`fused_explicit_loop` (see :func:`fused_workspace`)
 FusedWorkspace = namedtuple("FusedWorkspace", "conn_g d9_g ebeg emid eend onode olo pnode pptr pinc plo gptr gel "
                                               "conn d9 vol0 grad pe jm23a w1a w2a sprev hstate s_relaxed fe p_flat "
-                                              "inv_vnode n_bad n_far constant i2_dependent two_regions")
+                                              "inv_vnode n_bad n_far constant i2_dependent")
 
-HaloLayout = namedtuple("HaloLayout", "n_parts two_regions glob ebeg emid eend onode olo pnode pptr pinc plo gptr "
-                                       "gel first")
+HaloLayout = namedtuple("HaloLayout", "n_parts glob ebeg emid eend onode olo pnode pptr pinc plo gptr gel first")
 HaloLayout.__doc__ = """Overlapping node partition of :func:`halo_layout` (all index arrays unsigned).
 
 n_parts : number of parts ``P``
-two_regions : the elements are partitioned (each computed once, ``E1_p`` = the elements assigned to part ``p``) and
-    the node gather runs in a second region (False: ``E1_p`` = every element incident to an owned node)
 glob : (n_ext,) global element id of every extended element
 ebeg, emid, eend : (P,) uint64; part ``p``'s extended elements are ``[ebeg, eend)``, of which ``[ebeg, emid)``
     are ``E1_p`` (stress and forces) and ``[emid, eend)`` the pressure halo
@@ -87,7 +84,7 @@ first : (n_elements,) an extended index of every global element in some ``E1_p``
 
 
 def halo_layout(elements: np.ndarray, n_nodes: int, n_parts: int, anp: bool,
-                nodes_m: np.ndarray | None = None, two_regions: bool = False) -> HaloLayout:
+                nodes_m: np.ndarray | None = None) -> HaloLayout:
     """Split the nodes into ``n_parts`` parts and collect each part's elements with the halo that its owned nodes'
     forces need (depth 1, or 2 with average nodal pressure).
 
@@ -104,9 +101,6 @@ def halo_layout(elements: np.ndarray, n_nodes: int, n_parts: int, anp: bool,
     n_parts : parts (threads)
     anp : average nodal pressure (adds the depth-2 pressure halo)
     nodes_m : (n_nodes, 3) node coordinates (m), for the coordinate cuts; None: the node order only
-    two_regions : partition the elements instead (an element belongs to the part owning most of its nodes, the
-        lower part on a tie): no element is computed twice, but the node gather needs the other parts' element
-        forces, i.e. a second region per step (``kernel="fused2"``); the pressure halo (``J`` only) remains
 
     Returns
     -------
@@ -123,7 +117,7 @@ def halo_layout(elements: np.ndarray, n_nodes: int, n_parts: int, anp: bool,
     best = None
     for key in keys:
         owner = _owner_by_key(el, n_nodes, n_parts, key)
-        layout = _halo_layout_of_owner(el, n_nodes, n_parts, anp, owner, two_regions)
+        layout = _halo_layout_of_owner(el, n_nodes, n_parts, anp, owner)
         e1 = (layout.emid - layout.ebeg).astype(float)
         halo = (layout.eend - layout.emid).astype(float)
         cost = float(np.max(e1 + 0.4 * halo))
@@ -143,12 +137,9 @@ def _owner_by_key(el: np.ndarray, n_nodes: int, n_parts: int, key: np.ndarray) -
     return owner
 
 
-def _halo_layout_of_owner(el: np.ndarray, n_nodes: int, n_parts: int, anp: bool, owner: np.ndarray,
-                          two_regions: bool = False) -> HaloLayout:
+def _halo_layout_of_owner(el: np.ndarray, n_nodes: int, n_parts: int, anp: bool, owner: np.ndarray) -> HaloLayout:
     """:class:`HaloLayout` of a given node ownership (``owner``: part of every node)."""
     ne = el.shape[0]
-    # two regions: each element in one part, the one owning most of its nodes (argmax: the lower part on a tie)
-    eown = np.argmax((owner[el][:, :, None] == np.arange(n_parts)).sum(axis=1), axis=1) if two_regions else None
     deg = np.bincount(el.ravel(), minlength=n_nodes)
     onode = np.argsort(owner, kind="stable")
     olo = np.concatenate([[0], np.cumsum(np.bincount(owner, minlength=n_parts))])
@@ -164,7 +155,7 @@ def _halo_layout_of_owner(el: np.ndarray, n_nodes: int, n_parts: int, anp: bool,
     gslot_part = np.full((ne, 4), -1, np.int64)  # extended index of (element, a) in the owner part of its node a
     start = 0
     for p in range(n_parts):
-        e1 = np.flatnonzero(eown == p) if two_regions else np.flatnonzero((owner[el] == p).any(axis=1))
+        e1 = np.flatnonzero((owner[el] == p).any(axis=1))
         if anp:
             n1 = np.zeros(n_nodes, bool)
             n1[el[e1].ravel()] = True
@@ -197,13 +188,13 @@ def _halo_layout_of_owner(el: np.ndarray, n_nodes: int, n_parts: int, anp: bool,
             pcount_parts.append(cnt)
             pinc_parts.append(pinc)
         start += g.size
-    if np.any(first < 0) or (not two_regions and np.any(gslot_part < 0)):
+    if np.any(first < 0) or np.any(gslot_part < 0):
         raise AssertionError("halo layout incomplete")
     glob = np.concatenate(glob_parts)
     # node force gather: key 4 n + a, elements ascending within a key
     key = 4 * el + np.arange(4)[None, :]
     korder = np.argsort(key.ravel(), kind="stable")
-    gel = (np.repeat(first, 4) if two_regions else gslot_part.ravel())[korder]
+    gel = gslot_part.ravel()[korder]
     gptr = np.zeros(4 * n_nodes + 1, np.int64)
     gptr[1:] = np.cumsum(np.bincount(key.ravel(), minlength=4 * n_nodes))
     if anp:
@@ -219,7 +210,7 @@ def _halo_layout_of_owner(el: np.ndarray, n_nodes: int, n_parts: int, anp: bool,
     if glob.size >= 2**32 or pinc.size >= 2**32:
         raise ValueError("the fused kernel indexes with uint32: too many elements")
     u32, u64 = np.uint32, np.uint64
-    layout = HaloLayout(n_parts, bool(two_regions), glob, np.asarray(ebeg, u64), np.asarray(emid, u64),
+    layout = HaloLayout(n_parts, glob, np.asarray(ebeg, u64), np.asarray(emid, u64),
                         np.asarray(eend, u64), onode.astype(u32), olo.astype(u64), pnode.astype(u32),
                         pptr.astype(u32), pinc.astype(u32), plo.astype(u64), gptr.astype(u32), gel.astype(u32), first)
     return layout
@@ -234,7 +225,7 @@ def fused_step(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, f
                ha0, ha1, ha2, ha3, ha4, ha5, hb0, hb1, hb2, hb3, hb4, hb5,
                hc0, hc1, hc2, hc3, hc4, hc5, hd0, hd1, hd2, hd3, hd4, hd5,
                s0a, s1a, s2a, s3a, s4a, s5a,
-               fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11, n_bad, n_far, gather):
+               fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11, n_bad, n_far):
     """One explicit step of every part (one parallel region): internal forces ``fint`` (N) of the owned nodes and
     their new displacements ``u_new`` (m) by the central difference ``u+ = a (s_ext f_ext - f) + b u + c u-`` on
     free dofs (``u+ = u`` on prescribed ones; the caller applies the boundary conditions after the region).
@@ -245,7 +236,6 @@ def fused_step(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, f
     ``p n_nodes``. ``n_bad``/``n_far`` per part: elements with ``J <= 0`` (the part then stops before its stress
     pass) and outside the branch-free ``J^(-2/3)`` range (computed again with ``cbrt``). QLV (``qlv``): the four
     Prony terms unrolled (``decay``/``gain`` ``da``...``gd``; unused terms zero), states always committed.
-    Without ``gather`` the element forces stay in ``fe*`` for :func:`fused_node_pass` (``kernel="fused2"``).
     """
     for c in prange(ebeg.size):
         e_lo, e_mid, e_hi = ebeg[c], emid[c], eend[c]
@@ -356,11 +346,10 @@ def fused_step(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, f
                         d9[8, e])
                     store_nodal_forces(e, r1x, r1y, r1z, r2x, r2y, r2z, r3x, r3y, r3z,
                                         fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11)
-            if gather:
-                # (as vectorised.node_force + _kernels._cd_node_pass) owned nodes: gather, central difference
-                for m in range(olo[c], olo[c + 1]):
-                    _gather_and_advance(onode[m], u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, free,
-                                        gptr, gel, fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11)
+            # (as vectorised.node_force + _kernels._cd_node_pass) owned nodes: gather, central difference
+            for m in range(olo[c], olo[c + 1]):
+                _gather_and_advance(onode[m], u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, free,
+                                    gptr, gel, fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11)
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
@@ -397,16 +386,6 @@ def _gather_and_advance(n, u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_
             u_new[n, i] = u[n, i]
 
 
-@njit(**_REGION)
-def fused_node_pass(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, free, onode, olo, gptr, gel,
-                    fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11):
-    """The second region of ``kernel="fused2"``: :func:`_gather_and_advance` of every part's owned nodes."""
-    for c in prange(olo.size - 1):
-        for m in range(olo[c], olo[c + 1]):
-            _gather_and_advance(onode[m], u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, free, gptr,
-                                gel, fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11)
-
-
 @njit(cache=True)
 def fused_explicit_loop(mesh, mat, laws, loads, mass, dt, n_steps, damping, out_every, u, u_old, track_energy, fz):
     """Central-difference time loop of :func:`._kernels.explicit_loop` with one parallel region per step
@@ -418,7 +397,7 @@ def fused_explicit_loop(mesh, mat, laws, loads, mass, dt, n_steps, damping, out_
     (bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, n_groups, free, hist_time, hist_vals, fext_ref,
      contact_kind, cparams, contact_nodes) = loads
     (conn_g, d9_g, ebeg, emid, eend, onode, olo, pnode, pptr, pinc, plo, gptr, gel, conn, d9, vol0, grad, pe, jm23a,
-     w1a, w2a, sp, hs, srel, fe, p_flat, inv_vnode, n_bad, n_far, constant, i2_dependent, two_regions) = fz
+     w1a, w2a, sp, hs, srel, fe, p_flat, inv_vnode, n_bad, n_far, constant, i2_dependent) = fz
     nn = X.shape[0]
     n_out = n_steps // out_every + 2
     out_t = np.zeros(n_out)
@@ -462,15 +441,11 @@ def fused_explicit_loop(mesh, mat, laws, loads, mass, dt, n_steps, damping, out_
                    hs[2, 0], hs[2, 1], hs[2, 2], hs[2, 3], hs[2, 4], hs[2, 5],
                    hs[3, 0], hs[3, 1], hs[3, 2], hs[3, 3], hs[3, 4], hs[3, 5],
                    srel[0], srel[1], srel[2], srel[3], srel[4], srel[5],
-                   fe[0], fe[1], fe[2], fe[3], fe[4], fe[5], fe[6], fe[7], fe[8], fe[9], fe[10], fe[11], n_bad, n_far,
-                   not two_regions)
+                   fe[0], fe[1], fe[2], fe[3], fe[4], fe[5], fe[6], fe[7], fe[8], fe[9], fe[10], fe[11], n_bad, n_far)
         if n_bad.sum() > 0:
             bad_e = first_inverted_element_of(u, conn_g, d9_g, vol0_g.size)
             return STATUS_INVERTED, bad_e, step, u, u_old, out_t[:k_out], out_force[:k_out], \
                 out_torque[:k_out], out_contact[:k_out], out_ke[:k_out], out_energy[:k_out]
-        if two_regions:
-            fused_node_pass(u, u_old, u_new, fint, fext_ref, s_ext, coef_a, coef_b, coef_c, free, onode, olo, gptr,
-                            gel, fe[0], fe[1], fe[2], fe[3], fe[4], fe[5], fe[6], fe[7], fe[8], fe[9], fe[10], fe[11])
         history_values(t + dt, hist_time, hist_vals, hv)
         if step % out_every == 0 or step == n_steps:
             if not record_explicit_output(k_out, t, u, u_old, fint, mass, dt, energy, X, bc_nodes, bc_group,
@@ -516,7 +491,7 @@ def fused_workspace(model, layout: HaloLayout, law, h_state: np.ndarray, s_prev:
         np.zeros(n_ext, dt), np.zeros(n_ext), np.full(n_ext, float(w1)), np.full(n_ext, float(w2)), sp, hs,
         np.zeros((6, ne_q), dt), np.zeros((12, n_ext), dt), np.zeros(layout.n_parts * nn), 1.0 / model.vnode,
         np.zeros(layout.n_parts, np.int64), np.zeros(layout.n_parts, np.int64), bool(constant),
-        bool(model.material.kind == KIND_INVARIANT), layout.two_regions)
+        bool(model.material.kind == KIND_INVARIANT))
     return fz
 
 
@@ -550,25 +525,24 @@ def renumbered_by_part(model, layout: HaloLayout):
         free=np.ascontiguousarray(model.free[perm]), fext_ref=np.ascontiguousarray(model.fext_ref[perm]),
         bc_nodes=inv[model.bc_nodes], contact_nodes=inv[model.contact_nodes])
     owner = np.repeat(np.arange(layout.n_parts), np.diff(layout.olo.astype(np.int64)))
-    return new, _halo_layout_of_owner(el.astype(np.int64), perm.size, layout.n_parts, model.use_anp, owner,
-                                      layout.two_regions)
+    return new, _halo_layout_of_owner(el.astype(np.int64), perm.size, layout.n_parts, model.use_anp, owner)
 
 
 #: part-renumbered models and their layouts, by ``(id(model), parts)`` (a weak reference checks the model)
 _LAYOUTS: dict = {}
 
 
-def model_for_parts(model, n_parts: int, two_regions: bool = False):
+def model_for_parts(model, n_parts: int):
     """``(part_model, layout)``: :func:`renumbered_by_part` of ``model`` on the :func:`halo_layout` of ``n_parts``
     parts, kept for the model's lifetime (building it takes ~0.1 s for a 10k-tet model, ~1 s for 1e5 tets)."""
     import weakref
 
-    key = (id(model), int(n_parts), bool(two_regions))
+    key = (id(model), int(n_parts))
     hit = _LAYOUTS.get(key)
     if hit is not None and hit[0]() is model:
         return hit[1], hit[2]
     layout = halo_layout(model.kernel_mesh.elements, model.kernel_mesh.n_nodes, n_parts, model.use_anp,
-                         model.kernel_mesh.nodes, two_regions)
+                         model.kernel_mesh.nodes)
     part_model, layout = renumbered_by_part(model, layout)
     for k in [k for k, v in _LAYOUTS.items() if v[0]() is None]:
         del _LAYOUTS[k]

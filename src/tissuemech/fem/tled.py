@@ -445,7 +445,7 @@ def _caller_state(model: TLEDModel, h_state, s_prev, w_prev) -> tuple:
     return tuple(out)
 
 
-KERNELS = ("auto", "fused", "fused2", "vectorised", "generic")
+KERNELS = ("auto", "fused", "vectorised", "generic")
 
 #: above this many elements ``kernel="auto"`` keeps float64 runs on the generic kernel: the vectorised passes
 #: move ~3x the bytes per element (stored F, element forces), which costs more than vectorisation gains once
@@ -472,14 +472,14 @@ def vectorised_law(material: Material) -> tuple[bool, bool, float, float] | None
 
 def _fused_law(model: TLEDModel, kernel: str) -> tuple[bool, bool, float, float] | None:
     """The :func:`vectorised_law` of an explicit run on the fused one-region-per-step kernel (:mod:`.fused`), or
-    None when the run takes another kernel. ``kernel="fused"`` / ``"fused2"`` require an invariant law (SVK and
+    None when the run takes another kernel. ``kernel="fused"`` requires an invariant law (SVK and
     the generic kernel's laws raise). ``"auto"`` never takes it: on a free machine it measured as fast as the
     vectorised passes (a parallel region costs ~1.3 us of a ~200 us brain step) and it costs a compile of its
     own (~35 CPU s); it holds up better than them with 2 threads on a loaded machine (docs/fem_timing.md,
     "Issue 17, fused step"), where ``n_threads="auto"`` already runs one thread."""
     if kernel not in KERNELS:
         raise ValueError(f"kernel must be one of {KERNELS}, not {kernel!r}")
-    if kernel not in ("fused", "fused2"):
+    if kernel != "fused":
         return None
     law = vectorised_law(model.material)
     if law is None or law[0]:
@@ -674,9 +674,8 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
         without up to four QLV terms, except float64 meshes above :data:`AUTO_VECTORISED_MAX_FLOAT64_ELEMENTS`
         elements; the generic kernel for stretch-based laws and beyond-QLV), ``"fused"`` (opt-in,
         :mod:`.fused`: the vectorised passes of an invariant law
-        in one parallel region per step over overlapping node parts, one part per thread), ``"fused2"`` (the
-        same with the elements partitioned, each computed once, and the node update in a second region),
-        ``"vectorised"`` or ``"generic"``; all agree to rounding
+        in one parallel region per step over overlapping node parts, one part per thread), ``"vectorised"`` or
+        ``"generic"``; all agree to rounding
     """
     dt = critical_time_step(model, safety) if dt_s is None else float(dt_s)
     n_steps = max(1, int(np.ceil(t_end_s / dt - 1e-9)))
@@ -685,7 +684,7 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
     threads = resolve_threads(model, n_threads)
     if law is not None:
         # the same problem with the kernel nodes numbered part after part (the caller's numbering is unchanged)
-        model, layout = fused.model_for_parts(model, _fused_parts(threads), kernel == "fused2")
+        model, layout = fused.model_for_parts(model, _fused_parts(threads))
     u = np.zeros((model.mesh.n_nodes, 3), model.dtype) if u0_m is None else \
         np.array(model.to_kernel_nodes(u0_m), dtype=model.dtype)
     u_old = u.copy() if v0_m_s is None else (u - dt * model.to_kernel_nodes(v0_m_s)).astype(model.dtype)
@@ -697,7 +696,7 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
             res = fused.fused_explicit_loop(*_kernel_arguments(model), model.mass, dt, n_steps, damping_1_s,
                                             out_every, u, u_old, bool(track_energy), fz)
             fused.fused_state_back(fz, layout, h_state, s_prev)
-            ran = "fused2" if layout.two_regions else "fused"
+            ran = "fused"
         else:
             vec, fbuf, pbuf = _vector_setup(model, kernel, h_state, s_prev)
             res = explicit_loop(*_kernel_arguments(model), model.mass, h_state, s_prev, w_prev, dt, n_steps,
@@ -726,7 +725,7 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
         element altitude)
     n_threads : numba threads for this run (None: numba's current setting; ``"auto"``: see :func:`run_explicit`)
     kernel : ``"auto"``, ``"vectorised"`` or ``"generic"`` (see :func:`run_explicit`; dynamic relaxation has no
-        fused loop: ``"fused"``/``"fused2"`` run the vectorised passes)
+        fused loop: ``"fused"`` runs the vectorised passes)
     """
     times = np.atleast_1d(np.asarray(times_s, float))
     if np.any(np.diff(times) < 0):
@@ -736,7 +735,7 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
         np.array(model.to_kernel_nodes(u0_m), dtype=model.dtype)
     h_state, s_prev, w_prev = _state(model, state)
     # dynamic relaxation has no fused loop: "fused" runs the vectorised passes
-    vec, fbuf, pbuf = _vector_setup(model, "vectorised" if kernel.startswith("fused") else kernel, h_state, s_prev)
+    vec, fbuf, pbuf = _vector_setup(model, "vectorised" if kernel == "fused" else kernel, h_state, s_prev)
     with numba_threads(resolve_threads(model, n_threads)):
         res = dynamic_relaxation_loop(*_kernel_arguments(model), model.dr_mass, h_state, s_prev, w_prev, times, tol,
                                       min_iter, max_iter, u, fbuf, pbuf, vec)
