@@ -23,10 +23,12 @@ import tempfile
 import time
 from pathlib import Path
 
-os.environ.setdefault("NUMBA_CACHE_DIR", str(Path(__file__).resolve().parents[1] / ".numba_cache"))
-os.environ.setdefault("MPLBACKEND", "Agg")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+from tissuemech.numba_cache import use_source_keyed_cache  # noqa: E402 (before anything imports numba)
+
+use_source_keyed_cache(Path(__file__).resolve().parents[1] / ".numba_cache")
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+os.environ.setdefault("MPLBACKEND", "Agg")
 
 import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402

@@ -6,7 +6,12 @@ from pathlib import Path
 
 import pytest
 
+from tissuemech.numba_cache import use_source_keyed_cache
+
 ROOT = Path(__file__).resolve().parents[1]
+# a plain pytest run (not make test) gets a cache folder named after the kernel sources too: numba's own __pycache__
+# cache would serve the TLED loops compiled from older material laws or kinematics (tissuemech.numba_cache)
+use_source_keyed_cache(ROOT / ".numba_cache")
 SHARED_REAL = Path(os.environ.get("TISSUEMECH_SHARED_REAL", ROOT.parent / "shared" / "data" / "real"))
 
 

@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 from tissuemech.fem.mesh import (block_mesh, boundary_faces, cylinder_mesh, element_volumes, graded_layers,
-                                 graded_ring_radii, mesh_quality, read_mesh, reorder_for_locality, write_mesh)
+                                 graded_ring_radii, mesh_quality, read_mesh, reorder_for_locality, subdivide,
+                                 write_mesh)
 
 
 def _face_area(nodes, faces):
@@ -18,6 +19,26 @@ def test_block_is_conforming_and_exact():
     assert q["min_volume_m3"] > 0
     # conforming: the boundary faces are exactly the box surface
     assert _face_area(mesh.nodes, boundary_faces(mesh.elements)) == pytest.approx(2 * (6 + 8 + 12) * 1e-6, rel=1e-12)
+
+
+def test_subdivision_is_conforming_and_keeps_the_shape():
+    parent = cylinder_mesh(12.5e-3, 2e-3, n_rings=4, n_layers=2)
+    fine = subdivide(parent)
+    q0, q1 = mesh_quality(parent), mesh_quality(fine)
+    assert q1["n_elements"] == 8 * q0["n_elements"]
+    assert q1["volume_m3"] == pytest.approx(q0["volume_m3"], rel=1e-12)
+    assert q1["min_volume_m3"] > 0
+    # conforming: each boundary triangle is cut into four, and the surface area is unchanged
+    assert boundary_faces(fine.elements).shape[0] == 4 * boundary_faces(parent.elements).shape[0]
+    assert _face_area(fine.nodes, boundary_faces(fine.elements)) == pytest.approx(
+        _face_area(parent.nodes, boundary_faces(parent.elements)), rel=1e-12)
+    # one midpoint per edge: nodes = parent nodes + parent edges
+    edges = np.unique(np.sort(parent.elements[:, [[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]]], axis=2).reshape(-1, 2),
+                      axis=0)
+    assert fine.n_nodes == parent.n_nodes + edges.shape[0]
+    # the shortest-diagonal split keeps the shape: altitudes halve, within a fixed factor
+    assert q1["min_altitude_m"] > 0.4 * q0["min_altitude_m"]
+    assert q1["max_aspect"] < 1.5 * q0["max_aspect"]
 
 
 def test_rheometer_cylinder_quality_and_conformity():

@@ -9,6 +9,7 @@ calls the loops. numba's cache does not see changes of inlined code in another f
 """
 from __future__ import annotations
 
+import math
 from collections import namedtuple
 
 import numpy as np
@@ -304,22 +305,29 @@ def history_values(t, hist_time, hist_vals, out):
         out[r] = np.interp(t, hist_time, hist_vals[r])
 
 
+@njit(cache=True, inline="always")
+def prescribed_displacement(s, theta, rotate, dir_x, dir_y, dir_z, x, y, center_x, center_y):
+    """Prescribed displacement ``s d + [R_z(theta) (X - c) - (X - c)]`` of a node at ``(x, y)`` (the rotation term
+    only when ``rotate``); shared by :func:`apply_bcs` and the CUDA node phase (:mod:`.cuda`)."""
+    ux = s * dir_x
+    uy = s * dir_y
+    uz = s * dir_z
+    if rotate:
+        ct, st = math.cos(theta), math.sin(theta)
+        rx, ry = x - center_x, y - center_y
+        ux += ct * rx - st * ry - rx
+        uy += st * rx + ct * ry - ry
+    return ux, uy, uz
+
+
 @njit(cache=True)
 def apply_bcs(u, X, bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, hv, n_groups):
     """Set prescribed dofs: ``u = s_g dir`` (+ rotation about z by angle theta_g around the group centre)."""
     for k in range(bc_nodes.size):
         n = bc_nodes[k]
         g = bc_group[k]
-        s = hv[g]
-        ux = s * bc_dir[k, 0]
-        uy = s * bc_dir[k, 1]
-        uz = s * bc_dir[k, 2]
-        if bc_rotate[k]:
-            th = hv[n_groups + g]
-            ct, st = np.cos(th), np.sin(th)
-            rx, ry = X[n, 0] - rot_center[g, 0], X[n, 1] - rot_center[g, 1]
-            ux += ct * rx - st * ry - rx
-            uy += st * rx + ct * ry - ry
+        ux, uy, uz = prescribed_displacement(hv[g], hv[n_groups + g], bc_rotate[k], bc_dir[k, 0], bc_dir[k, 1],
+                                             bc_dir[k, 2], X[n, 0], X[n, 1], rot_center[g, 0], rot_center[g, 1])
         if bc_mask[k, 0]:
             u[n, 0] = ux
         if bc_mask[k, 1]:
@@ -345,6 +353,32 @@ def group_reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_out, torqu
         torque_out[g] += x * fy - y * fx
 
 
+@njit(cache=True, inline="always")
+def rigid_contact_move(px, py, pz, contact_kind, cparams):
+    """``(dx, dy, dz, touching)``: the frictionless projection of a node at ``p`` (relative to the rigid body's
+    current centre) onto the surface of a rigid sphere (kind 1), infinite cylinder (kind 2) or flat cylindrical
+    punch (kind 3), zero when the node is outside (see :func:`contact_project`); shared with the CUDA node phase."""
+    r = cparams[6]
+    if contact_kind == 3:
+        dx, dy, dz = cparams[3], cparams[4], cparams[5]
+        ahead = px * dx + py * dy + pz * dz
+        qx, qy, qz = px - ahead * dx, py - ahead * dy, pz - ahead * dz
+        if ahead < 0.0 and qx * qx + qy * qy + qz * qz <= r * r * (1.0 + 1e-9):
+            return -ahead * dx, -ahead * dy, -ahead * dz, True
+        return 0.0, 0.0, 0.0, False
+    if contact_kind == 2:
+        ax, ay, az = cparams[7], cparams[8], cparams[9]
+        along = px * ax + py * ay + pz * az
+        px -= along * ax
+        py -= along * ay
+        pz -= along * az
+    d = math.sqrt(px * px + py * py + pz * pz)
+    if d < r and d > 0.0:
+        fac = (r - d) / d
+        return fac * px, fac * py, fac * pz, True
+    return 0.0, 0.0, 0.0, False
+
+
 @njit(cache=True)
 def contact_project(u, X, contact_nodes, in_contact, contact_kind, cparams, s_contact):
     """Project nodes inside a rigid sphere (kind 1), infinite cylinder (kind 2) or flat cylindrical punch
@@ -359,42 +393,16 @@ def contact_project(u, X, contact_nodes, in_contact, contact_kind, cparams, s_co
     cx = cparams[0] + s_contact * cparams[3]
     cy = cparams[1] + s_contact * cparams[4]
     cz = cparams[2] + s_contact * cparams[5]
-    r = cparams[6]
-    ax, ay, az = cparams[7], cparams[8], cparams[9]
     count = 0
     for k in range(contact_nodes.size):
         n = contact_nodes[k]
-        px = X[n, 0] + u[n, 0] - cx
-        py = X[n, 1] + u[n, 1] - cy
-        pz = X[n, 2] + u[n, 2] - cz
-        if contact_kind == 3:
-            dx, dy, dz = cparams[3], cparams[4], cparams[5]
-            ahead = px * dx + py * dy + pz * dz
-            qx, qy, qz = px - ahead * dx, py - ahead * dy, pz - ahead * dz
-            if ahead < 0.0 and qx * qx + qy * qy + qz * qz <= r * r * (1.0 + 1e-9):
-                u[n, 0] -= ahead * dx
-                u[n, 1] -= ahead * dy
-                u[n, 2] -= ahead * dz
-                in_contact[k] = 1
-                count += 1
-            else:
-                in_contact[k] = 0
-            continue
-        if contact_kind == 2:
-            along = px * ax + py * ay + pz * az
-            px -= along * ax
-            py -= along * ay
-            pz -= along * az
-        d = np.sqrt(px * px + py * py + pz * pz)
-        if d < r and d > 0.0:
-            fac = (r - d) / d
-            u[n, 0] += fac * px
-            u[n, 1] += fac * py
-            u[n, 2] += fac * pz
-            in_contact[k] = 1
-            count += 1
-        else:
-            in_contact[k] = 0
+        dx, dy, dz, touching = rigid_contact_move(X[n, 0] + u[n, 0] - cx, X[n, 1] + u[n, 1] - cy,
+                                                  X[n, 2] + u[n, 2] - cz, contact_kind, cparams)
+        u[n, 0] += dx
+        u[n, 1] += dy
+        u[n, 2] += dz
+        in_contact[k] = 1 if touching else 0
+        count += 1 if touching else 0
     return count
 
 
@@ -596,13 +604,21 @@ def explicit_loop(mesh, mat, laws, loads, mass, h_state, s_prev, w_prev, dt, n_s
         out_contact[:k_out], out_ke[:k_out], out_energy[:k_out]
 
 
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def dynamic_relaxation_dof(u, u_old, beta, alpha_over_mass, f_ext, f_int):
+    """Next iterate of one free dof in dynamic relaxation: ``u + beta (u - u_old) + alpha/m (f_ext - f_int)``
+    (shared by :func:`_dr_node_pass` and the CUDA relaxation kernel)."""
+    return u + beta * (u - u_old) + alpha_over_mass * (f_ext - f_int)
+
+
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _dr_node_pass(fint, fext_ref, s_ext, u, u_old, u_new, inv_mass, alpha, beta, free):
     for n in prange(u.shape[0]):
         am = alpha * inv_mass[n]
         for i in range(3):
             if free[n, i]:
-                u_new[n, i] = u[n, i] + beta * (u[n, i] - u_old[n, i]) + am * (s_ext * fext_ref[n, i] - fint[n, i])
+                u_new[n, i] = dynamic_relaxation_dof(u[n, i], u_old[n, i], beta, am, s_ext * fext_ref[n, i],
+                                                     fint[n, i])
             else:
                 u_new[n, i] = u[n, i]
 

@@ -296,6 +296,43 @@ _KUHN_TETS = np.array(
 )
 
 
+#: the octahedron left inside a tet after cutting off its four corners, as (diagonal, equator in cyclic order) over the
+#: edge midpoints m01 m02 m03 m12 m13 m23 (indices 0-5): one entry per choice of diagonal
+_OCTAHEDRON_SPLITS = (((0, 5), (1, 2, 4, 3)), ((1, 4), (0, 2, 5, 3)), ((2, 3), (0, 1, 5, 4)))
+
+
+def subdivide(mesh: TetMesh) -> TetMesh:
+    """Uniform refinement: every tet into eight (Bey 1995), through the midpoints of its edges.
+
+    Four children are the corners of the parent; the inner octahedron is split into four along its shortest diagonal,
+    which keeps the children's shape within a fixed factor of the parent's. Shared edges get one midpoint, so the
+    refined mesh is conforming; the element count grows 8x and the smallest altitude halves (or a little less: the
+    octahedron's children). Node order: the parent's nodes first, then the midpoints; call
+    :func:`reorder_for_locality` for the solver.
+    """
+    el = np.asarray(mesh.elements, np.int64)
+    pairs = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
+    edges = np.sort(el[:, pairs], axis=2).reshape(-1, 2)
+    unique, inverse = np.unique(edges, axis=0, return_inverse=True)
+    nn = mesh.n_nodes
+    nodes = np.vstack([mesh.nodes, 0.5 * (mesh.nodes[unique[:, 0]] + mesh.nodes[unique[:, 1]])])
+    mid = nn + inverse.reshape(-1, 6)  # m01 m02 m03 m12 m13 m23 of every element
+    corners = [np.column_stack([el[:, 0], mid[:, 0], mid[:, 1], mid[:, 2]]),
+               np.column_stack([mid[:, 0], el[:, 1], mid[:, 3], mid[:, 4]]),
+               np.column_stack([mid[:, 1], mid[:, 3], el[:, 2], mid[:, 5]]),
+               np.column_stack([mid[:, 2], mid[:, 4], mid[:, 5], el[:, 3]])]
+    lengths = np.stack([np.linalg.norm(nodes[mid[:, a]] - nodes[mid[:, b]], axis=1)
+                        for (a, b), _ in _OCTAHEDRON_SPLITS], axis=1)
+    choice = np.argmin(lengths, axis=1)
+    inner = np.empty((el.shape[0], 4, 4), np.int64)
+    for c, ((a, b), ring) in enumerate(_OCTAHEDRON_SPLITS):
+        rows = choice == c
+        for i in range(4):
+            inner[rows, i] = np.column_stack([mid[rows, a], mid[rows, b], mid[rows, ring[i]], mid[rows, ring[(i + 1) % 4]]])
+    children = np.concatenate([np.stack(corners, axis=1), inner], axis=1).reshape(-1, 4)
+    return TetMesh(nodes, orient_positive(nodes, children))
+
+
 def block_mesh_from_coordinates(x_m: np.ndarray, y_m: np.ndarray, z_m: np.ndarray) -> TetMesh:
     """Tetrahedral mesh of the box spanned by strictly increasing coordinate lines (graded allowed).
 

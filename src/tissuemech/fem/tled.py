@@ -523,14 +523,7 @@ def _vector_setup(model: TLEDModel, kernel: str, h_state, s_prev):
     dt = model.dtype
     nchunk = model.chunk_lo.size - 1
     if enabled:
-        if 12 * ne >= 2**32:
-            raise ValueError("the vectorised kernel indexes element forces with uint32: at most 357M elements")
-        flat = el.ravel()
-        order = np.argsort(flat, kind="stable")
-        node_ptr = np.zeros(nn + 1, np.uint32)
-        node_ptr[1:] = np.cumsum(np.bincount(flat, minlength=nn))
-        inc_elem = (order // 4).astype(np.uint32)
-        inc_slot = (3 * (order % 4) * ne + order // 4).astype(np.uint32)
+        node_ptr, inc_elem, inc_slot = vectorised.node_incidence(el, nn)
         conn = np.ascontiguousarray(el.T, dtype=np.uint32)
         d9 = np.ascontiguousarray(model.dndx[:, 3:].T)
         inv_vnode = 1.0 / model.vnode

@@ -175,26 +175,34 @@ def exact_far_jm23(grad_u, jm23a, n_elements):
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
-def store_law_derivatives(e, f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a, w1fn, w2fn, params,
-                          i2_dependent, w1a, w2a):
-    """``w1a[e], w2a[e]`` = ``dW/dI1``, ``dW/dI2`` of element ``e`` at its isochoric invariants
-    ``I1bar = J^-2/3 tr b``, ``I2bar = (I1bar^2 - J^-4/3 tr b^2) / 2`` (stored ``F - I`` and ``J^-2/3``), through
-    the law's functions; ``i2_dependent`` False: ``W(I1bar)`` only, ``w2a`` untouched. Shared by
-    :func:`invariant_law_pass` and the fused step (:mod:`.fused`); inlined (as a plain call it made the loop
-    ~30 % slower for a law evaluated through its functions: LP2, 10k-tet cube, 1 thread)."""
-    f11, f12, f13 = 1.0 + f11a[e], f12a[e], f13a[e]
-    f21, f22, f23 = f21a[e], 1.0 + f22a[e], f23a[e]
-    f31, f32, f33 = f31a[e], f32a[e], 1.0 + f33a[e]
-    b11, b22, b33, b12, b23, b13 = left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-    jm23 = jm23a[e]
+def law_derivatives(w1fn, w2fn, params, i2_dependent, jm23, b11, b22, b33, b12, b23, b13):
+    """``(dW/dI1, dW/dI2)`` of an invariant law at the isochoric invariants ``I1bar = J^-2/3 tr b``,
+    ``I2bar = (I1bar^2 - J^-4/3 tr b^2) / 2`` of ``b = F F^T``, through the law's functions (C pointers on the CPU,
+    the jitted functions themselves in :mod:`.cuda`); ``i2_dependent`` False: ``W(I1bar)`` only, ``dW/dI2 = 0``
+    without a call."""
     i1 = jm23 * (b11 + b22 + b33)
     if i2_dependent:
         q = b11 * b11 + b22 * b22 + b33 * b33 + 2.0 * (b12 * b12 + b23 * b23 + b13 * b13)
         i2 = 0.5 * (i1 * i1 - jm23 * jm23 * q)
-        w1a[e] = w1fn(params, i1, i2)
-        w2a[e] = w2fn(params, i1, i2)
-    else:
-        w1a[e] = w1fn(params, i1, 3.0)
+        return w1fn(params, i1, i2), w2fn(params, i1, i2)
+    return w1fn(params, i1, 3.0), 0.0
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def store_law_derivatives(e, f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a, w1fn, w2fn, params,
+                          i2_dependent, w1a, w2a):
+    """``w1a[e], w2a[e]`` = :func:`law_derivatives` of element ``e`` (stored ``F - I`` and ``J^-2/3``);
+    ``i2_dependent`` False: ``w2a`` untouched. Shared by :func:`invariant_law_pass` and the fused step
+    (:mod:`.fused`); inlined (as a plain call it made the loop ~30 % slower for a law evaluated through its
+    functions: LP2, 10k-tet cube, 1 thread)."""
+    f11, f12, f13 = 1.0 + f11a[e], f12a[e], f13a[e]
+    f21, f22, f23 = f21a[e], 1.0 + f22a[e], f23a[e]
+    f31, f32, f33 = f31a[e], f32a[e], 1.0 + f33a[e]
+    b11, b22, b33, b12, b23, b13 = left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
+    w1, w2 = law_derivatives(w1fn, w2fn, params, i2_dependent, jm23a[e], b11, b22, b33, b12, b23, b13)
+    w1a[e] = w1
+    if i2_dependent:
+        w2a[e] = w2
 
 
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
@@ -209,23 +217,29 @@ def invariant_law_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm2
                                   i2_dependent, w1a, w2a)
 
 
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def nodal_pressure(pe, node_ptr, inc_elem, inv_vnode, n):
+    """Average nodal pressure of node ``n``: ``sum_e kappa (J_e - 1) V0_e / sum_e V0_e`` over its incident elements
+    (two partial sums, as in :func:`node_force`; shared with :mod:`.cuda`)."""
+    one, two = np.uint64(1), np.uint64(2)
+    k, end = np.uint64(node_ptr[n]), np.uint64(node_ptr[n + 1])
+    even = 0.0
+    odd = 0.0
+    while k + one < end:
+        even += pe[inc_elem[k]]
+        odd += pe[inc_elem[k + one]]
+        k += two
+    if k < end:
+        even += pe[inc_elem[k]]
+    return (even + odd) * inv_vnode[n]
+
+
 @njit(**_PASS)
 def nodal_pressure_pass(pe, node_ptr, inc_elem, inv_vnode, p_node, lo):
-    """Average nodal pressure ``p_n = sum_e kappa (J_e - 1) V0_e / sum_e V0_e`` over the incident elements
-    (two partial sums, as in :func:`node_force`)."""
-    one, two = np.uint64(1), np.uint64(2)
+    """:func:`nodal_pressure` of every node into ``p_node`` (ANP)."""
     for c in prange(lo.size - 1):
         for n in range(lo[c], lo[c + 1]):
-            k, end = np.uint64(node_ptr[n]), np.uint64(node_ptr[n + 1])
-            even = 0.0
-            odd = 0.0
-            while k + one < end:
-                even += pe[inc_elem[k]]
-                odd += pe[inc_elem[k + one]]
-                k += two
-            if k < end:
-                even += pe[inc_elem[k]]
-            p_node[n] = (even + odd) * inv_vnode[n]
+            p_node[n] = nodal_pressure(pe, node_ptr, inc_elem, inv_vnode, n)
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
@@ -440,6 +454,23 @@ def first_inverted_element_of(u, conn, d9, n_elements):
         if not J > 0.0:
             return np.int64(e)
     return np.int64(-1)
+
+
+def node_incidence(elements: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Node -> incident element CSR of the element-force layout (shared by the CPU passes and :mod:`.cuda`).
+
+    Returns ``node_ptr`` (n_nodes + 1), ``inc_elem`` (element of each incidence, elements ascending per node) and
+    ``inc_slot = 3 a n_elements + e`` (the x force of local node ``a`` of element ``e`` in the flattened
+    ``(12, n_elements)`` element-force array), all ``uint32``.
+    """
+    ne = elements.shape[0]
+    if 12 * ne >= 2**32:
+        raise ValueError("the element-force layout indexes with uint32: at most 357M elements")
+    flat = np.asarray(elements).ravel()
+    order = np.argsort(flat, kind="stable")
+    node_ptr = np.zeros(n_nodes + 1, np.uint32)
+    node_ptr[1:] = np.cumsum(np.bincount(flat, minlength=n_nodes))
+    return node_ptr, (order // 4).astype(np.uint32), (3 * (order % 4) * ne + order // 4).astype(np.uint32)
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")

@@ -1,0 +1,34 @@
+"""A numba cache folder keyed by the numba-compiled sources of the package.
+
+numba keys a cached function on its own source file only, while the TLED loops of ``fem/_kernels.py`` compile in
+functions of other modules (the material laws, ``fem.kinematics.symmetric_eigen3``, ``models``): one cache folder
+kept across edits serves a kernel compiled from older sources of those modules. The Makefile names its
+``NUMBA_CACHE_DIR`` after the same sources (``cksum``); the test suite and the benchmarks, which also run outside
+``make``, call :func:`use_source_keyed_cache`. This module imports nothing that imports numba, so it can run before
+numba reads its configuration.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+#: the package folders whose modules the compiled kernels reach
+KERNEL_SOURCE_FOLDERS = ("fem", "models")
+
+
+def source_keyed_cache_dir(base: str | Path) -> Path:
+    """``base / "src-<sha1 of tissuemech/fem/*.py and tissuemech/models/*.py>"`` (16 hex digits)."""
+    package = Path(__file__).resolve().parent
+    digest = hashlib.sha1()
+    for folder in KERNEL_SOURCE_FOLDERS:
+        for source in sorted((package / folder).glob("*.py")):
+            digest.update(f"{folder}/{source.name}".encode())
+            digest.update(source.read_bytes())
+    return Path(base) / f"src-{digest.hexdigest()[:16]}"
+
+
+def use_source_keyed_cache(base: str | Path) -> None:
+    """Set ``NUMBA_CACHE_DIR`` to :func:`source_keyed_cache_dir` of ``base``, unless it is set (e.g. by the Makefile).
+    Call it before anything imports numba."""
+    os.environ.setdefault("NUMBA_CACHE_DIR", str(source_keyed_cache_dir(base)))
