@@ -484,7 +484,7 @@ def _kernels(w1, w2, branch_w1, kind: int, use_anp: bool, n_terms: int, beyond: 
         if t == 0:
             out[b, 0], out[b, 1], out[b, 2], out[b, 3] = fx, fy, fz, tq
 
-    limited = cuda.jit(max_registers=max_registers) if max_registers else cuda.jit
+    limited = cuda.jit(max_registers=max_registers) if max_registers and not python else cuda.jit
     return {"explicit_steps": limited(explicit_steps), "evaluate_forces": limited(evaluate_forces),
             "relaxation_start": cuda.jit(relaxation_start), "relaxation_iterations": limited(relaxation_iterations),
             "outputs": cuda.jit(outputs)}
@@ -644,10 +644,15 @@ class DeviceProblem:
                 from numba import typeof
 
                 kern = self.kernels[name]
-                compiled = kern.compile(tuple(typeof(a) for a in args))
+                signature = tuple(typeof(a) for a in args)
+                compiled = kern.compile(signature) or kern.overloads[signature]
                 mesh = self.model.kernel_mesh
                 needed = (max(mesh.n_elements, mesh.n_nodes) + self.threads - 1) // self.threads
-                blocks = min(needed, compiled.max_cooperative_grid_blocks(self.threads))
+                try:
+                    resident = compiled.max_cooperative_grid_blocks(self.threads)
+                except AttributeError:  # a numba-cuda without the occupancy query: one block per multiprocessor
+                    resident = cuda.get_current_device().MULTIPROCESSOR_COUNT
+                blocks = min(needed, resident)
             self._launch_cache[name] = max(1, int(blocks))
         return self._launch_cache[name]
 
