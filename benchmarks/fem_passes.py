@@ -28,12 +28,12 @@ from fem_timing import cube_with_n_elements, machine, setup, time_cpu  # noqa: E
 
 from tissuemech.fem import vectorised  # noqa: E402
 # the vectorised workspace is internal to the solver; a benchmark of its passes builds it the way run_explicit does
-from tissuemech.fem.tled import _state, _vector_setup, numba_threads  # noqa: E402
+from tissuemech.fem.tled import _vector_setup, initial_states, numba_threads  # noqa: E402
 
 
 def pass_times(model, calls: int, repeats: int) -> dict[str, float]:
     """Median microseconds per call of each pass of the NH + ANP step at a random small displacement."""
-    h_state, s_prev, _ = _state(model, None)
+    h_state, s_prev, _ = initial_states(model, None)
     vec, _, _ = _vector_setup(model, "vectorised", h_state, s_prev)
     (conn, d9, vol0, node_ptr, inc_elem, inc_slot, inv_vnode, elo, nlo, g, pe, p_node, fe, n_bad, n_far,
      _sprev, _hstate, jm23a, _s_relaxed, w1a, w2a) = vec[1]

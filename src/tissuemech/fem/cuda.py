@@ -43,8 +43,8 @@ from ._kernels import (central_difference_coefficients, central_difference_dof, 
 from ._kernels import rigid_contact_move as _rigid_contact_move
 from .kinematics import cofactor, determinant, left_cauchy_green, pull_back, push_forward
 from .materials import KIND_INVARIANT, KIND_INVARIANT_I1, KIND_SVK, j_minus_two_thirds, svk_kirchhoff
-from .tled import (DynamicRelaxationError, ElementInversionError, RunResult, TLEDModel, _caller_state, _state,
-                   critical_time_step)
+from .tled import (DynamicRelaxationError, ElementInversionError, RunResult, TLEDModel, caller_states,
+                   critical_time_step, initial_states)
 from .vectorised import gathered_deformation_gradient as _gathered_deformation_gradient
 from .vectorised import isochoric_kirchhoff, nodal_forces, node_incidence, prony_update
 from .vectorised import law_derivatives as _law_derivatives
@@ -546,11 +546,7 @@ class DeviceProblem:
         n_terms = int(m.prony_g.size)
         beyond = m.branch_params.shape[0] > 0
         law = m.law
-        branch = m.branch_law_key
-        from .materials import _zero_w, available_laws
-
-        branch_w1 = available_laws()[branch].dw_di1 if branch else _zero_w
-        self.kernels = _kernels(law.dw_di1, law.dw_di2, branch_w1, int(m.kind), bool(model.use_anp), n_terms,
+        self.kernels = _kernels(law.dw_di1, law.dw_di2, m.branch_law.dw_di1, int(m.kind), bool(model.use_anp), n_terms,
                                 bool(beyond), int(model.contact_kind), threads,
                                 None if max_registers is None else int(max_registers))
         self.threads = threads
@@ -564,7 +560,7 @@ class DeviceProblem:
         node_rotate[model.bc_nodes] = model.bc_rotate
         contact_slot = np.full(nn, -1, np.int32)
         contact_slot[model.contact_nodes] = np.arange(model.contact_nodes.size, dtype=np.int32)
-        h_state, s_prev, w_prev = _state(model, state)
+        h_state, s_prev, w_prev = initial_states(model, state)
         n_state = max(1, n_terms)
         hstate = np.zeros((6 * n_state, ne), ft)
         hstate[:6 * n_terms] = h_state.transpose(1, 2, 0).reshape(6 * n_terms, ne)
@@ -713,7 +709,7 @@ class DeviceProblem:
         h = self.g.hstate.copy_to_host()[:6 * nt].reshape(nt, 6, ne).transpose(2, 0, 1)
         s = self.g.sprev.copy_to_host().T
         w = self.g.wprev.copy_to_host()[:nt].T
-        return _caller_state(m, np.ascontiguousarray(h), np.ascontiguousarray(s), np.ascontiguousarray(w))
+        return caller_states(m, np.ascontiguousarray(h), np.ascontiguousarray(s), np.ascontiguousarray(w))
 
     def internal_forces(self, u_m: np.ndarray, commit: bool = False) -> np.ndarray:
         """Internal nodal forces (N, caller's node order) of the displacement ``u_m`` (caller's order); the

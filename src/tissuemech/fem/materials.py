@@ -205,10 +205,14 @@ class Material:
         return (as_cfunc(law.dw_di1, INVARIANT_SIG), as_cfunc(law.dw_di2, INVARIANT_SIG),
                 as_cfunc(law.dw_dlambda, STRETCH_SIG))
 
+    @property
+    def branch_law(self) -> LawSpec:
+        """The beyond-QLV branch energy's law (a zero law when there are no branches)."""
+        return LawSpec("invariant", ()) if self.branch_law_key is None else available_laws()[self.branch_law_key]
+
     def branch_function(self):
         """C function pointer of the branch law's ``dW/dI1`` (a zero law when there are no branches)."""
-        fn = _zero_w if self.branch_law_key is None else available_laws()[self.branch_law_key].dw_di1
-        return as_cfunc(fn, INVARIANT_SIG)
+        return as_cfunc(self.branch_law.dw_di1, INVARIANT_SIG)
 
     @property
     def dilatational_modulus_pa(self) -> float:

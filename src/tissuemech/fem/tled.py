@@ -424,7 +424,7 @@ class RunResult:
     kernel: str = "generic"
 
 
-def _state(model: TLEDModel, state: tuple | None):
+def initial_states(model: TLEDModel, state: tuple | None):
     """Viscoelastic element states ``(h_state, s_prev, w_prev)`` in the kernel's element order: virgin or copies of
     a previous run's (given in the caller's element order)."""
     nt, ne = model.material.prony_g.size, model.mesh.n_elements
@@ -435,7 +435,7 @@ def _state(model: TLEDModel, state: tuple | None):
             np.ascontiguousarray(state[2][eo], dtype=model.dtype))
 
 
-def _caller_state(model: TLEDModel, h_state, s_prev, w_prev) -> tuple:
+def caller_states(model: TLEDModel, h_state, s_prev, w_prev) -> tuple:
     """The states of a run back in the caller's element order."""
     out = []
     for a in (h_state, s_prev, w_prev):
@@ -681,7 +681,7 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
     u = np.zeros((model.mesh.n_nodes, 3), model.dtype) if u0_m is None else \
         np.array(model.to_kernel_nodes(u0_m), dtype=model.dtype)
     u_old = u.copy() if v0_m_s is None else (u - dt * model.to_kernel_nodes(v0_m_s)).astype(model.dtype)
-    h_state, s_prev, w_prev = _state(model, state)
+    h_state, s_prev, w_prev = initial_states(model, state)
     with numba_threads(threads):
         if law is not None:
             # one parallel region per step over numba.get_num_threads() overlapping parts (fem.fused)
@@ -701,7 +701,7 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
     names = model.group_names
     return RunResult(t, {n: force[:, i] for i, n in enumerate(names)}, {n: torque[:, i] for i, n in enumerate(names)},
                      cforce, ke, model.to_caller_nodes(u), model.to_caller_nodes(u_old), dt, np.zeros(0, np.int64),
-                     _caller_state(model, h_state, s_prev, w_prev),
+                     caller_states(model, h_state, s_prev, w_prev),
                      {k: energy[:, i] for i, k in enumerate(ENERGY_TERMS)} if track_energy else {}, ran)
 
 
@@ -726,7 +726,7 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
     tol = 1e-6 * model.min_altitude_m if tol_m is None else float(tol_m)
     u = np.zeros((model.mesh.n_nodes, 3), model.dtype) if u0_m is None else \
         np.array(model.to_kernel_nodes(u0_m), dtype=model.dtype)
-    h_state, s_prev, w_prev = _state(model, state)
+    h_state, s_prev, w_prev = initial_states(model, state)
     # dynamic relaxation has no fused loop: "fused" runs the vectorised passes
     vec, fbuf, pbuf = _vector_setup(model, "vectorised" if kernel == "fused" else kernel, h_state, s_prev)
     with numba_threads(resolve_threads(model, n_threads)):
@@ -742,5 +742,5 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
     u = model.to_caller_nodes(u)
     return RunResult(times, {n: force[:, i] for i, n in enumerate(names)}, {n: torque[:, i] for i, n in enumerate(names)},
                      cforce, np.full(times.size, np.nan), u, u.copy(), float("nan"), iters,
-                     _caller_state(model, h_state, s_prev, w_prev), {},
+                     caller_states(model, h_state, s_prev, w_prev), {},
                      "vectorised" if vec[0] else "generic")
