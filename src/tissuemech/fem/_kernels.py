@@ -101,6 +101,20 @@ def _anp_node_pass(pbuf, vnode, p_node):
         p_node[n] = s / vnode[n]
 
 
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def branch_drive(c11, c12, c13, c21, c22, c23, c31, c32, c33, J, jm23, b11, b22, b33, b12, b23, b13):
+    """Beyond QLV: the isochoric invariants ``I1bar``, ``I2bar`` and ``Q = 2 F^-1 dev(bbar) F^-T`` (so that a branch
+    energy ``W_i(I1bar)`` drives ``S_i = W_i' Q``) from ``cof F``, ``J``, ``J^-2/3`` and ``b = F F^T``; shared by
+    :func:`_element_force_pass` and :mod:`.cuda`."""
+    bb11, bb22, bb33, bb12, bb23, bb13 = jm23 * b11, jm23 * b22, jm23 * b33, jm23 * b12, jm23 * b23, jm23 * b13
+    bi1 = bb11 + bb22 + bb33
+    bi2 = 0.5 * (bi1 * bi1 - (bb11 * bb11 + bb22 * bb22 + bb33 * bb33 + 2.0 * (bb12 * bb12 + bb23 * bb23 + bb13 * bb13)))
+    mb = bi1 / 3.0
+    q0, q1, q2, q3, q4, q5 = pull_back(c11, c12, c13, c21, c22, c23, c31, c32, c33, J, 2.0 * (bb11 - mb),
+                                       2.0 * (bb22 - mb), 2.0 * (bb33 - mb), 2.0 * bb12, 2.0 * bb23, 2.0 * bb13)
+    return bi1, bi2, q0, q1, q2, q3, q4, q5
+
+
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _element_force_pass(u, elements, dndx, vol0, chunk_lo, fbuf, kind, w1fn, w2fn, wlfn, params, kappa,
                         use_anp, p_node, prony_g, prony_e, prony_f, h_state, s_prev, bfn, branch_params, w_prev, commit, bad):
@@ -135,21 +149,9 @@ def _element_force_pass(u, elements, dndx, vol0, chunk_lo, fbuf, kind, w1fn, w2f
                     # beyond QLV: branch energies W_i(I1bar), S_i = 2 W_i' dI1bar/dC = 2 W_i' F^-1 dev(bbar) F^-T;
                     # the drive increments are S_i(C_n+1) - S_i(C_n) (science.md 1.1 "3D/TLED"), the
                     # equilibrium stress S_e is the main law in full (g_inf = 1)
-                    bb11, bb22, bb33, bb12, bb23, bb13 = left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-                    jm23 = j_minus_two_thirds(J)
-                    bb11 *= jm23
-                    bb22 *= jm23
-                    bb33 *= jm23
-                    bb12 *= jm23
-                    bb23 *= jm23
-                    bb13 *= jm23
-                    bi1 = bb11 + bb22 + bb33
-                    bi2 = 0.5 * (bi1 * bi1 - (bb11 * bb11 + bb22 * bb22 + bb33 * bb33
-                                              + 2.0 * (bb12 * bb12 + bb23 * bb23 + bb13 * bb13)))
-                    mb = bi1 / 3.0
-                    q0, q1, q2, q3, q4, q5 = pull_back(c11, c12, c13, c21, c22, c23, c31, c32, c33, J,
-                                                       2.0 * (bb11 - mb), 2.0 * (bb22 - mb), 2.0 * (bb33 - mb),
-                                                       2.0 * bb12, 2.0 * bb23, 2.0 * bb13)
+                    b11, b22, b33, b12, b23, b13 = left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
+                    bi1, bi2, q0, q1, q2, q3, q4, q5 = branch_drive(c11, c12, c13, c21, c22, c23, c31, c32, c33, J,
+                                                                    j_minus_two_thirds(J), b11, b22, b33, b12, b23, b13)
                     s0, s1, s2, s3, s4, s5 = se0, se1, se2, se3, se4, se5
                     for i in range(nterm):
                         ee = prony_e[i]
@@ -611,6 +613,23 @@ def dynamic_relaxation_dof(u, u_old, beta, alpha_over_mass, f_ext, f_int):
     return u + beta * (u - u_old) + alpha_over_mass * (f_ext - f_int)
 
 
+@njit(cache=True, inline="always")
+def relaxation_coefficients(lam_min):
+    """``(alpha, beta)`` of the dynamic-relaxation update for the lowest-mode estimate ``lam_min`` (unit step, largest
+    eigenvalue 1): damping ``c = 2 sqrt(lam_min)``, ``alpha = 2 / (2 + c)``, ``beta = (2 - c) / (2 + c)``."""
+    c = 2.0 * math.sqrt(lam_min)
+    return 2.0 / (2.0 + c), (2.0 - c) / (2.0 + c)
+
+
+@njit(cache=True, inline="always")
+def relaxation_error_bound(lam_min, lam_max, dmax):
+    """Joldes et al.'s bound ``rho / (1 - rho) ||du||_inf`` on the distance to equilibrium, with the convergence rate
+    ``rho = (1 - sqrt(lam_min/lam_max)) / (1 + sqrt(lam_min/lam_max))``."""
+    sq = math.sqrt(lam_min / lam_max)
+    rho = (1.0 - sq) / (1.0 + sq)
+    return rho / (1.0 - rho) * dmax
+
+
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _dr_node_pass(fint, fext_ref, s_ext, u, u_old, u_new, inv_mass, alpha, beta, free):
     for n in prange(u.shape[0]):
@@ -700,9 +719,7 @@ def dynamic_relaxation_loop(mesh, mat, laws, loads, dr_mass, h_state, s_prev, w_
             contact_project(u, X, contact_nodes, in_contact, contact_kind, cparams, hv[2 * n_groups])
         u_old[:] = u
         lam_min = 1e-6
-        c = 2.0 * np.sqrt(lam_min)
-        alpha = 2.0 / (2.0 + c)
-        beta = (2.0 - c) / (2.0 + c)
+        alpha, beta = relaxation_coefficients(lam_min)
         n_ok = 0
         converged = False
         it = 0
@@ -726,9 +743,7 @@ def dynamic_relaxation_loop(mesh, mat, laws, loads, dr_mass, h_state, s_prev, w_
                     est = num / den
                     if est < lam_max:
                         lam_min = est
-                        c = 2.0 * np.sqrt(lam_min)
-                        alpha = 2.0 / (2.0 + c)
-                        beta = (2.0 - c) / (2.0 + c)
+                        alpha, beta = relaxation_coefficients(lam_min)
             _dr_node_pass(fint, fext_ref, hv[2 * n_groups + 1], u, u_old, u_new, inv_mass, alpha, beta, free)
             if contact_kind > 0:
                 contact_project(u_new, X, contact_nodes, in_contact, contact_kind, cparams, hv[2 * n_groups])
@@ -742,9 +757,7 @@ def dynamic_relaxation_loop(mesh, mat, laws, loads, dr_mass, h_state, s_prev, w_
                 return STATUS_NOT_FINITE, -1, k, u, iters, out_force, out_torque, out_contact
             # the error bound takes the smaller of this increment's estimate and the previous increment's final one:
             # from an extrapolated start the first Rayleigh quotients see only high modes and would stop too early
-            sq = np.sqrt(min(lam_min, lam_prev) / lam_max)
-            rho = (1.0 - sq) / (1.0 + sq)
-            err = rho / (1.0 - rho) * dmax
+            err = relaxation_error_bound(min(lam_min, lam_prev), lam_max, dmax)
             fint_prev, fint = fint, fint_prev
             u_old, u, u_new = u, u_new, u_old
             it += 1

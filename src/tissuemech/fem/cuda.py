@@ -38,8 +38,9 @@ import time
 import numpy as np
 
 from ..models.recursion import relaxation_factors
-from ._kernels import (central_difference_coefficients, central_difference_dof, dynamic_relaxation_dof,
-                       prescribed_displacement)
+from ._kernels import (branch_drive, central_difference_coefficients, central_difference_dof,
+                       dynamic_relaxation_dof, prescribed_displacement, relaxation_coefficients,
+                       relaxation_error_bound)
 from ._kernels import rigid_contact_move as _rigid_contact_move
 from .kinematics import cofactor, determinant, left_cauchy_green, pull_back, push_forward
 from .materials import KIND_INVARIANT, KIND_INVARIANT_I1, KIND_SVK, j_minus_two_thirds, svk_kirchhoff
@@ -111,14 +112,19 @@ def _kernels(w1, w2, branch_w1, kind: int, use_anp: bool, n_terms: int, beyond: 
          _rigid_contact_move))
 
     @cuda.jit(device=True)
-    def block_sum(sm, value):
+    def block_reduce(sm, value, take_max):
+        """Sum (or maximum) of ``value`` over the block, the same fixed-order tree in every block."""
         t = cuda.threadIdx.x
         sm[t] = value
         cuda.syncthreads()
         s = threads // 2
         while s > 0:
             if t < s:
-                sm[t] += sm[t + s]
+                if take_max:
+                    if sm[t + s] > sm[t]:
+                        sm[t] = sm[t + s]
+                else:
+                    sm[t] += sm[t + s]
             cuda.syncthreads()
             s //= 2
         total = sm[0]
@@ -126,35 +132,17 @@ def _kernels(w1, w2, branch_w1, kind: int, use_anp: bool, n_terms: int, beyond: 
         return total
 
     @cuda.jit(device=True)
-    def block_max(sm, value):
-        t = cuda.threadIdx.x
-        sm[t] = value
-        cuda.syncthreads()
-        s = threads // 2
-        while s > 0:
-            if t < s and sm[t + s] > sm[t]:
-                sm[t] = sm[t + s]
-            cuda.syncthreads()
-            s //= 2
-        total = sm[0]
-        cuda.syncthreads()
-        return total
-
-    @cuda.jit(device=True)
-    def partials_sum(sm, partials, row):
-        # the same fixed-order reduction in every block: every block gets the identical total
+    def partials_reduce(sm, partials, row, take_max):
+        """Sum (or maximum) of the per-block partials of ``row``: every block reduces them in the same order, so every
+        block gets the identical total."""
         acc = 0.0
         for b in range(cuda.threadIdx.x, partials.shape[1], threads):
-            acc += partials[row, b]
-        return block_sum(sm, acc)
-
-    @cuda.jit(device=True)
-    def partials_max(sm, partials, row):
-        acc = 0.0
-        for b in range(cuda.threadIdx.x, partials.shape[1], threads):
-            if partials[row, b] > acc:
-                acc = partials[row, b]
-        return block_max(sm, acc)
+            if take_max:
+                if partials[row, b] > acc:
+                    acc = partials[row, b]
+            else:
+                acc += partials[row, b]
+        return block_reduce(sm, acc, take_max)
 
     @cuda.jit(device=True)
     def element_pressure_phase(tid, stride, u, conn, d9, vol0, kappa, pe):
@@ -198,15 +186,8 @@ def _kernels(w1, w2, branch_w1, kind: int, use_anp: bool, n_terms: int, beyond: 
                     if beyond:
                         # beyond QLV (_kernels._element_force_pass): drive S_i = 2 W_i'(I1bar) F^-1 dev(bbar) F^-T,
                         # increments W_i' Q - W_i,prev S_prev with Q = 2 F^-1 dev(bbar) F^-T
-                        bb11, bb22, bb33 = jm23 * b11, jm23 * b22, jm23 * b33
-                        bb12, bb23, bb13 = jm23 * b12, jm23 * b23, jm23 * b13
-                        bi1 = bb11 + bb22 + bb33
-                        bi2 = 0.5 * (bi1 * bi1 - (bb11 * bb11 + bb22 * bb22 + bb33 * bb33
-                                                  + 2.0 * (bb12 * bb12 + bb23 * bb23 + bb13 * bb13)))
-                        mb = bi1 / 3.0
-                        q0, q1, q2, q3, q4, q5 = pull_back(c11, c12, c13, c21, c22, c23, c31, c32, c33, J,
-                                                           2.0 * (bb11 - mb), 2.0 * (bb22 - mb), 2.0 * (bb33 - mb),
-                                                           2.0 * bb12, 2.0 * bb23, 2.0 * bb13)
+                        bi1, bi2, q0, q1, q2, q3, q4, q5 = branch_drive(c11, c12, c13, c21, c22, c23, c31, c32, c33,
+                                                                        J, jm23, b11, b22, b33, b12, b23, b13)
                         for i in range(n_terms):
                             wb = branch_w1(branch_params[i], bi1, bi2)
                             wo = wprev[i, e]
@@ -357,9 +338,7 @@ def _kernels(w1, w2, branch_w1, kind: int, use_anp: bool, n_terms: int, beyond: 
         nn = U.shape[1]
         lam_max = 1.0
         lam_min = 1e-6
-        c = 2.0 * math.sqrt(lam_min)
-        alpha = 2.0 / (2.0 + c)
-        beta = (2.0 - c) / (2.0 + c)
+        alpha, beta = relaxation_coefficients(lam_min)
         n_ok = 0
         it = 0
         outcome = DR_NOT_CONVERGED
@@ -386,22 +365,20 @@ def _kernels(w1, w2, branch_w1, kind: int, use_anp: bool, n_terms: int, beyond: 
                             du = u[n, i] - u_old[n, i]
                             num += du * (fint[n, i] - fprev[n, i])
                             den += du * du * g.dr_mass[n]
-            num = block_sum(sm, num)
-            den = block_sum(sm, den)
+            num = block_reduce(sm, num, False)
+            den = block_reduce(sm, den, False)
             if cuda.threadIdx.x == 0:
                 partials[0, blk] = num
                 partials[1, blk] = den
             grid.sync()
             if it > 0:
-                num = partials_sum(sm, partials, 0)
-                den = partials_sum(sm, partials, 1)
+                num = partials_reduce(sm, partials, 0, False)
+                den = partials_reduce(sm, partials, 1, False)
                 if den > 0.0 and num > 0.0:
                     est = num / den
                     if est < lam_max:
                         lam_min = est
-                        c = 2.0 * math.sqrt(lam_min)
-                        alpha = 2.0 / (2.0 + c)
-                        beta = (2.0 - c) / (2.0 + c)
+                        alpha, beta = relaxation_coefficients(lam_min)
             n_groups = g.rot_center.shape[0]
             dmax = 0.0
             for n in range(tid, nn, stride):
@@ -417,17 +394,15 @@ def _kernels(w1, w2, branch_w1, kind: int, use_anp: bool, n_terms: int, beyond: 
                     d = abs(u_new[n, i] - u[n, i])
                     if d > dmax or d != d:
                         dmax = d
-            dmax = block_max(sm, dmax)
+            dmax = block_reduce(sm, dmax, True)
             if cuda.threadIdx.x == 0:
                 partials[2, blk] = dmax
             grid.sync()
-            dmax = partials_max(sm, partials, 2)
+            dmax = partials_reduce(sm, partials, 2, True)
             if not math.isfinite(dmax):
                 outcome = DR_NOT_FINITE
                 break
-            sq = math.sqrt(min(lam_min, lam_prev) / lam_max)
-            rho = (1.0 - sq) / (1.0 + sq)
-            err = rho / (1.0 - rho) * dmax
+            err = relaxation_error_bound(min(lam_min, lam_prev), lam_max, dmax)
             it += 1
             if it >= min_iter and err < tol_m:
                 n_ok += 1
@@ -477,10 +452,10 @@ def _kernels(w1, w2, branch_w1, kind: int, use_anp: bool, n_terms: int, beyond: 
                 for i in range(3):
                     v = (u[n, i] - u_old[n, i]) / dt
                     tq += 0.5 * g.mass[n] * v * v
-        fx = block_sum(sm, fx)
-        fy = block_sum(sm, fy)
-        fz = block_sum(sm, fz)
-        tq = block_sum(sm, tq)
+        fx = block_reduce(sm, fx, False)
+        fy = block_reduce(sm, fy, False)
+        fz = block_reduce(sm, fz, False)
+        tq = block_reduce(sm, tq, False)
         if t == 0:
             out[b, 0], out[b, 1], out[b, 2], out[b, 3] = fx, fy, fz, tq
 
