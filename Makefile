@@ -11,9 +11,12 @@ STAMP := $(VENV)/.tissuemech-installed
 TEST_STAMP := $(VENV)/.tissuemech-installed-test
 CORES ?= all
 # numba keys its cache on the source file of each jitted function only; the TLED kernels inline material laws
-# from other modules, so the cache folder is named after the numba-compiled sources (a stale kernel is never reused)
-NUMBA_SOURCES_HASH := $(shell cat src/tissuemech/fem/*.py src/tissuemech/models/*.py 2>/dev/null | cksum | cut -d' ' -f1)
-export NUMBA_CACHE_DIR ?= $(CURDIR)/.numba_cache/$(NUMBA_SOURCES_HASH)
+# from other modules, so the cache folder is named after the numba-compiled sources (a stale kernel is never reused):
+# tissuemech.numba_cache, which imports nothing but the standard library, so any python3 computes it before install
+ifeq ($(origin NUMBA_CACHE_DIR), undefined)
+NUMBA_CACHE_DIR := $(shell PYTHONPATH=src $(PYTHON) -c 'from tissuemech.numba_cache import source_keyed_cache_dir as d; print(d("$(CURDIR)/.numba_cache"))')
+endif
+export NUMBA_CACHE_DIR
 export MPLBACKEND ?= Agg
 export HDF5_USE_FILE_LOCKING ?= FALSE
 

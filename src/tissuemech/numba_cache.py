@@ -2,10 +2,10 @@
 
 numba keys a cached function on its own source file only, while the TLED loops of ``fem/_kernels.py`` compile in
 functions of other modules (the material laws, ``fem.kinematics.symmetric_eigen3``, ``models``): one cache folder
-kept across edits serves a kernel compiled from older sources of those modules. The Makefile names its
-``NUMBA_CACHE_DIR`` after the same sources (``cksum``); the test suite and the benchmarks, which also run outside
-``make``, call :func:`use_source_keyed_cache`. This module imports nothing that imports numba, so it can run before
-numba reads its configuration.
+kept across edits serves a kernel compiled from older sources of those modules. The Makefile sets
+``NUMBA_CACHE_DIR`` to :func:`source_keyed_cache_dir`; the test suite and the benchmarks, which also run outside
+``make``, call :func:`use_source_keyed_cache`. This module imports only the standard library (nothing that imports
+numba, so it can run before numba reads its configuration, and any ``python3`` can run it before the install).
 """
 from __future__ import annotations
 
