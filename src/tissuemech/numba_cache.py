@@ -17,9 +17,10 @@ from pathlib import Path
 KERNEL_SOURCE_FOLDERS = ("fem", "models")
 
 
-def source_keyed_cache_dir(base: str | Path) -> Path:
-    """``base / "src-<sha1 of tissuemech/fem/*.py and tissuemech/models/*.py>"`` (16 hex digits)."""
-    package = Path(__file__).resolve().parent
+def source_keyed_cache_dir(base: str | Path, package: str | Path | None = None) -> Path:
+    """``base / "src-<sha1 of fem/*.py and models/*.py of the package>"`` (16 hex digits); ``package``: the package
+    folder (default: this one's)."""
+    package = Path(__file__).resolve().parent if package is None else Path(package)
     digest = hashlib.sha1()
     for folder in KERNEL_SOURCE_FOLDERS:
         for source in sorted((package / folder).glob("*.py")):
