@@ -464,7 +464,7 @@ def device(data: Path, out: Path, deadline_s: float, cpu_threads: int, stages: s
             for prec in ("float32", "float64"):
                 rec.run(name, timing, name, mesh, "LP2", prec, models=models, need_s=10)
     if "registers" in stages:
-        # NH uses ~122 registers (2 blocks of 256 per multiprocessor), QLV4 ~229 (1 block): limits that let 3-4 and 2
+        # NH uses 109-118 registers (2 blocks of 256 per multiprocessor), QLV4 208-226 (1 block): limits that let 3-4 and 2
         for law, limits in (("NH", (64, 80)), ("QLV4-NH", (128, 64))):
             for regs in limits:
                 rec.run("cube1m", timing, "cube1m", big, law, "float32", models=models, max_registers=regs, need_s=15)

@@ -34,6 +34,7 @@ from __future__ import annotations
 import functools
 import math
 import time
+from collections import namedtuple
 
 import numpy as np
 
@@ -86,7 +87,7 @@ def unsupported_reason(model: TLEDModel) -> str | None:
         return ("the CUDA kernels run Saint Venant-Kirchhoff and invariant laws; stretch-based laws (Ogden: an "
                 "eigen-decomposition per element) run on the CPU solver (tissuemech.fem.tled)")
     if model.material.kind == KIND_SVK and model.material.prony_g.size:
-        return "QLV on Saint Venant-Kirchhoff is not a law of the CPU kernels either"
+        return "QLV on Saint Venant-Kirchhoff runs on the CPU solver only (tissuemech.fem.tled)"
     return None
 
 
@@ -259,12 +260,14 @@ def _kernels(w1, w2, branch_w1, kind: int, use_anp: bool, n_terms: int, beyond: 
             g.in_contact[slot] = 1 if touching else 0
 
     @cuda.jit(device=True)
-    def prescribe(n, i, row, g, n_groups):
+    def prescribe(n, row, g, n_groups):
+        """Prescribed displacement of node ``n`` (histories ``row``); zero for a node with no prescribed dof."""
+        if g.free[n, 0] and g.free[n, 1] and g.free[n, 2]:
+            return 0.0, 0.0, 0.0
         grp = g.node_group[n]
-        ux, uy, uz = prescribed_displacement(row[grp], row[n_groups + grp], g.node_rotate[n], g.node_dir[n, 0],
-                                             g.node_dir[n, 1], g.node_dir[n, 2], g.X[n, 0], g.X[n, 1],
-                                             g.rot_center[grp, 0], g.rot_center[grp, 1])
-        return ux if i == 0 else (uy if i == 1 else uz)
+        return prescribed_displacement(row[grp], row[n_groups + grp], g.node_rotate[n], g.node_dir[n, 0],
+                                       g.node_dir[n, 1], g.node_dir[n, 2], g.X[n, 0], g.X[n, 1],
+                                       g.rot_center[grp, 0], g.rot_center[grp, 1])
 
     @cuda.jit(device=True)
     def explicit_node_phase(tid, stride, k, u, u_old, u_new, g):
@@ -277,12 +280,13 @@ def _kernels(w1, w2, branch_w1, kind: int, use_anp: bool, n_terms: int, beyond: 
         for n in range(tid, u.shape[0], stride):
             fx, fy, fz = node_force(g.fel_flat, g.node_ptr, g.inc_slot, ne, n)
             g.fint[n, 0], g.fint[n, 1], g.fint[n, 2] = fx, fy, fz
+            ux, uy, uz = prescribe(n, nxt, g, n_groups)
             for i in range(3):
                 if g.free[n, i]:
                     u_new[n, i] = central_difference_dof(g.coef_a[n], g.coef_b[n], g.coef_c[n],
                                                          s_ext * g.fext[n, i], g.fint[n, i], u[n, i], u_old[n, i])
                 else:
-                    u_new[n, i] = prescribe(n, i, nxt, g, n_groups)
+                    u_new[n, i] = ux if i == 0 else (uy if i == 1 else uz)
             project_contact(n, u_new, g, nxt[2 * n_groups])
 
     def explicit_steps(k0, n_steps, U, g):
@@ -317,13 +321,14 @@ def _kernels(w1, w2, branch_w1, kind: int, use_anp: bool, n_terms: int, beyond: 
         from the histories ``hv`` at the increment's time."""
         n_groups = g.rot_center.shape[0]
         for n in range(cuda.grid(1), u.shape[0], cuda.gridsize(1)):
+            ux, uy, uz = prescribe(n, hv, g, n_groups)
             for i in range(3):
                 du = u[n, i] - u_eq[n, i]
                 u_eq[n, i] = u[n, i]
                 if extrapolate and g.free[n, i]:
                     u[n, i] += r * du
                 if not g.free[n, i]:
-                    u[n, i] = prescribe(n, i, hv, g, n_groups)
+                    u[n, i] = ux if i == 0 else (uy if i == 1 else uz)
             project_contact(n, u, g, hv[2 * n_groups])
 
     def relaxation_iterations(base, min_iter, max_iter, tol_m, lam_prev, s_ext, U, F2, partials, info, g):
@@ -468,21 +473,11 @@ def _kernels(w1, w2, branch_w1, kind: int, use_anp: bool, n_terms: int, beyond: 
 # --------------------------------------------------------------------------------------------------
 # device-resident problem
 # --------------------------------------------------------------------------------------------------
-_DeviceArrays = None
-
-
-def _device_arrays_type():
-    """The namedtuple type of the device arrays (numba passes a namedtuple of arrays as one kernel argument)."""
-    global _DeviceArrays
-    if _DeviceArrays is None:
-        from collections import namedtuple
-
-        _DeviceArrays = namedtuple("_DeviceArrays", (
-            "conn d9 vol0 pe p_node node_ptr inc_elem inc_slot inv_vnode params kappa branch_params g_inf decay gain "
-            "sprev hstate wprev fel fel_flat fint bad free fext coef_a coef_b coef_c bc_table node_group node_dir "
-            "node_rotate rot_center X contact_slot contact_nodes in_contact cparams bc_nodes mass dr_mass inv_dr_mass "
-            "hv"))
-    return _DeviceArrays
+#: the device arrays of a problem, passed to the kernels as one argument (numba flattens a namedtuple of arrays)
+DeviceArrays = namedtuple("DeviceArrays", (
+    "conn d9 vol0 pe p_node node_ptr inc_elem inc_slot inv_vnode params kappa branch_params g_inf decay gain sprev hstate "
+    "wprev fel fel_flat fint bad free fext coef_a coef_b coef_c bc_table node_group node_dir node_rotate rot_center X "
+    "contact_slot contact_nodes in_contact cparams bc_nodes mass dr_mass inv_dr_mass hv"))
 
 
 class DeviceProblem:
@@ -546,7 +541,7 @@ class DeviceProblem:
         bc_table = self._history_table(times)
         to = cuda.to_device
         fel_flat = cuda.device_array(12 * ne, ft)
-        g = _device_arrays_type()(
+        g = DeviceArrays(
             conn=to(np.ascontiguousarray(mesh.elements.T, dtype=np.uint32)),
             d9=to(np.ascontiguousarray(model.dndx[:, 3:].T, dtype=ft)), vol0=to(model.vol0.astype(ft)),
             pe=cuda.device_array(ne, ft), p_node=to(np.zeros(nn)), node_ptr=to(node_ptr), inc_elem=to(inc_elem),
@@ -757,7 +752,9 @@ def solve_quasistatic_gpu(model: TLEDModel, times_s, *, tol_m: float | None = No
     out_torque = np.zeros((times.size, n_groups))
     out_contact = np.zeros((times.size, 3))
     iters = np.zeros(times.size, np.int64)
-    partials = None
+    # one partial sum per block of the cooperative grid (its size needs the kernel compiled for these argument types)
+    template = (0, min_iter, max_iter, tol, 1.0, 0.0, run.U, F2, cuda.to_device(np.zeros((3, 1))), info, g)
+    partials = cuda.to_device(np.zeros((3, run.cooperative_blocks("relaxation_iterations", template))))
     for k, t in enumerate(times):
         dt = t - t_prev
         extrapolate = bool(have_eq and t_prev > t_eq and dt > 0.0)
@@ -771,12 +768,8 @@ def solve_quasistatic_gpu(model: TLEDModel, times_s, *, tol_m: float | None = No
         run.kernels["relaxation_start"][max(1, (nn + run.threads - 1) // run.threads), run.threads](
             u, u_eq, r, extrapolate, g.hv, g)
         run.U[(base + 2) % 3].copy_to_device(u)  # u_old = u
-        args = (base, min_iter, max_iter, tol, lam_prev, float(hv[2 * n_groups + 1]), run.U, F2, partials, info, g)
-        if partials is None:  # one partial sum per block of the cooperative grid
-            partials = cuda.to_device(np.zeros((3, run.cooperative_blocks("relaxation_iterations", args[:8] + (
-                cuda.to_device(np.zeros((3, 1))),) + args[9:]))))
-            args = args[:8] + (partials,) + args[9:]
-        run._launch("relaxation_iterations", *args)
+        run._launch("relaxation_iterations", base, min_iter, max_iter, tol, lam_prev, float(hv[2 * n_groups + 1]), run.U,
+                    F2, partials, info, g)
         outcome, n_it, lam_min, _ = info.copy_to_host()
         n_it = int(n_it)
         iters[k] = n_it
