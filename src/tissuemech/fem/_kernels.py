@@ -630,6 +630,17 @@ def relaxation_error_bound(lam_min, lam_max, dmax):
     return rho / (1.0 - rho) * dmax
 
 
+#: dynamic relaxation stops after this many consecutive iterations with the error bound under the tolerance
+RELAXATION_CALM_ITERATIONS = 3
+
+
+@njit(cache=True, inline="always")
+def relaxation_calm_iterations(n_calm, iteration, min_iter, err, tol_m):
+    """Consecutive iterations so far with the error bound ``err`` under ``tol_m`` (counted from ``min_iter`` on; the
+    run stops at :data:`RELAXATION_CALM_ITERATIONS`); shared by :func:`dynamic_relaxation_loop` and :mod:`.cuda`."""
+    return n_calm + 1 if iteration >= min_iter and err < tol_m else 0
+
+
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _dr_node_pass(fint, fext_ref, s_ext, u, u_old, u_new, inv_mass, alpha, beta, free):
     for n in prange(u.shape[0]):
@@ -761,13 +772,10 @@ def dynamic_relaxation_loop(mesh, mat, laws, loads, dr_mass, h_state, s_prev, w_
             fint_prev, fint = fint, fint_prev
             u_old, u, u_new = u, u_new, u_old
             it += 1
-            if it >= min_iter and err < tol_m:
-                n_ok += 1
-                if n_ok >= 3:
-                    converged = True
-                    break
-            else:
-                n_ok = 0
+            n_ok = relaxation_calm_iterations(n_ok, it, min_iter, err, tol_m)
+            if n_ok >= RELAXATION_CALM_ITERATIONS:
+                converged = True
+                break
         iters[k] = it
         lam_prev = lam_min
         if not converged:

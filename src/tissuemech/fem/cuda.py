@@ -39,9 +39,9 @@ from collections import namedtuple
 import numpy as np
 
 from ..models.recursion import relaxation_factors
-from ._kernels import (branch_drive, central_difference_coefficients, central_difference_dof,
-                       dynamic_relaxation_dof, prescribed_displacement, relaxation_coefficients,
-                       relaxation_error_bound)
+from ._kernels import (RELAXATION_CALM_ITERATIONS, branch_drive, central_difference_coefficients,
+                       central_difference_dof, dynamic_relaxation_dof, prescribed_displacement,
+                       relaxation_calm_iterations, relaxation_coefficients, relaxation_error_bound)
 from ._kernels import rigid_contact_move as _rigid_contact_move
 from .kinematics import cofactor, determinant, left_cauchy_green, pull_back, push_forward
 from .materials import KIND_INVARIANT, KIND_INVARIANT_I1, KIND_SVK, j_minus_two_thirds, svk_kirchhoff
@@ -409,13 +409,10 @@ def _kernels(w1, w2, branch_w1, kind: int, use_anp: bool, n_terms: int, beyond: 
                 break
             err = relaxation_error_bound(min(lam_min, lam_prev), lam_max, dmax)
             it += 1
-            if it >= min_iter and err < tol_m:
-                n_ok += 1
-                if n_ok >= 3:
-                    outcome = DR_CONVERGED
-                    break
-            else:
-                n_ok = 0
+            n_ok = relaxation_calm_iterations(n_ok, it, min_iter, err, tol_m)
+            if n_ok >= RELAXATION_CALM_ITERATIONS:
+                outcome = DR_CONVERGED
+                break
         if tid == 0:
             info[0] = outcome
             info[1] = it
