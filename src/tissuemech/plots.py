@@ -634,3 +634,39 @@ def plot_all_lve(summary: xr.Dataset, runs: Sequence[xr.Dataset], averages: xr.D
         written += plot_lve(strain, storage, loss, row, folder / f"lve__{source}__{safe_name(name)}",
                             storage_sd=sds[0], loss_sd=sds[1], title=title)
     return written
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# fit one test kind, predict the others
+# ----------------------------------------------------------------------------------------------------------------
+def plot_cross_test(table: pd.DataFrame, path: str | Path) -> list[Path]:
+    """The dataset's ``cross_test.csv`` as one figure: for each held-out test kind (x), the held-out misfit in noise
+    units (left, log axis; the adequacy limit dashed) and the held-out NRMSE (right) of each model that predicted it
+    (one colour per scope/model), unscored kinds left empty."""
+    fig, (left, right) = new_figure(ncols=2, width=5.5, height=4.0)
+    scored = table[table["status"] == "ok"] if "status" in table else table
+    if scored.empty:
+        left.text(0.5, 0.5, "no test kind could be predicted from another", ha="center", va="center",
+                  transform=left.transAxes)
+        left.set_axis_off()
+        right.set_axis_off()
+        return save_figure(fig, path)
+    kinds = sorted(set(table["held_out_test"]))
+    series = list(dict.fromkeys(f"{s}: {m}" for s, m in zip(scored["scope"], scored["model"])))
+    width = 0.8 / max(len(series), 1)
+    colours = matplotlib.colormaps["tab10"]
+    for j, name in enumerate(series):
+        rows = scored[(scored["scope"] + ": " + scored["model"]) == name]
+        x = np.array([kinds.index(k) for k in rows["held_out_test"]]) + (j - (len(series) - 1) / 2) * width
+        left.bar(x, rows["misfit_noise_units"], width, color=colours(j % 10), label=name)
+        right.bar(x, rows["nrmse"], width, color=colours(j % 10))
+    left.axhline(2.0, color="0.3", ls="--", lw=1, label="adequate: <= 2 noise SDs")
+    left.set_yscale("log")
+    left.set_ylabel("held-out misfit (noise SDs)")
+    right.set_ylabel("held-out NRMSE")
+    for ax in (left, right):
+        ax.set_xticks(range(len(kinds)), [k.replace("_", "\n") for k in kinds], fontsize=8)
+        ax.set_xlabel("predicted test kind (not fitted)")
+    left.legend(fontsize=7, loc="upper left")
+    fig.suptitle("Fit one test kind, predict the others")
+    return save_figure(fig, path)

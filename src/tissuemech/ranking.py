@@ -23,13 +23,16 @@ import multiprocessing as mp
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import scipy
 
-from .fitting import (Curve, FitProblem, FitResult, NoiseModel, at_bound_parameters, evaluate, fit, has_covariance,
+from .fitting import (Curve, FitProblem, FitResult, NoiseModel, at_bound_parameters, describes, evaluate, fit,
+                      has_covariance,
                       prony_start)
+from .adequacy import add_assessment, assess, verdict
 from .models.base import ConstitutiveModel
 from .models.registry import get_model
 from .plots import save_figure
@@ -108,14 +111,7 @@ class Candidate:
 
     def describes(self, curves: Sequence[Curve]) -> bool:
         model = self.factory()
-        for c in curves:
-            need = c.response
-            if need == "shear_history":
-                if not (model.supports("shear_history") or model.supports("elastic_shear")):
-                    return False
-            elif not model.supports(need):
-                return False
-        return True
+        return all(describes(model, c.response) for c in curves)
 
 
 def fit_candidate(cand: Candidate, curves: Sequence[Curve], target: str, scope: str = "",
@@ -352,7 +348,25 @@ def _not_recommendable_reason(row: pd.Series) -> str:
         reasons.append(f"{row['at_bound']} at a bound")
     if not bool(row.get("has_covariance", True)):
         reasons.append("no covariance")
+    if "determined" in row and not bool(row["determined"]) and isinstance(row.get("undetermined"), str) \
+            and row["undetermined"]:
+        reasons.append(f"undetermined {row['undetermined']} (standard error above the value)")
+    if "skill" in row and not row["skill"] > 0:
+        reasons.append(f"no better than the curves' means (skill {row['skill']:.3g})")
+    if "adequate" in row and not bool(row["adequate"]) and np.isfinite(row.get("misfit_noise_units", np.nan)):
+        reasons.append(f"misfit {row['misfit_noise_units']:.3g} noise SDs")
     return ", ".join(reasons) or "flagged"
+
+
+def supported_mask(table: pd.DataFrame) -> np.ndarray:
+    """Fits a scope may recommend: ``recommendable`` and, where the table is assessed
+    (:func:`tissuemech.adequacy.add_assessment`), determined, adequate and better than the curves' means."""
+    ok = table["recommendable"].fillna(False).astype(bool).to_numpy(copy=True) if "recommendable" in table \
+        else np.ones(len(table), bool)
+    if "determined" in table:
+        ok &= (table["determined"].astype(bool) & table["adequate"].astype(bool)
+               & (table["skill"].astype(float) > 0)).to_numpy()
+    return ok
 
 
 def recommend(table: pd.DataFrame, curves: Sequence[Curve], noise: NoiseModel | None = None,
@@ -363,7 +377,10 @@ def recommend(table: pd.DataFrame, curves: Sequence[Curve], noise: NoiseModel | 
     tell, a time-dependent model beating every elastic one by ΔAICc > 10); strain-dependent relaxation (a
     beyond-QLV model beating the best QLV by ΔAICc > 10 and not worse in CV).
 
-    Only fits that are ``recommendable`` (:func:`ranking_table`: converged, with a covariance, no parameter at a
+    Only supported fits (:func:`supported_mask`: ``recommendable`` and, in an assessed table, determined, adequate
+    against the measured noise and better than the curves' means; :mod:`tissuemech.adequacy`) can be recommended;
+    without one the scope's ``verdict`` is ``no_model_supported``. ``recommendable`` (:func:`ranking_table`:
+    converged, with a covariance, no parameter at a
     bound) can be recommended; the statement names every fit that is not, and why. Among them the
     rule's family is recommended (best model of that family) unless the top-ranked model of another family is
     *decisively* better: held-out NRMSE below ``decisive_cv_ratio`` times the rule model's, or, without
@@ -390,8 +407,7 @@ def recommend(table: pd.DataFrame, curves: Sequence[Curve], noise: NoiseModel | 
         nonsep = bool(b["aicc"] < q["aicc"] - STRONG_EVIDENCE and cv_ok)
     rule = thesis_rule(strain_max if np.isfinite(strain_max) else 0.0, rate_dep, nonsep)
     # the choice: recommendable fits only
-    ok = table["recommendable"].fillna(False).astype(bool).to_numpy() if "recommendable" in table \
-        else np.ones(len(table), bool)
+    ok = supported_mask(table)
     pool, pool_classes = table[ok], classes[ok]
     first = table.iloc[0]
     evidence = (f"Thesis criteria: max strain {100 * strain_max:.3g} %, "
@@ -402,10 +418,13 @@ def recommend(table: pd.DataFrame, curves: Sequence[Curve], noise: NoiseModel | 
     common = {"rule_family": rule, "strain_max": strain_max, "rate_dependent": rate_dep, "nonseparable": nonsep,
               "rate_evidence": rd}
     if pool.empty:
-        statement = (f"{evidence}. Data ranking ({first.get('rank_criterion', 'aicc')}): {first['model']} first. No model is recommended: no fit is converged with a covariance and no "
-                     f"parameter at a bound ({'; '.join(passed)}).")
+        why = verdict(table)["reason"] if "determined" in table else (
+            "no fit is converged with a covariance and no parameter at a bound")
+        statement = (f"{evidence}. Data ranking ({first.get('rank_criterion', 'aicc')}): {first['model']} first. "
+                     f"No model is supported: {why} ({'; '.join(passed)}).")
         return common | {"rule_model": None, "data_model": None, "data_family": None, "agree": False,
-                         "recommended": None, "statement": statement}
+                         "recommended": None, "verdict": "no_model_supported", "verdict_reason": why,
+                         "statement": statement}
     best_ok = {cls: pool[pool_classes == cls].iloc[0] for cls in pool_classes.unique()}
     top = pool.iloc[0]
     top_class = _family_class(top)
@@ -433,9 +452,13 @@ def recommend(table: pd.DataFrame, curves: Sequence[Curve], noise: NoiseModel | 
                           f"the rule's choice stands.")
     elif not agree:
         statement += f" No recommendable {rule.replace('_', ' ')} model was fitted in this scope: the data's choice is used."
+    chosen = table[table["model"] == recommended].iloc[0]
+    reason = (f"misfit {chosen['misfit_noise_units']:.3g} noise SDs, parameters determined, skill "
+              f"{chosen['skill']:.3g}" if "determined" in table else "recommendable")
     return common | {"rule_model": None if rule_best is None else str(rule_best["model"]),
                      "data_model": str(top["model"]), "data_family": top_class, "agree": agree,
-                     "recommended": recommended, "statement": statement}
+                     "recommended": recommended, "verdict": "supported", "verdict_reason": reason,
+                     "statement": statement}
 
 
 def rank_scope(candidates: Sequence[Candidate], curves: Sequence[Curve], target: str, scope: str,
@@ -474,11 +497,15 @@ def rank_scope(candidates: Sequence[Candidate], curves: Sequence[Curve], target:
             cv_rows += rows
     cv = pd.DataFrame(cv_rows)
     table = ranking_table(fits, cv, scope=scope, dataset=dataset)
+    if not table.empty:
+        table = add_assessment(table, {k: assess(by_key[k].factory(), r, curves, target) for k, r in fits.items()})
     rec = recommend(table, curves, noise)
     if not table.empty:
         # the one "best model of the scope": cards, FEM and diagnosis read this column
         table["recommendation"] = rec["statement"]
         table["recommended"] = table["model"] == rec["recommended"]
+        table["verdict"] = rec.get("verdict", "no_model_supported")
+        table["verdict_reason"] = rec.get("verdict_reason", "")
     return table, fits, cv, rec
 
 
@@ -490,6 +517,21 @@ def recommended_mask(ranking: pd.DataFrame) -> np.ndarray:
     if col.dtype != bool:  # read back with empty cells, or as text
         col = col.map(lambda v: str(v).strip().lower() in ("true", "1", "1.0"))
     return col.to_numpy(bool)
+
+
+def scope_model(scope_ranking_csv, model: str) -> str:
+    """The model key a rule's ``model`` wildcard names in one scope's ranking table (``ranking/<scope>.csv``):
+    ``baseline`` -> the row with ``baseline`` true (the material scope's baseline, whose key the data decide;
+    :func:`tissuemech.material.baseline_model`), any other name -> itself. A missing baseline returns
+    ``"baseline"`` (no record of that name: the caller writes files that say so)."""
+    if model != "baseline":
+        return model
+    table = pd.read_csv(scope_ranking_csv) if Path(scope_ranking_csv).stat().st_size > 0 else pd.DataFrame()
+    if "baseline" in table:
+        chosen = table[table["baseline"].map(lambda v: str(v).strip().lower() in ("true", "1", "1.0"))]
+        if not chosen.empty:
+            return str(chosen["model"].iloc[0])
+    return model
 
 
 def recommended_models(ranking_csv) -> dict[str, str]:

@@ -11,7 +11,14 @@ from collections.abc import Mapping, Sequence
 
 from .models.registry import available_models
 
-JOINT_SCOPE = "viscoelastic_joint"
+#: one QLV-family model fitted jointly to every viscoelastic shear test of a dataset (:mod:`tissuemech.material`)
+MATERIAL_SCOPE = "material"
+#: the test kinds the material model describes (flow curves of fluids stay in their own scope)
+MATERIAL_TESTS = ("constant_shear_rate", "stress_relaxation", "creep_recovery", "frequency_sweep", "amplitude_sweep")
+#: instantaneous-law tags (:func:`tissuemech.models.qlv.instantaneous_law`) the material model's law is chosen among
+#: by AICc: neo-Hookean, reduced polynomial 2 and 3, one-term Ogden (either sign of alpha), Gent, two-term
+#: Lopez-Pamies, exponential (Demiray)
+MATERIAL_LAWS = ("neo_hookean", "rp2", "rp3", "ogden1", "gent", "lp2", "exp")
 ALL_MODES_SCOPE = "all_modes"
 #: frequency sweeps at >= 2 temperatures: the shifted sweeps as one curve at Tref (``tts.mastercurve_curve``)
 MASTERCURVE_SCOPE = "mastercurve"
@@ -25,6 +32,12 @@ def dataset_scopes(tests: Sequence[str], fit_config: Mapping, tts: bool = False)
     ``frequency_sweep`` scope is left out and the :data:`MASTERCURVE_SCOPE` scope fits the shifted sweeps, one
     curve at the reference temperature, with ``fit.models.mastercurve`` (default: the ``frequency_sweep`` list).
     Its spec carries ``"mastercurve": True``; the fit stage then needs the ``tts.nc`` of the dataset.
+
+    The :data:`MATERIAL_SCOPE` scope (every dataset with at least one of :data:`MATERIAL_TESTS`; config
+    ``fit.material``: ``enabled``, ``laws``) fits one QLV model to all of them (:func:`tissuemech.material.fit_material`);
+    its spec has ``"material": True``, the ``laws`` and no ``models`` (the candidates are built on the relaxation
+    times the data resolve), and ``"mastercurve": True`` when its sweeps are at several temperatures (the sweeps
+    enter shifted to Tref).
     """
     known = set(available_models())
     tests = set(tests)
@@ -43,9 +56,17 @@ def dataset_scopes(tests: Sequence[str], fit_config: Mapping, tts: bool = False)
         plain = scopes.pop("frequency_sweep")
         models = fit_config.get("models", {}).get(MASTERCURVE_SCOPE) or plain["models"]
         scopes[MASTERCURVE_SCOPE] = {"tests": ["frequency_sweep"], "models": check(models), "mastercurve": True}
-    joint = fit_config.get("joint_models", [])
-    if joint and {"constant_shear_rate", "stress_relaxation"} <= tests:
-        scopes[JOINT_SCOPE] = {"tests": ["constant_shear_rate", "stress_relaxation"], "models": check(joint)}
+    material = fit_config.get("material", {})
+    shear = [t for t in MATERIAL_TESTS if t in tests]
+    if shear and material.get("enabled", True):
+        laws = list(material.get("laws") or MATERIAL_LAWS)
+        unknown = sorted(set(laws) - set(MATERIAL_LAWS))
+        if unknown:
+            raise KeyError(f"config fit.material.laws names unknown laws {unknown}; known: {list(MATERIAL_LAWS)}")
+        # the candidates' keys follow from the relaxation times the data resolve, so they are not listed here
+        scopes[MATERIAL_SCOPE] = {"tests": shear, "models": [], "laws": laws, "material": True,
+                                  "points_per_curve": material.get("points_per_curve"),
+                                  "mastercurve": bool(tts and "frequency_sweep" in shear)}
     if {"simple_shear", "uniaxial"} <= tests:
         models = [m for m in fit_config.get("models", {}).get("uniaxial", []) if m != "linear_elastic"]
         if models:

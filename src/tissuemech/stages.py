@@ -4,9 +4,10 @@ A *scope* is a set of test kinds fitted jointly with a list of candidate models:
 
 * one scope per test kind present in the dataset that has models in ``config.fit.models`` (e.g. ``flow_curve``,
   ``stress_relaxation``, ``constant_shear_rate``);
-* ``viscoelastic_joint`` when the dataset has constant-shear-rate ramps *and* relaxations: QLV and beyond-QLV
-  models (``config.fit.joint_models``) fitted to all CSR rates plus all relaxations, cross-validated by
-  leave-one-rate-out and by "fit relaxation, predict the ramps";
+* ``material`` when the dataset has any viscoelastic shear test: one QLV model fitted jointly to every ramp,
+  relaxation, creep-recovery, frequency sweep and amplitude sweep through the plate, its relaxation times chosen
+  from the window the tests resolve and its instantaneous law by AICc (:mod:`tissuemech.material`); refitted
+  without each test kind to predict it (``cross_test.csv``);
 * ``all_modes`` when the dataset has simple shear *and* uniaxial curves (e.g. Budday et al.): hyperelastic laws
   fitted to every mode jointly, cross-validated by leaving one mode out;
 * ``mastercurve`` instead of ``frequency_sweep`` when the sweeps carry >= 2 temperatures: the sweeps shifted by
@@ -40,11 +41,14 @@ from .canonical import read_netcdf, write_json, write_netcdf, write_text
 from .curves import as_str, select_average
 from .fem.experiments import flat_punch_indentation, rheometer_torsion
 from .fem.materials import available_laws
+from .adequacy import ADEQUACY_FACTOR, misfit_in_noise_units
 from .fem.tled import DynamicRelaxationError, ElementInversionError
+from .material import MaterialFit, baseline_model, cross_test, fit_material
 from .models.registry import get_model
-from .plots import plot_force_depth, plot_torque
+from .plots import plot_cross_test, plot_force_depth, plot_torque
 from .records import MaterialCard
-from .scopes import ALL_MODES_SCOPE, JOINT_SCOPE, MASTERCURVE_SCOPE, dataset_scopes  # noqa: F401 (re-exported)
+from .scopes import (ALL_MODES_SCOPE, MASTERCURVE_SCOPE, MATERIAL_LAWS, MATERIAL_SCOPE,  # noqa: F401 (re-exported)
+                     MATERIAL_TESTS, dataset_scopes)
 from .tts import mastercurve_curve, tts_card
 
 logger = logging.getLogger(__name__)
@@ -68,16 +72,20 @@ def _geometry_by_test(avg: xr.Dataset, name: str) -> dict[str, float]:
 
 
 def scope_curves(averages: xr.Dataset, tests: Sequence[str], relaxation: str = "measured",
-                 tts: xr.Dataset | None = None) -> list[F.Curve]:
-    """Averaged curves of ``tests`` with their plate geometry, thinned to :data:`POINTS_PER_CURVE` points.
+                 tts: xr.Dataset | None = None, amplitude: str = "lve",
+                 n_points: int = POINTS_PER_CURVE) -> list[F.Curve]:
+    """Averaged curves of ``tests`` with their plate geometry, thinned to ``n_points`` points.
 
     With ``tts`` (the dataset's ``tts.nc``; the ``mastercurve`` scope) the frequency sweeps, one per temperature
     and each thinned alone, are replaced by their mastercurve at the reference temperature, one curve
     (:func:`tissuemech.tts.mastercurve_curve`); sweeps without a finite shift are left out (logged).
+    ``amplitude``: an amplitude sweep's linear part as an elastic curve (``"lve"``, the per-test scope) or every
+    amplitude as measured (``"full"``, the material scope): :func:`tissuemech.fitting.curves_from_averages`.
     """
     curves = F.curves_from_averages(averages, radius_m=_geometry_by_test(averages, "radius_m"),
-                                    gap_m=_geometry_by_test(averages, "gap_m"), relaxation=relaxation, tests=tests)
-    curves = [F.thin(c, POINTS_PER_CURVE) for c in curves]
+                                    gap_m=_geometry_by_test(averages, "gap_m"), relaxation=relaxation, tests=tests,
+                                    amplitude=amplitude)
+    curves = [F.thin(c, n_points) for c in curves]
     if tts is None:
         return curves
     labels = as_str(averages["condition"].values)
@@ -92,13 +100,23 @@ def scope_curves(averages: xr.Dataset, tests: Sequence[str], relaxation: str = "
     return [c for c in curves if c.test != "frequency_sweep"] + [master]
 
 
+def spec_curves(averages: xr.Dataset, spec: Mapping | Sequence[str], relaxation: str = "measured",
+                tts: xr.Dataset | None = None) -> list[F.Curve]:
+    """:func:`scope_curves` of a scope's spec (:func:`dataset_scopes`; a plain list of test kinds is a per-test
+    spec): the material scope takes its amplitude sweeps whole and its ``points_per_curve``."""
+    if not isinstance(spec, Mapping):
+        spec = {"tests": list(spec)}
+    if spec.get("material"):
+        return scope_curves(averages, spec["tests"], relaxation, tts, amplitude="full",
+                            n_points=int(spec.get("points_per_curve") or POINTS_PER_CURVE))
+    return scope_curves(averages, spec["tests"], relaxation, tts)
+
+
 def scope_folds(scope: str, curves: Sequence[F.Curve]) -> list[R.Fold]:
     """Cross-validation designs of a scope (science.md section 4.3)."""
     folds: list[R.Fold] = []
-    if scope in ("constant_shear_rate", JOINT_SCOPE):
+    if scope == "constant_shear_rate":
         folds += R.leave_one_condition_out(curves, "constant_shear_rate")
-    if scope == JOINT_SCOPE:
-        folds += R.train_on_tests(curves, ("stress_relaxation",), ("constant_shear_rate",))
     if scope == "stress_relaxation":
         folds += R.leave_one_condition_out(curves, "stress_relaxation")
     if scope == ALL_MODES_SCOPE:
@@ -134,13 +152,16 @@ def run_fit_scope(averages_path, scope: str, spec: Mapping, target: str, seed: i
         if tts_path is None:
             raise ValueError(f"scope {scope!r} fits the TTS mastercurve and needs the dataset's tts.nc (tts_path)")
         tts_ds = read_netcdf(tts_path)
-    curves = scope_curves(avg, spec["tests"], tts=tts_ds)
+    curves = spec_curves(avg, spec, tts=tts_ds)
     shift_card = None
     if tts_ds is not None:
         shift_card = tts_card(tts_ds, dataset)
     fits_dir, cards_dir = Path(fits_dir), Path(cards_dir)
     fits_dir.mkdir(parents=True, exist_ok=True)
     cards_dir.mkdir(parents=True, exist_ok=True)
+    if spec.get("material"):
+        return run_material_scope(avg, curves, scope, spec, target, seed, fits_dir, cards_dir, ranking_path,
+                                  poisson_ratio, dataset, shift_card)
     # a mastercurve spans far more decades of reduced frequency than the rheometer window the registry's bounds
     # suit: its candidates' time and modulus bounds are widened to the data (fitting.oscillation_window_bounds)
     candidates = [R.Candidate(key, R.RegistryFactory(key),
@@ -152,29 +173,125 @@ def run_fit_scope(averages_path, scope: str, spec: Mapping, target: str, seed: i
                                             dataset=dataset, n_random=multistart, seed=seed, failures=failures)
     else:
         table, fits, cv, rec = pd.DataFrame(), {}, pd.DataFrame(), {"statement": "no curves in this scope"}
-    for key, result in fits.items():
-        F.write_fit_netcdf(result, fits_dir / f"{key}.nc")
-        if not result.success:
+    cross = pd.DataFrame(columns=CROSS_TEST_COLUMNS)
+    if rec.get("recommended"):
+        # the scope's choice, fitted to its own test kind, predicting every other shear test of the dataset
+        key = rec["recommended"]
+        others = [t for t in MATERIAL_TESTS if t in set(as_str(avg["test"].values)) and t not in spec["tests"]]
+        cross = predict_other_tests(get_model(key), fits[key], scope_curves(avg, others, amplitude="full"), target,
+                                    scope)
+    write_scope_outputs(fits, table, rec, cv, cross, failures, scope, fits_dir, cards_dir, ranking_path,
+                        poisson_ratio, dataset, shift_card, {k: get_model(k) for k in fits})
+    return table
+
+
+#: columns of ``ranking/<scope>.cross_test.csv`` and of the dataset's ``cross_test.csv``
+CROSS_TEST_COLUMNS = ("scope", "model", "held_out_test", "nrmse", "n_points", "misfit_noise_units", "skill",
+                      "fitted_to", "status")
+
+
+def predict_other_tests(model, result: F.FitResult, curves: Sequence[F.Curve], target: str, scope: str) -> pd.DataFrame:
+    """How a per-test scope's fit predicts the dataset's other test kinds (``curves``), one row per kind:
+    :data:`CROSS_TEST_COLUMNS` (held-out NRMSE of :func:`tissuemech.fitting.evaluate`, misfit in noise units and
+    skill of :func:`tissuemech.adequacy.misfit_in_noise_units`; ``status`` says why a kind was not scored, e.g. a
+    model that cannot describe it)."""
+    rows = []
+    fitted_to = " ".join(sorted({str(s.get("test")) for s in result.selection}))
+    for kind in sorted({c.test for c in curves}):
+        held = [c for c in curves if c.test == kind]
+        row = {"scope": scope, "model": result.model_key, "held_out_test": kind, "nrmse": np.nan,
+               "n_points": int(sum(c.n_points for c in held)), "misfit_noise_units": np.nan, "skill": np.nan,
+               "fitted_to": fitted_to, "status": "ok"}
+        if not all(F.describes(model, c.response) for c in held):
+            row["status"] = f"not scored: {result.model_key} cannot describe {kind}"
+            rows.append(row)
             continue
         try:
-            card = cards_mod.make_card(result, get_model(key), poisson_ratio=poisson_ratio, dataset=dataset,
+            ev = F.evaluate(model, result.params, held, target)
+            m = misfit_in_noise_units(model, result.params, held, target)
+        except (ValueError, RuntimeError, FloatingPointError) as exc:
+            row["status"] = f"failed: {exc}"
+            rows.append(row)
+            continue
+        row.update(nrmse=ev["nrmse"], misfit_noise_units=m["misfit"], skill=m["skill"])
+        rows.append(row)
+    return pd.DataFrame(rows, columns=list(CROSS_TEST_COLUMNS))
+
+
+def write_scope_outputs(fits: Mapping, table: pd.DataFrame, rec: Mapping, cv: pd.DataFrame, cross: pd.DataFrame,
+                        failures: dict, scope: str, fits_dir: Path, cards_dir: Path, ranking_path, poisson_ratio: float,
+                        dataset: str, shift_card, models: Mapping) -> None:
+    """Fit records, cards, the ranking table, its CV and cross-test tables and the recommendation of one scope.
+
+    A card is written for every fit that may stand for the material: recommendable (converged, with a covariance,
+    no parameter at a bound) and better than the curves' means (``skill`` > 0); never for one that predicts worse
+    than a flat line. Each card states its fit quality (``fit_quality``: misfit in noise units, adequacy,
+    determinacy, skill, the scope's verdict) and, for the recommended one, how it predicts the other test kinds
+    (``cross_test``).
+    """
+    quality = table.set_index("model") if not table.empty and "model" in table else pd.DataFrame()
+    for key, result in fits.items():
+        F.write_fit_netcdf(result, fits_dir / f"{key}.nc")
+        row = quality.loc[key] if key in quality.index else None
+        if row is None or not bool(row.get("recommendable", False)) or not float(row.get("skill", np.nan)) > 0:
+            continue
+        try:
+            card = cards_mod.make_card(result, models[key], poisson_ratio=poisson_ratio, dataset=dataset,
                                        fit_file=str(fits_dir / f"{key}.nc"))
         except (ValueError, KeyError, RuntimeError) as exc:
             failures[f"card:{key}"] = str(exc)
             continue
         if shift_card is not None:
             card["time_temperature_shift"] = shift_card
+        card["fit_quality"] = {
+            "misfit_noise_units": float(row["misfit_noise_units"]), "adequate": bool(row["adequate"]),
+            "determined": bool(row["determined"]), "undetermined": str(row.get("undetermined") or ""),
+            "skill": float(row["skill"]), "recommended": key == rec.get("recommended"),
+            "scope_verdict": str(rec.get("verdict", "")), "adequacy_factor": ADEQUACY_FACTOR}
+        if key == rec.get("recommended") and not cross.empty:
+            card["cross_test"] = cross.to_dict("records")
         cards_mod.write_card_files(card, cards_dir, stem=key)
     if not table.empty:
         table["failures"] = json.dumps(failures) if failures else ""
     else:
         table = pd.DataFrame([{"dataset": dataset, "scope": scope, "model": None, "recommended": False,
+                               "verdict": rec.get("verdict", "no_model_supported"),
+                               "verdict_reason": rec.get("reason", rec.get("statement", "")),
                                "recommendation": rec.get("statement", ""), "failures": json.dumps(failures)}])
+    ranking_path = Path(ranking_path)
     write_text(table.to_csv(index=False), ranking_path)
     write_text(cv.to_csv(index=False) if not cv.empty else "fold,design,model,status\n",
-               Path(ranking_path).with_suffix(".cv.csv"))
-    write_json(rec, Path(ranking_path).with_suffix(".recommendation.json"), newline=False)
-    return table
+               ranking_path.with_suffix(".cv.csv"))
+    write_text(cross.to_csv(index=False), ranking_path.with_suffix(".cross_test.csv"))
+    write_json(dict(rec), ranking_path.with_suffix(".recommendation.json"), newline=False)
+
+
+def run_material_scope(avg: xr.Dataset, curves: Sequence[F.Curve], scope: str, spec: Mapping, target: str, seed: int,
+                       fits_dir: Path, cards_dir: Path, ranking_path, poisson_ratio: float, dataset: str,
+                       shift_card) -> pd.DataFrame:
+    """The ``material`` scope of :func:`run_fit_scope`: :func:`tissuemech.material.fit_material` on every shear
+    test, the cross-test refits of its baseline (:func:`tissuemech.material.cross_test`), and the scope's files."""
+    if curves:
+        mf = fit_material(curves, target, laws=spec.get("laws") or MATERIAL_LAWS, seed=seed, scope=scope,
+                          dataset=dataset)
+    else:
+        mf = MaterialFit(pd.DataFrame(), {}, {}, {"recommended": None, "verdict": "no_model_supported",
+                                                   "reason": "no curves in this scope",
+                                                   "statement": "no_model_supported: no curves in this scope"}, {}, {})
+    baseline = baseline_model(mf.table)
+    cross = pd.DataFrame(columns=CROSS_TEST_COLUMNS)
+    if baseline is not None:
+        cross = cross_test(mf.factories[baseline], mf.fits[baseline], curves, target, seed=seed)
+        cross.insert(0, "scope", scope)
+        cross = cross.rename(columns={"train_tests": "fitted_to"})[list(CROSS_TEST_COLUMNS)]
+    rec = {**mf.recommendation, "baseline": baseline,
+           "relaxation_times_s": [float(t) for t in mf.spectrum.get("taus_s", [])],
+           "window": {k: v for k, v in mf.spectrum.get("window", {}).items()},
+           "equilibrium_share": mf.spectrum.get("equilibrium_share"), "spectrum_method": mf.spectrum.get("method")}
+    write_scope_outputs(mf.fits, mf.table, rec, pd.DataFrame(), cross, dict(mf.failures), scope, fits_dir,
+                        cards_dir, ranking_path, poisson_ratio, dataset, shift_card,
+                        {k: f() for k, f in mf.factories.items()})
+    return mf.table
 
 
 def collect_scopes(ranking_paths: Sequence, ranking_out, figure_out=None) -> pd.DataFrame:
@@ -191,6 +308,25 @@ def collect_scopes(ranking_paths: Sequence, ranking_out, figure_out=None) -> pd.
         shown["model"] = shown["scope"].astype(str) + ": " + shown["model"].astype(str)
         R.plot_ranking(shown, figure_out)
     return ranking
+
+
+def collect_cross_tests(ranking_paths: Sequence, dataset: str, out, figure_out=None) -> pd.DataFrame:
+    """The dataset's ``cross_test.csv``: every scope's ``ranking/<scope>.cross_test.csv`` (the material model refitted
+    without each test kind, each per-test scope's recommended fit predicting the other kinds;
+    :data:`CROSS_TEST_COLUMNS` and ``dataset``), and its figure (:func:`tissuemech.plots.plot_cross_test`)."""
+    parts = []
+    for p in ranking_paths:
+        path = Path(p).with_suffix(".cross_test.csv")
+        if path.is_file() and path.stat().st_size > 0:
+            t = pd.read_csv(path)
+            if not t.empty:
+                parts.append(t)
+    table = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame(columns=list(CROSS_TEST_COLUMNS))
+    table.insert(0, "dataset", dataset)
+    write_text(table.to_csv(index=False), out)
+    if figure_out is not None:
+        plot_cross_test(table, figure_out)
+    return table
 
 
 def write_fits_table(fits_dirs: Sequence, dataset: str, out, posterior_tables: Sequence = ()) -> pd.DataFrame:
@@ -231,7 +367,7 @@ def write_fits_table(fits_dirs: Sequence, dataset: str, out, posterior_tables: S
 # FEM experiments driven by the material cards
 # ------------------------------------------------------------------------------------------------------
 #: scopes whose cards describe the shear response of a parallel-plate sample, best first
-TORSION_SCOPES = (JOINT_SCOPE, "constant_shear_rate", "stress_relaxation", "amplitude_sweep", ALL_MODES_SCOPE,
+TORSION_SCOPES = (MATERIAL_SCOPE, "constant_shear_rate", "stress_relaxation", "amplitude_sweep", ALL_MODES_SCOPE,
                   "simple_shear")
 
 

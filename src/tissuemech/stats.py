@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from math import comb
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
@@ -37,6 +38,60 @@ if TYPE_CHECKING:  # annotations only
 #: family-wise false-alarm level of the diagnosis (Holm across every test run on one dataset); the default of
 #: :func:`holm`
 ALPHA = 0.01
+
+
+# ------------------------------------------------------------------------------------------------
+# the noise of a smooth measured sequence
+# ------------------------------------------------------------------------------------------------
+def robust_noise_sd(values: np.ndarray) -> float:
+    """White-noise SD of a smooth sequence from its second differences: 1.4826 MAD(d2) / sqrt(6).
+
+    For y_i = f_i + e_i with slowly varying f and independent e_i of SD s, var(e_{i+1} - 2 e_i + e_{i-1})
+    = 6 s^2; the median absolute value makes the estimate robust to steps and outliers. Units of ``values``;
+    NaN for fewer than 3 finite values.
+    """
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v)]
+    if v.size < 3:
+        return np.nan
+    d2 = v[2:] - 2.0 * v[1:-1] + v[:-2]
+    return float(1.4826 * np.median(np.abs(d2)) / np.sqrt(6.0))
+
+
+def relative_differences(y: np.ndarray, scale: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(|y| x ``scale`` at the centre points, relative k-th differences scaled to the noise SD) of one curve.
+
+    Six detrendings are computed: k-th differences (k = 2, 3, 4) of ln|y| (exact for exponential and
+    power-law trends) and of y over |y| (exact for polynomial trends, e.g. a ramp from zero), each divided
+    by sqrt(C(2k, k)) so that white noise of relative SD s gives differences of SD s. A smooth trend can only
+    add to them, so the detrending with the smallest median magnitude is kept for the curve. ``scale``
+    (per point, e.g. the strain amplitude of a modulus) converts the magnitudes to the units the absolute
+    noise is constant in.
+    """
+    y = np.asarray(y, float)
+    s = np.ones_like(y) if scale is None else np.abs(np.asarray(scale, float))
+    keep = np.isfinite(y) & (y != 0) & np.isfinite(s) & (s > 0)
+    y, s = y[keep], s[keep]
+    if y.size < 5:
+        return np.empty(0), np.empty(0)
+    z = np.log(np.abs(y))
+    best, best_scale, centre = None, np.inf, None
+    for k in (2, 3, 4):
+        norm = np.sqrt(float(comb(2 * k, k)))
+        lo = k // 2
+        mag = np.abs(y[lo:y.size - (k - lo)]) * s[lo:y.size - (k - lo)]
+        for d in (np.diff(z, k) / norm, np.diff(y, k) / norm / mag):
+            spread = float(np.median(np.abs(d)))
+            if spread < best_scale:
+                best, best_scale, centre = d, spread, mag
+    return centre, best
+
+
+def relative_noise_sd(y: np.ndarray) -> float:
+    """Relative white-noise SD of a smooth curve (1.4826 times the median absolute relative difference of
+    :func:`relative_differences`); NaN for fewer than 5 usable points."""
+    _, d = relative_differences(y)
+    return float(1.4826 * np.median(np.abs(d))) if d.size else float("nan")
 
 
 def log10_p_from_z(z: float) -> float:

@@ -39,7 +39,7 @@ from .plots import (all_positive, axis_label, figure_curves, figure_table, new_f
                     save_figure)
 from .ranking import recommended_models
 from .records import Finding, FitRecord, MaterialCard
-from .stages import scope_curves
+from .stages import spec_curves
 from .uq import predictive_band
 
 # ------------------------------------------------------------------------------------------------------
@@ -192,11 +192,11 @@ def figure_scope_fit(fit: FitRecord | xr.Dataset, curves: Sequence, title: str |
     return fig
 
 
-def plot_scope_fits(averages_path, fits_dir, tests: Sequence[str], out_dir, tts_path=None) -> list[Path]:
+def plot_scope_fits(averages_path, fits_dir, spec: Mapping | Sequence[str], out_dir, tts_path=None) -> list[Path]:
     """``<out_dir>/<model>.png/.svg`` for every fit record ``<fits_dir>/<model>.nc`` of a scope.
 
-    The curves are rebuilt from the averages exactly as the fit stage builds them
-    (:func:`tissuemech.stages.scope_curves`, with the dataset's ``tts.nc`` as ``tts_path`` for the ``mastercurve``
+    The curves are rebuilt from the averages exactly as the fit stage builds them from the scope's ``spec`` (or
+    its test kinds) (:func:`tissuemech.stages.spec_curves`, with the dataset's ``tts.nc`` as ``tts_path`` for the ``mastercurve``
     scope, whose one curve is drawn in reduced frequency), so each fitted point is drawn at its own
     time/strain/rate/frequency.
     """
@@ -210,13 +210,13 @@ def plot_scope_fits(averages_path, fits_dir, tests: Sequence[str], out_dir, tts_
         fit = FitRecord.from_netcdf(path)
         relaxation = fit.relaxation
         if relaxation not in curves_by_relaxation:
-            curves_by_relaxation[relaxation] = scope_curves(averages, list(tests), relaxation=relaxation, tts=tts)
+            curves_by_relaxation[relaxation] = spec_curves(averages, spec, relaxation=relaxation, tts=tts)
         fig = figure_scope_fit(fit, curves_by_relaxation[relaxation])
         written += save_figure(fig, out_dir / safe_name(path.stem), dpi=110)
     return written
 
 
-def plot_posterior_fit(averages_path, record_path, posterior_nc, tests: Sequence[str], out) -> list[Path]:
+def plot_posterior_fit(averages_path, record_path, posterior_nc, spec: Mapping | Sequence[str], out) -> list[Path]:
     """The fit figure of one sampled fit record (:func:`figure_scope_fit`, as drawn by :func:`plot_scope_fits`)
     with the 5-95 % posterior-predictive band of its posterior file (``posterior/<scope>/<model>.nc``,
     :func:`tissuemech.uq.predictive_band`); a figure that says so where the record or its posterior is absent."""
@@ -227,7 +227,7 @@ def plot_posterior_fit(averages_path, record_path, posterior_nc, tests: Sequence
         ax.set_axis_off()
         return save_figure(fig, out)
     fit = FitRecord.from_netcdf(record_path)
-    curves = scope_curves(read_netcdf(averages_path), list(tests), relaxation=fit.relaxation)
+    curves = spec_curves(read_netcdf(averages_path), spec, relaxation=fit.relaxation)
     return save_figure(figure_scope_fit(fit, curves, band=band), out, dpi=110)
 
 

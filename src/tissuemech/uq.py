@@ -71,12 +71,12 @@ from .curves import drop_flagged, select_average
 from .models.base import initial_shear_modulus
 from .fem.experiments import flat_punch_indentation, rheometer_torsion
 from .fem.tled import DynamicRelaxationError, ElementInversionError
-from .models.registry import get_model
+from .models.registry import build_model, get_model
 from .pipeline import load_runs
 from .plots import new_figure, save_figure
 from .records import MaterialCard
 from .stats import mixed_effects
-from .stages import scope_curves
+from .stages import spec_curves
 
 logger = logging.getLogger(__name__)
 
@@ -86,11 +86,13 @@ Z95 = 1.6448536269514722
 IDATA_GROUPS = ("posterior", "posterior_predictive", "sample_stats", "observed_data")
 
 
-def problem_for_record(averages: xr.Dataset, record: F.FitRecord, tests) -> F.FitProblem:
-    """The fit problem a record came from: the scope's curves (``stages.scope_curves``), its plate target,
-    relaxation treatment and the registry model with its default bounds and noise model."""
-    curves = scope_curves(averages, list(tests), relaxation=record.relaxation or "measured")
-    return F.FitProblem(model=get_model(record.model_key), curves=list(curves), target=record.target,
+def problem_for_record(averages: xr.Dataset, record: F.FitRecord, spec) -> F.FitProblem:
+    """The fit problem a record came from: the scope's curves (``stages.spec_curves`` of the scope's spec or test
+    kinds), its plate target, relaxation treatment and the record's model (``models.registry.build_model``: the
+    registered model, or a fixed-time QLV on the record's relaxation times) with its default bounds and noise
+    model."""
+    curves = spec_curves(averages, spec, relaxation=record.relaxation or "measured")
+    return F.FitProblem(model=build_model(record.model_key, record.structure), curves=list(curves), target=record.target,
                         model_key=record.model_key, scope=record.scope, relaxation=record.relaxation or "measured")
 
 
@@ -307,10 +309,10 @@ def run_posterior(averages_path, fits_dir, scope: str, model: str, tests, out_nc
 # ------------------------------------------------------------------------------------------------------
 # specimen variability: per-piece levels and the mixed-effects model (tissuemech.stats.mixed_effects)
 # ------------------------------------------------------------------------------------------------------
-def reference_shear_modulus(model_key: str, params: Mapping[str, float]) -> float:
+def reference_shear_modulus(model, params: Mapping[str, float]) -> float:
     """Initial shear modulus of a fitted model (Pa): the elastic law's small-strain tangent, or for a Prony
-    series ``G_inf + sum G_i``; NaN where neither is defined."""
-    model = get_model(model_key)
+    series ``G_inf + sum G_i``; NaN where neither is defined. ``model``: the model or its registry key."""
+    model = get_model(model) if isinstance(model, str) else model
     if model.supports("elastic_shear"):
         return float(initial_shear_modulus(model, params))
     prony = [v for k, v in params.items() if k == "G_inf" or (k.startswith("G_") and k[2:].isdigit())]
@@ -320,8 +322,8 @@ def reference_shear_modulus(model_key: str, params: Mapping[str, float]) -> floa
 def piece_levels(runs, record: F.FitRecord, tests, exclude_flagged: bool = True) -> pd.DataFrame:
     """One row per run of ``tests``: specimen, sample, test, condition, ``log_level`` (natural log of the factor
     that scales the fit's prediction onto the run; module docstring), ``log_g0`` and the points used."""
-    model = get_model(record.model_key)
-    g0 = reference_shear_modulus(record.model_key, record.params)
+    model = build_model(record.model_key, record.structure)
+    g0 = reference_shear_modulus(model, record.params)
     noise = F.NoiseModel()
     rows = []
     for run in runs:
@@ -365,7 +367,7 @@ def run_population(ranking_csv, runs_dir, fits_dir, cards_dir, scope: str, tests
     levels = piece_levels(load_runs(runs_dir), record, list(tests), exclude_flagged=exclude_flagged)
     write_text(levels.to_csv(index=False), out_csv)
     ok = levels[levels.get("status", pd.Series(dtype=str)) == "ok"] if not levels.empty else levels
-    g0 = reference_shear_modulus(model, record.params)
+    g0 = reference_shear_modulus(build_model(record.model_key, record.structure), record.params)
     value = "log_g0" if g0 > 0 else "log_level"
     pop = {"status": "no run of the scope's tests"}
     if not ok.empty:  # the population JSON holds the model's counts, mean and SDs (not the diagnosis's BLUPs / ICC)
@@ -409,7 +411,8 @@ def elastic_card(card: Mapping, record: F.FitRecord, params: Mapping[str, float]
         # the small-strain Prony series of the draw (exact for QLV; the small-strain linearisation of a
         # beyond-QLV law, whose strain-dependent weights the FEM does not have)
         taus = np.asarray(taus, float)
-        pr = prony_from_step_response(get_model(record.model_key), params, taus, taus.min() / 10, taus.max() * 10)
+        pr = prony_from_step_response(build_model(record.model_key, record.structure), params, taus, taus.min() / 10,
+                                      taus.max() * 10)
         prony = {"g": pr["g"], "tau": pr["tau"], "g_inf": pr["g_inf"],
                  "source": "small-strain step response of the fit (tissuemech.uq)"}
     fields, _, _ = material_fields(law, {n: float(params[n]) for n in names}, float(card["poisson_ratio"]), prony,
@@ -430,6 +433,10 @@ def recommended_posterior(posterior_ncs, model: str) -> Path:
     error when the recommended model was not sampled (config ``posterior.models`` left it out)."""
     paths = {Path(p).stem: Path(p) for p in ([posterior_ncs] if isinstance(posterior_ncs, (str, Path))
                                              else posterior_ncs)}
+    if model not in paths and "baseline" in paths and paths["baseline"].is_file():
+        # the material scope samples its baseline, a file named after the role, not the data-chosen key
+        if read_inference_group(paths["baseline"], "posterior").attrs.get("model") == model:
+            return paths["baseline"]
     if model not in paths:
         raise FileNotFoundError(f"the recommended model {model} has no posterior (sampled: {sorted(paths)}); "
                                 "add it to config posterior.models or leave that list empty")
@@ -477,7 +484,7 @@ def propagate(solve, card: Mapping, pop: Mapping, post: xr.Dataset, record: F.Fi
         except (ElementInversionError, DynamicRelaxationError) as exc:  # a NaN row, reported
             failed.append(f"draw {k}: {exc}")
             logger.warning("uq FEM: draw %d failed: %s", k, exc)
-    g0_fit = reference_shear_modulus(record.model_key, record.params)
+    g0_fit = reference_shear_modulus(build_model(record.model_key, record.structure), record.params)
     sd_pop = math.hypot(float(pop.get("sd_specimen", 0.0)), float(pop.get("sd_sample", 0.0)))
     offset = float(pop["mean"]) - math.log(g0_fit) if pop.get("value") == "log_g0" and "mean" in pop else 0.0
     factor = np.exp(offset + sd_pop * rng.standard_normal(n_draws))

@@ -131,9 +131,9 @@ def scope_card_dirs(wildcards):
     ]
 
 
-#: scope whose fits the diagnosis examines, best first (the joint viscoelastic fit carries most evidence)
+#: scope whose fits the diagnosis examines, best first (the material model carries every shear test)
 DIAGNOSIS_SCOPES = (
-    "viscoelastic_joint",
+    "material",
     "all_modes",
     "constant_shear_rate",
     "stress_relaxation",
@@ -241,8 +241,13 @@ def posterior_scopes_of(name):
 
 def posterior_models_of(name, scope):
     """Models of a scope that are sampled: config posterior.models, or every model the scope fits (so the
-    recommended one is always among them; the sampling does not read the ranking)."""
-    fitted = list(dataset_scopes_of(name)[scope]["models"])
+    recommended one is always among them); the material scope: its baseline (named ``baseline``; rule posterior
+    reads the key from the scope's ranking)."""
+    spec = dataset_scopes_of(name)[scope]
+    if spec.get("material"):
+        # the material scope's candidates are named after the data: its baseline model is sampled
+        return ["baseline"]
+    fitted = list(spec["models"])
     wanted = POSTERIOR.get("models") or []
     return [m for m in fitted if not wanted or m in wanted]
 

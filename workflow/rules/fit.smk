@@ -59,6 +59,20 @@ rule rank:
             subcategory="4 ranking",
             labels={"item": "ranking figure"},
         ),
+        cross_test=report(
+            "results/{dataset}/cross_test.csv",
+            caption="../report/cross_test_table.rst",
+            category="{dataset}",
+            subcategory="4 ranking",
+            labels={"item": "cross-test table"},
+        ),
+        cross_test_figure=report(
+            "results/{dataset}/figures/cross_test.png",
+            caption="../report/cross_test.rst",
+            category="{dataset}",
+            subcategory="4 ranking",
+            labels={"item": "cross-test figure"},
+        ),
         cards_table=report(
             "results/{dataset}/cards.csv",
             caption="../report/cards_table.rst",

@@ -7,6 +7,7 @@ rule posterior:
     input:
         averages="results/{dataset}/averages.nc",
         fits="results/{dataset}/fits/{scope}",
+        ranking="results/{dataset}/ranking/{scope}.csv",
     output:
         idata="results/{dataset}/posterior/{scope}/{model}.nc",
         table=report(
@@ -34,7 +35,7 @@ rule posterior:
     benchmark:
         "benchmarks/runs/{dataset}/posterior_{scope}_{model}.tsv"
     params:
-        tests=lambda wildcards: scope_spec(wildcards)["tests"],
+        spec=scope_spec,
         walkers=POSTERIOR.get("walkers"),
         steps=POSTERIOR.get("steps", 1400),
         burn=POSTERIOR.get("burn", 400),

@@ -12,6 +12,6 @@ with job_log(snakemake.log[0], end_process=True) as log:
         tts_path=snakemake.input.get("tts"),
     )
     log.info("scope %s: ranked %d models", snakemake.wildcards.scope, len(table))
-    written = plot_scope_fits(snakemake.input.averages, snakemake.output.fits, snakemake.params.spec["tests"],
+    written = plot_scope_fits(snakemake.input.averages, snakemake.output.fits, snakemake.params.spec,
                               snakemake.output.figures, tts_path=snakemake.input.get("tts"))
     log.info("%s/%s: %d fit figures", snakemake.wildcards.dataset, snakemake.wildcards.scope, len(written))

@@ -434,25 +434,10 @@ def level_normalised(runs: Sequence[xr.Dataset], levels: Mapping[str, float]) ->
     return out
 
 
-#: keys of the fixed-time models (``qlv_<law>_prony<n>``, ``pr_<law>_prony<n>``): family, instantaneous law tag
-FIXED_TIME_KEY = re.compile(r"(qlv|pr)_(.+)_prony\d+")
-
-
 def spectrum_model(model_key: str, taus_s: Sequence[float]) -> ConstitutiveModel:
-    """The registered model ``model_key`` rebuilt on the relaxation times ``taus_s`` [s].
-
-    Only fixed-time QLV (``qlv_<law>_prony<n>``) and Pipkin-Rogers (``pr_<law>_prony<n>``) models are
-    rebuilt (same instantaneous law, one branch per time, same key); every other model is returned as
-    registered (free times, fractional or flow models choose their own time scales).
-    """
-    m = FIXED_TIME_KEY.fullmatch(model_key)
-    taus = np.asarray(taus_s, float)
-    if m is None or taus.size == 0:
-        return get_model(model_key)
-    law = instantaneous_law(m.group(2))
-    if m.group(1) == "qlv":
-        return QLVModel(law, n_prony=taus.size, taus_s=taus, name=model_key)
-    return PipkinRogersModel(law, taus.size, taus_s=taus, name=model_key)
+    """The model ``model_key`` rebuilt on the relaxation times ``taus_s`` [s] (fixed-time QLV and Pipkin-Rogers
+    keys; :func:`tissuemech.models.registry.model_on_times`); every other model as registered."""
+    return model_on_times(model_key, taus_s)
 
 
 def curves_of_runs(runs: Sequence[xr.Dataset], relaxation: str, n_points: int) -> list[fitting.Curve]:

@@ -40,9 +40,9 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 import scipy
-from scipy.special import comb
 
 from ..models.recursion import prony_branch_histories
+from ..stats import relative_differences
 
 #: a row enters the level and structure tests only where its OBSERVED magnitude exceeds this many noise SDs
 #: (a detection convention, not an instrument property)
@@ -110,50 +110,6 @@ def condition_label(run: xr.Dataset) -> str:
     return test
 
 
-def robust_noise_sd(values: np.ndarray) -> float:
-    """White-noise SD of a smooth sequence from its second differences: 1.4826 MAD(d2) / sqrt(6).
-
-    For y_i = f_i + e_i with slowly varying f and independent e_i of SD s, var(e_{i+1} - 2 e_i + e_{i-1})
-    = 6 s^2; the median absolute value makes the estimate robust to steps and outliers. Units of ``values``;
-    NaN for fewer than 3 finite values.
-    """
-    v = np.asarray(values, float)
-    v = v[np.isfinite(v)]
-    if v.size < 3:
-        return np.nan
-    d2 = v[2:] - 2.0 * v[1:-1] + v[:-2]
-    return float(1.4826 * np.median(np.abs(d2)) / np.sqrt(6.0))
-
-
-def _second_differences(y: np.ndarray, scale: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(|y| x ``scale`` at the centre points, relative k-th differences scaled to the noise SD) of one curve.
-
-    Six detrendings are computed: k-th differences (k = 2, 3, 4) of ln|y| (exact for exponential and
-    power-law trends) and of y over |y| (exact for polynomial trends, e.g. a ramp from zero), each divided
-    by sqrt(C(2k, k)) so that white noise of relative SD s gives differences of SD s. A smooth trend can only
-    add to them, so the detrending with the smallest median magnitude is kept for the curve. ``scale``
-    (per point, e.g. the strain amplitude of a modulus) converts the magnitudes to the units the absolute
-    noise is constant in.
-    """
-    y = np.asarray(y, float)
-    s = np.ones_like(y) if scale is None else np.abs(np.asarray(scale, float))
-    keep = np.isfinite(y) & (y != 0) & np.isfinite(s) & (s > 0)
-    y, s = y[keep], s[keep]
-    if y.size < 5:
-        return np.empty(0), np.empty(0)
-    z = np.log(np.abs(y))
-    best, best_scale, centre = None, np.inf, None
-    for k in (2, 3, 4):
-        norm = np.sqrt(float(comb(2 * k, k)))
-        lo = k // 2
-        mag = np.abs(y[lo:y.size - (k - lo)]) * s[lo:y.size - (k - lo)]
-        for d in (np.diff(z, k) / norm, np.diff(y, k) / norm / mag):
-            scale = float(np.median(np.abs(d)))
-            if scale < best_scale:
-                best, best_scale, centre = d, scale, mag
-    return centre, best
-
-
 #: oscillation quantities that are a torque divided by the strain amplitude (their absolute noise is not constant)
 MODULI = ("storage_modulus", "loss_modulus")
 
@@ -175,7 +131,7 @@ def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
     """Noise model of the measured quantities, from the data themselves (no instrument constant).
 
     Within every curve the relative differences of order 2-4 (acquisition order; of ln|y| or of y/|y|,
-    whichever is smallest for that curve, see :func:`_second_differences`) measure the point-to-point
+    whichever is smallest for that curve, see :func:`tissuemech.stats.relative_differences`) measure the point-to-point
     scatter; smooth trends (power laws in frequency, exponential decays, polynomial ramps) contribute little.
     Per (test, quantity) block the points are pooled over curves, binned by |y| (quantiles), and the
     robust variance per bin, s_b^2 = (1.4826 MAD)^2 (relative units), is fitted by NNLS as
@@ -206,7 +162,7 @@ def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
     for key, curves in pooled.items():
         # a modulus block is pooled in stress amplitude only when every sweep records its strain amplitude
         per_strain = all(a is not None for _, a in curves)
-        parts = [_second_differences(y, a if per_strain else None) for y, a in curves]
+        parts = [relative_differences(y, a if per_strain else None) for y, a in curves]
         parts = [(m, d) for m, d in parts if m.size]
         if not parts:
             continue

@@ -55,7 +55,7 @@ from scipy.linalg import block_diag
 from ..io.quality import RAW_PHASE_LIMIT_RAD
 from .. import stats as st
 from .catalogue import DiagnosisContext, fix_record, make_finding, untested_finding
-from .evidence import robust_noise_sd, run_id
+from .evidence import run_id
 
 EFFECT = "inertia_dominated_points"
 #: fewest unflagged points of a run for the held-out score (a quadratic needs 3 + 1 to leave out)
@@ -299,7 +299,7 @@ def hold_rise_sds(e: pd.DataFrame) -> tuple[float, int]:
     (a completely monotone relaxation function), so ``max_j (|s_j| - min_{i<j} |s_i|)`` is noise only; a
     ring makes it large. ``e``: the curve's rows in time order (``residual``, ``predicted`` or ``observed``;
     ``strain``: only points at >= 98 % of the curve's largest |strain|, i.e. the hold, are used when given;
-    ``sigma``: per-point noise SD, else :func:`tissuemech.diagnosis.evidence.robust_noise_sd` of the
+    ``sigma``: per-point noise SD, else :func:`tissuemech.stats.robust_noise_sd` of the
     stress). Returns (rise / (sqrt(2) median sigma) [1], number of hold points).
     """
     obs = (e["observed"] if "observed" in e else e["predicted"] + e["residual"]).to_numpy(float)
@@ -310,7 +310,7 @@ def hold_rise_sds(e: pd.DataFrame) -> tuple[float, int]:
     s = np.abs(obs[keep])
     if s.size < 3:
         return 0.0, int(s.size)
-    sd = float(np.nanmedian(e["sigma"].to_numpy(float)[keep])) if "sigma" in e else robust_noise_sd(s)
+    sd = float(np.nanmedian(e["sigma"].to_numpy(float)[keep])) if "sigma" in e else st.robust_noise_sd(s)
     rise = float(np.max(s - np.minimum.accumulate(s)))
     if not (np.isfinite(sd) and sd > 0):
         return (np.inf if rise > 0 else 0.0), int(s.size)

@@ -53,18 +53,19 @@ from __future__ import annotations
 
 from ..records import FitRecord
 from ..spectra import log_spaced_taus
-from ._data import (TEST_RESPONSE, Curve, amplitude_sweep_lve_curve, curve_and_rows, curve_from_run, curve_ranges,
+from ._data import (TEST_RESPONSE, Curve, amplitude_sweep_curve, amplitude_sweep_lve_curve, curve_and_rows, curve_from_run, curve_ranges,
                     curves_from_averages, geometry_from_runs, relaxation_history, select_strain, thin,
                     with_relaxation_history)
 from ._fit import (CORRELATION_FLAG, EQUIVALENT_CHISQR_RTOL, FITS_CSV_ATTRS, FitResult, at_bound_parameters, evaluate,
                    fit, fit_to_dataset, fits_csv_row, has_covariance, weights_at_upper_bound, write_fit_netcdf)
-from ._problem import (LOG_RESPONSES, PLATE_TARGETS, FitProblem, NoiseModel, oscillation_window_bounds, plate_factor,
-                       predict, target_observations)
+from ._problem import (AMPLITUDE_SWEEP_CYCLES, LOG_RESPONSES, PLATE_TARGETS, FitProblem, NoiseModel, describes,
+                       oscillation_window_bounds, plate_factor, predict, target_observations)
 from ._prony import prony_nnls, prony_start
 
 
 __all__ = [
     "PLATE_TARGETS", "TEST_RESPONSE", "LOG_RESPONSES", "CORRELATION_FLAG", "EQUIVALENT_CHISQR_RTOL",
+    "AMPLITUDE_SWEEP_CYCLES", "describes", "amplitude_sweep_curve",
     "Curve", "amplitude_sweep_lve_curve", "curve_from_run", "curve_and_rows", "curves_from_averages",
     "geometry_from_runs", "relaxation_history", "thin", "select_strain", "with_relaxation_history", "curve_ranges",
     "plate_factor", "target_observations", "predict", "oscillation_window_bounds",

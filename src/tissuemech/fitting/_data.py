@@ -16,6 +16,7 @@ TEST_RESPONSE: dict[str, str] = {
     "stress_relaxation": "shear_history",
     "constant_shear_rate": "shear_history",
     "frequency_sweep": "oscillation",
+    "amplitude_sweep": "amplitude_sweep",
     "creep_recovery": "creep",
     "flow_curve": "flow",
     "simple_shear": "elastic_shear",
@@ -35,10 +36,12 @@ class Curve:
     test : canonical test kind (``canonical.TEST_KINDS``)
     condition : label of the nominal condition, e.g. ``"rate=0.01/s"``, ``"strain=10%"``
     response : model response kind (``models.base``): ``shear_history``, ``oscillation``, ``flow``,
-        ``creep``, ``elastic_shear``, ``uniaxial``
+        ``creep``, ``elastic_shear``, ``uniaxial``; or ``amplitude_sweep``, the first harmonic of a model's
+        ``shear_history`` response to sinusoidal rim strains (:func:`tissuemech.models.plate.oscillation_moduli`)
     inputs : model inputs (SI): ``time`` [s] + ``shear_strain`` [1] (a full history from a virgin state) for
         ``shear_history``; ``angular_frequency`` [rad/s]; ``shear_rate`` [1/s]; ``time`` + ``shear_stress``
-        [Pa] (imposed) for ``creep``; ``shear_strain`` for ``elastic_shear``; ``stretch`` for ``uniaxial``
+        [Pa] (imposed) for ``creep``; ``shear_strain`` for ``elastic_shear``; ``stretch`` for ``uniaxial``;
+        ``shear_strain`` = rim strain amplitude [1] for ``amplitude_sweep`` (its frequency: ``nominal["frequency_hz"]``)
     observed : observable name -> values at the observation points: ``shear_stress`` [Pa] (reported rim
         stress for plate tests), optional ``torque`` [N m], ``storage_modulus``/``loss_modulus`` [Pa],
         ``shear_strain`` (creep), ``nominal_stress`` [Pa] (uniaxial)
@@ -192,6 +195,8 @@ def curve_and_rows(ds: xr.Dataset, relaxation: str) -> tuple[Curve, np.ndarray]:
     if test == "flow_curve":
         return Curve(inputs={"shear_rate": _var(ds, "shear_rate")}, observed={"shear_stress": _var(ds, "shear_stress")},
                      **common), rows
+    if test == "amplitude_sweep":
+        return amplitude_sweep_curve(ds, common), rows
     t = _var(ds, "time")
     if test == "creep_recovery":
         stress = _var(ds, "shear_stress")
@@ -237,7 +242,8 @@ def geometry_from_runs(runs: Iterable[xr.Dataset]) -> dict[str, tuple[float, flo
 
 def curves_from_averages(avg: xr.Dataset, radius_m: float | Mapping[str, float] = float("nan"),
                          gap_m: float | Mapping[str, float] = float("nan"),
-                         relaxation: str = "measured", tests: Sequence[str] | None = None) -> list[Curve]:
+                         relaxation: str = "measured", tests: Sequence[str] | None = None,
+                         amplitude: str = "lve") -> list[Curve]:
     """Curves (sample means, SDs and counts) from an averages dataset (``curves.average_runs`` layout).
 
     Parameters
@@ -247,6 +253,9 @@ def curves_from_averages(avg: xr.Dataset, radius_m: float | Mapping[str, float] 
         mapping test kind -> value (e.g. from :func:`geometry_from_runs`); NaN for homogeneous data
     relaxation : relaxation strain-history treatment (:func:`relaxation_history`)
     tests : restrict to these test kinds (default: every fittable one)
+    amplitude : how an amplitude sweep becomes a curve: ``"lve"``, its linear part as an elastic shear curve
+        (:func:`amplitude_sweep_lve_curve`, the thesis's linear G); ``"full"``, every amplitude as measured
+        between the plates (response ``amplitude_sweep``: G', G'' of the first harmonic)
 
     Grid points where the mean is missing (fewer samples than needed) are dropped; the time of a CSR curve
     (grid: strain) is strain / nominal rate when the averaged time is absent.
@@ -259,11 +268,13 @@ def curves_from_averages(avg: xr.Dataset, radius_m: float | Mapping[str, float] 
         test, label = str(test), str(label)
         if tests is not None and test not in tests:
             continue
-        if test == "amplitude_sweep":
+        if test == "amplitude_sweep" and amplitude == "lve":
             curve = amplitude_sweep_lve_curve(select_average(avg, test, label))
             if curve is not None:
                 out.append(curve)
             continue
+        if amplitude not in ("lve", "full"):
+            raise ValueError(f"amplitude must be 'lve' or 'full', not {amplitude!r}")
         if test not in TEST_RESPONSE:
             continue
         one = select_average(avg, test, label)
@@ -278,6 +289,7 @@ def curves_from_averages(avg: xr.Dataset, radius_m: float | Mapping[str, float] 
         needed = {"stress_relaxation": ("time", "shear_stress"), "constant_shear_rate": ("shear_strain", "shear_stress"),
                   "frequency_sweep": ("frequency", "storage_modulus", "loss_modulus"),
                   "creep_recovery": ("time", "shear_strain", "shear_stress"), "flow_curve": ("shear_rate", "shear_stress"),
+                  "amplitude_sweep": ("shear_strain", "storage_modulus", "loss_modulus"),
                   "simple_shear": ("shear_strain",), "uniaxial": ("stretch", "nominal_stress")}[test]
         ok = np.ones(grid.size, bool)
         for name in needed:
@@ -294,6 +306,30 @@ def curves_from_averages(avg: xr.Dataset, radius_m: float | Mapping[str, float] 
         sd = {k: sds[k][ok][rows] for k in curve.observed if k in sds}
         out.append(replace(curve, sd=sd))
     return out
+
+
+def amplitude_sweep_curve(ds: xr.Dataset, common: Mapping) -> Curve:
+    """An amplitude sweep (run or average as a run) as measured between the plates: response ``amplitude_sweep``.
+
+    Input ``shear_strain`` = the rim strain amplitude [1]; observed ``storage_modulus``/``loss_modulus`` [Pa] as
+    the instrument reports them (first harmonic of the apparent rim stress over the rim strain). The frequency is
+    the run's ``frequency_hz`` attribute or, failing that, its ``frequency`` or ``angular_frequency`` channel
+    (median); without any the sweep cannot be predicted and ``ValueError`` says so.
+    """
+    nominal = dict(common.get("nominal", {}))
+    f_hz = nominal.get("frequency_hz", np.nan)
+    if not np.isfinite(f_hz) and "frequency" in ds:
+        f_hz = float(np.nanmedian(_var(ds, "frequency")))
+    if not np.isfinite(f_hz) and "angular_frequency" in ds:
+        f_hz = float(np.nanmedian(_var(ds, "angular_frequency"))) / (2.0 * np.pi)
+    if not (np.isfinite(f_hz) and f_hz > 0):
+        raise ValueError(f"amplitude sweep {common.get('condition', '')!r} has no frequency (attribute frequency_hz, "
+                         "channel frequency or angular_frequency)")
+    nominal["frequency_hz"] = float(f_hz)
+    strain = np.abs(_var(ds, "shear_strain"))
+    return Curve(inputs={"shear_strain": strain},
+                 observed={"storage_modulus": _var(ds, "storage_modulus"), "loss_modulus": _var(ds, "loss_modulus")},
+                 **{**common, "nominal": nominal})
 
 
 def amplitude_sweep_lve_curve(sweep: xr.Dataset, tolerance: float = 0.05) -> Curve | None:
@@ -360,7 +396,7 @@ def with_relaxation_history(curve: Curve, mode: str) -> Curve:
 def _obs_x(curve: Curve) -> np.ndarray:
     """The natural ordering variable of a curve at its observation points."""
     key = {"shear_history": "time", "oscillation": "angular_frequency", "flow": "shear_rate", "creep": "time",
-           "elastic_shear": "shear_strain", "uniaxial": "stretch"}[curve.response]
+           "elastic_shear": "shear_strain", "uniaxial": "stretch", "amplitude_sweep": "shear_strain"}[curve.response]
     return curve.obs_inputs(key)
 
 
@@ -396,7 +432,7 @@ def thin(curve: Curve, n_points: int = 40) -> Curve:
 
 def select_strain(curve: Curve, max_strain: float | None = None, min_strain: float | None = None) -> Curve:
     """Restrict the observations to rim strains (or |stretch - 1|) within ``[min_strain, max_strain]``."""
-    if curve.response in ("shear_history", "elastic_shear"):
+    if curve.response in ("shear_history", "elastic_shear", "amplitude_sweep"):
         s = np.abs(curve.obs_inputs("shear_strain"))
     elif curve.response == "uniaxial":
         s = np.abs(curve.obs_inputs("stretch") - 1.0)
@@ -416,7 +452,7 @@ def curve_ranges(curves: Sequence[Curve]) -> dict[str, float]:
     """Strain, rate, frequency and time ranges covered by the observations of ``curves`` (validity range)."""
     strains, rates, omegas, times = [], [], [], []
     for c in curves:
-        if c.response in ("shear_history", "elastic_shear"):
+        if c.response in ("shear_history", "elastic_shear", "amplitude_sweep"):
             strains.append(np.abs(c.obs_inputs("shear_strain")))
         if c.response == "uniaxial":
             strains.append(np.abs(c.obs_inputs("stretch") - 1.0))
@@ -428,6 +464,8 @@ def curve_ranges(curves: Sequence[Curve]) -> dict[str, float]:
             rates.append(np.array([c.nominal["shear_rate_1_per_s"]]))
         if c.response == "oscillation":
             omegas.append(c.obs_inputs("angular_frequency"))
+        if c.response == "amplitude_sweep":
+            omegas.append(np.array([2.0 * np.pi * c.nominal["frequency_hz"]]))
         if c.response in ("shear_history", "creep"):
             times.append(c.obs_inputs("time"))
 

@@ -10,7 +10,8 @@ import lazy_loader
 import numpy as np
 
 from ..models.base import ConstitutiveModel, ParamSpec, ResponseNotSupported
-from ..models.plate import PlateHistories, forward_plate, forward_plate_batch, rabinowitsch_rim_stress
+from ..models.plate import (PlateHistories, creep_rim_strain, forward_plate, forward_plate_batch, oscillation_moduli,
+                            rabinowitsch_rim_stress)
 from ._data import Curve
 
 # loaded on first use: jobs that read fit records without fitting skip lmfit's import (~0.5 CPU s with
@@ -20,7 +21,22 @@ lmfit = lazy_loader.load("lmfit")
 PLATE_TARGETS: tuple[str, ...] = ("thesis", "apparent_stress", "corrected_stress", "torque", "none")
 
 #: responses fitted with log residuals (the data span decades)
-LOG_RESPONSES: frozenset[str] = frozenset({"oscillation", "flow"})
+LOG_RESPONSES: frozenset[str] = frozenset({"oscillation", "flow", "amplitude_sweep"})
+
+#: cycles simulated, cycles analysed and samples per cycle of an ``amplitude_sweep`` prediction: the first harmonic
+#: of the last cycle; start-up transients of modes slower than a period are near-linear in time over it and the
+#: harmonic analysis absorbs them (:func:`tissuemech.models.plate.first_harmonic_moduli`)
+AMPLITUDE_SWEEP_CYCLES = (3, 1, 48)
+
+
+def describes(model: ConstitutiveModel, response: str) -> bool:
+    """Whether ``model`` can predict a curve of ``response`` (a shear history also from a purely elastic law; an
+    amplitude sweep from any shear-history model, through its first harmonic)."""
+    if response == "shear_history":
+        return model.supports("shear_history") or model.supports("elastic_shear")
+    if response == "amplitude_sweep":
+        return model.supports("shear_history")
+    return model.supports(response)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -115,8 +131,25 @@ def predict(model: ConstitutiveModel, p: Mapping[str, float], curve: Curve, targ
             return {"shear_stress": torque / plate_factor(curve.radius_m)}
         return {"shear_stress": model.steady_shear_stress(p, rate)}
     if r == "creep":
-        full = model.creep_strain(p, np.asarray(curve.inputs["time"], float), np.asarray(curve.inputs["shear_stress"], float))
+        t, stress = np.asarray(curve.inputs["time"], float), np.asarray(curve.inputs["shear_stress"], float)
+        try:
+            if curve.is_plate and target in ("torque", "apparent_stress") and getattr(model, "separable", False):
+                # the torque-controlled plate: each radius its own history (equal to creep_strain for a linear law)
+                full = creep_rim_strain(model, p, t, stress, curve.radius_m)
+            else:
+                full = model.creep_strain(p, t, stress)
+        except ValueError:
+            # the law cannot carry the imposed stress at any strain (a locking or softening law at these
+            # parameters): no prediction, which a fit treats as a region to leave
+            full = np.full(t.size, np.nan)
         return {"shear_strain": full if idx is None else full[idx]}
+    if r == "amplitude_sweep":
+        n_cycles, n_analysed, per_cycle = AMPLITUDE_SWEEP_CYCLES
+        g1, g2 = oscillation_moduli(model, p, curve.nominal["frequency_hz"], curve.obs_inputs("shear_strain"),
+                                    curve.radius_m if curve.is_plate else 1.0, n_cycles=n_cycles,
+                                    n_analysed=n_analysed, points_per_cycle=per_cycle,
+                                    target="apparent_stress" if curve.is_plate else "corrected_stress")
+        return {"storage_modulus": g1, "loss_modulus": g2}
     if r == "elastic_shear":
         return {"shear_stress": model.elastic_shear_stress(p, curve.obs_inputs("shear_strain"))}
     if r == "uniaxial":
@@ -227,11 +260,9 @@ class FitProblem:
             self.model_key = self.model.name
         self.observations = []
         for c in self.curves:
-            need = c.response
-            if need == "shear_history" and not (self.model.supports("shear_history") or self.model.supports("elastic_shear")):
-                raise ValueError(f"model {self.model_key!r} cannot describe {c.label} (needs shear_history)")
-            if need != "shear_history" and not self.model.supports(need):
-                raise ValueError(f"model {self.model_key!r} ({self.model.family}) cannot describe {c.label} (needs {need})")
+            if not describes(self.model, c.response):
+                raise ValueError(f"model {self.model_key!r} ({self.model.family}) cannot describe {c.label} "
+                                 f"(needs {c.response})")
             obs, sd = target_observations(c, self.target)
             sig = {k: self.noise.sigma(k, v, sd.get(k)) for k, v in obs.items()}
             self.observations.append((obs, sig))

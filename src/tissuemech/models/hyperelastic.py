@@ -16,7 +16,7 @@ Closed forms (incompressible, ``science.md`` sections 1.7 and 2.2; ``fem.md`` se
   ``P = (t(lambda) - t(lambda^-1/2)) / lambda``.
 
 Laws: neo-Hookean, Mooney-Rivlin, full polynomial (orders 2-6, Abaqus coefficient order), reduced polynomial /
-Yeoh, Gent, Arruda-Boyce, Ogden, Lopez-Pamies, Nunes (``W = C1 (I1-3) + 4/3 C2 (I2-3)^(3/4)``) and Amin
+Yeoh, Gent, exponential (Demiray), Arruda-Boyce, Ogden, Lopez-Pamies, Nunes (``W = C1 (I1-3) + 4/3 C2 (I2-3)^(3/4)``) and Amin
 (``W = C5 (I1-3) + C3/(N+1) (I1-3)^(N+1) + C4/(M+1) (I1-3)^(M+1) + C2 (I2-3)``); see the factories.
 
 Parameter names follow the Abaqus/FEBio conventions used by :mod:`tissuemech.cards`: ``mu`` (neo-Hookean
@@ -128,6 +128,14 @@ def lopez_pamies_dw_di1(p, i1, i2):
 def gent_dw_di1(p, i1, i2):
     """``W = -mu Jm/2 ln(1 - (I1 - 3)/Jm)``; ``p = [mu, Jm]``; diverges at the locking stretch."""
     return 0.5 * p[0] / (1.0 - (i1 - 3.0) / p[1])
+
+
+@njit(cache=True)
+def exponential_dw_di1(p, i1, i2):
+    """Exponential (Demiray 1972) law ``W = mu/(2 b) (exp(b (I1 - 3)) - 1)``; ``p = [mu, b]``.
+
+    Simple shear: ``sigma12 = mu gamma exp(b gamma^2)`` (initial shear modulus ``mu``; ``b`` > 0 stiffens)."""
+    return 0.5 * p[0] * np.exp(p[1] * (i1 - 3.0))
 
 
 _AB_C = np.array([0.5, 1.0 / 20.0, 11.0 / 1050.0, 19.0 / 7000.0, 519.0 / 673750.0])
@@ -436,6 +444,13 @@ def gent() -> HyperelasticModel:
     return HyperelasticModel(name="gent", param_specs=specs, dw_di1=gent_dw_di1)
 
 
+def exponential() -> HyperelasticModel:
+    """Exponential (Demiray) law ``W = mu/(2 b) (exp(b (I1 - 3)) - 1)`` (Demiray 1972, J. Biomech. 5:309-311;
+    Abaqus has no built-in form: a user material). ``b`` is bounded below by 1e-6 (``b -> 0`` is neo-Hookean)."""
+    specs = (_modulus("mu", 200.0), ParamSpec("b", "1", 0.5, 1e-6, 100.0, log=True, description="stiffening exponent"))
+    return HyperelasticModel(name="exponential", param_specs=specs, dw_di1=exponential_dw_di1)
+
+
 def arruda_boyce() -> HyperelasticModel:
     specs = (_modulus("mu", 200.0), ParamSpec("lambda_m", "1", 3.0, 1.01, 100.0, log=True,
                                               description="locking chain stretch"))
@@ -492,6 +507,7 @@ MODELS: dict[str, Callable[[], ConstitutiveModel]] = {
     "polynomial2": polynomial2,
     "yeoh": lambda: reduced_polynomial(3, name="yeoh"),
     "gent": gent,
+    "exponential": exponential,
     "arruda_boyce": arruda_boyce,
     "nunes": nunes,
     "amin": amin,

@@ -30,7 +30,7 @@ import numpy as np
 import scipy
 
 from .base import ConstitutiveModel
-from .qlv import stress_controlled_strain, stress_controlled_strain_by_history
+from .qlv import invert_monotone, stress_controlled_strain, stress_controlled_strain_by_history
 
 Params = Mapping[str, float]
 
@@ -79,6 +79,46 @@ def stress_histories(model: ConstitutiveModel, p: Params, time_s: np.ndarray, st
     if model.supports("elastic_shear"):
         return np.asarray(model.elastic_shear_stress(p, strain.ravel()), float).reshape(strain.shape)
     raise ValueError(f"model {model.name!r} cannot give a shear-stress history")
+
+
+def apparent_elastic_stress(model: ConstitutiveModel, p: Params, rim_strain: np.ndarray, n_gauss: int = 8) -> np.ndarray:
+    """Apparent rim stress 2 M_e/(pi R^3) of the instantaneous elastic law of a ``separable`` (QLV) model at rim
+    strains ``rim_strain`` (any shape) [Pa]: ``4 int_0^1 sigma_e(x gamma_R) x^2 dx`` by Gauss-Legendre.
+
+    QLV applies one reduced relaxation function to sigma_e at every radius, so the plate's apparent stress is the
+    QLV response of this apparent elastic stress (exact, the quadrature aside): one history per measurement
+    instead of one per radius."""
+    x, w = _unit_gauss(int(n_gauss))
+    rim = np.asarray(rim_strain, float)
+    law, law_p = model.instantaneous, model.instantaneous_params(p)
+    s = np.asarray(law.elastic_shear_stress(law_p, (x[:, None] * rim.ravel()[None, :]).ravel()), float)
+    return (4.0 * (w * x * x) @ s.reshape(x.size, rim.size)).reshape(rim.shape)
+
+
+def invert_increasing(fun, target: np.ndarray, n_table: int = 512, n_newton: int = 3) -> np.ndarray:
+    """Solve ``fun(x) = target`` for an increasing odd ``fun`` of strain: a monotone table inverted by
+    interpolation, then secant steps on the exact function (each step one vectorised evaluation). The table spans
+    the strains the targets need (doubled from 1 until it holds them, up to 1e3; beyond: ValueError)."""
+    target = np.asarray(target, float)
+    need = float(np.max(np.abs(target))) if target.size else 0.0
+    top = 1.0
+    while float(fun(np.array([top]))[0]) < need:
+        top *= 2.0
+        if top > 1.0e3:
+            raise ValueError(f"cannot invert the elastic law: stress {need:g} Pa not reached for strains <= 1e3")
+    grid = np.concatenate([[0.0], np.geomspace(1e-9 * top, top, n_table)])
+    table = np.asarray(fun(grid), float)
+    if np.any(np.diff(table) <= 0):
+        # not increasing in floating point somewhere (a locking or softening law at these parameters)
+        return invert_monotone(fun, target)
+    x = np.sign(target) * np.interp(np.abs(target), table, grid)
+    for _ in range(n_newton):
+        h = 1e-7 * np.maximum(np.abs(x), 1e-9 * top)
+        f0 = fun(x) - target
+        slope = (fun(x + h) - fun(x - h)) / (2.0 * h)
+        step = np.where(slope > 0, f0 / np.where(slope > 0, slope, 1.0), 0.0)
+        x = x - step
+    return x
 
 
 def torque_from_history(model: ConstitutiveModel, p: Params, time_s: np.ndarray, rim_strain: np.ndarray,
@@ -151,11 +191,17 @@ def creep_rim_strain(model: ConstitutiveModel, p: Params, time_s: np.ndarray, ap
 
     The instrument imposes the torque so that the *apparent* rim stress 2M/(pi R^3) follows
     ``apparent_stress_pa(t)``; each radius carries its own history and the rim strain is solved per time
-    step from the torque balance. Models with ``branch_drives`` (QLV, Pipkin-Rogers) use the O(n) stepper
+    step from the torque balance. QLV (``separable``) inverts its apparent elastic law once (exact: one relaxation
+    function acts at every radius); other models with ``branch_drives`` (Pipkin-Rogers) use the O(n) stepper
     :func:`tissuemech.models.qlv.stress_controlled_strain`; any other shear-history model the generic
     O(n^2) :func:`tissuemech.models.qlv.stress_controlled_strain_by_history`. For a linear material the
     result equals the homogeneous ``creep_strain``.
     """
+    if getattr(model, "separable", False):
+        # QLV: M(t) = int G_r(t - s) dM_e(gamma_R(s)), M_e the elastic torque, so the apparent stress is the QLV
+        # response of the apparent elastic stress; its history is one pass, the rim strain one monotone inversion
+        elastic = model.elastic_stress_for(p, time_s, apparent_stress_pa)
+        return invert_increasing(lambda rim: apparent_elastic_stress(model, p, rim, n_gauss), elastic)
     r, w = gauss_radii(n_gauss, radius_m)
     if hasattr(model, "branch_drives"):
         drives, taus = model.branch_drives(p)
@@ -272,8 +318,9 @@ def forward_plate_batch(model: ConstitutiveModel, p: Params, histories: PlateHis
     With Gauss radii ``r_j = R x_j`` (weights ``R w_j``) each radius sees the strain ``x_j gamma_R(t)`` whatever
     the plate, so all measurements share one strain batch: the apparent stress is ``4 sum_j w_j x_j^2
     sigma_j(t)`` and the torque ``2 pi R^3 sum_j w_j x_j^2 sigma_j(t)`` -- :func:`torque_from_history`'s sum,
-    regrouped. Models without ``concatenated_histories`` are evaluated one measurement at a time. Returns one
-    array per measurement, in order.
+    regrouped; a ``separable`` (QLV) model relaxes the apparent elastic stress once (:func:`apparent_elastic_stress`).
+    Models without ``concatenated_histories`` are evaluated one measurement at a time. Returns one array per
+    measurement, in order.
     """
     if target not in ("apparent_stress", "torque"):
         raise ValueError(f"batched plate prediction supports 'apparent_stress' and 'torque', not {target!r}")
@@ -281,10 +328,15 @@ def forward_plate_batch(model: ConstitutiveModel, p: Params, histories: PlateHis
     if not model.concatenated_histories:
         return [forward_plate(model, p, histories.time_s[lo:hi], histories.rim_strain[lo:hi], radius, target=target,
                               n_gauss=n_gauss) for lo, hi, radius in zip(b[:-1], b[1:], histories.radius_m)]
-    x, w = _unit_gauss(int(n_gauss))
-    sigma = stress_histories(model, p, histories.time_s, x[:, None] * histories.rim_strain[None, :],
-                             restart=histories.restart)
-    apparent = 4.0 * ((w * x * x) @ sigma)
+    if getattr(model, "separable", False):
+        # QLV: one relaxation pass of the apparent elastic stress (apparent_elastic_stress)
+        elastic = apparent_elastic_stress(model, p, histories.rim_strain, n_gauss)
+        apparent = model.relaxed_stress(p, histories.time_s, elastic[None, :], restart=histories.restart)[0]
+    else:
+        x, w = _unit_gauss(int(n_gauss))
+        sigma = stress_histories(model, p, histories.time_s, x[:, None] * histories.rim_strain[None, :],
+                                 restart=histories.restart)
+        apparent = 4.0 * ((w * x * x) @ sigma)
     out = [apparent[lo:hi] for lo, hi in zip(b[:-1], b[1:])]
     if target == "torque":
         out = [a * (0.5 * np.pi * radius ** 3) for a, radius in zip(out, histories.radius_m)]
@@ -295,8 +347,11 @@ def forward_plate_batch(model: ConstitutiveModel, p: Params, histories: PlateHis
 # oscillation, analysed like the instrument
 # ----------------------------------------------------------------------------------------------------------
 def first_harmonic_moduli(time_s: np.ndarray, strain: np.ndarray, stress: np.ndarray,
-                          frequency_hz: float, n_harmonics: int = 9) -> tuple[float, float]:
+                          frequency_hz: float, n_harmonics: int = 9) -> tuple[float, float] | tuple[np.ndarray, np.ndarray]:
     """G', G'' (Pa) from the first Fourier harmonic of periodic stress and strain signals.
+
+    ``strain`` and ``stress`` are (n,) signals, or (k, n) batches on the one time grid (one least-squares solve
+    for all of them); a batch returns two (k,) arrays.
 
     Both signals are regressed (least squares) on ``1, t`` and ``cos k wt, sin k wt`` for
     ``k = 1..n_harmonics`` (capped below the Nyquist limit of the sampling); the constant and linear terms
@@ -312,11 +367,17 @@ def first_harmonic_moduli(time_s: np.ndarray, strain: np.ndarray, stress: np.nda
     cols = [np.ones_like(t), t - t.mean()]
     for k in range(1, k_max + 1):
         cols += [np.cos(k * w * t), np.sin(k * w * t)]
-    coef, *_ = np.linalg.lstsq(np.column_stack(cols), np.column_stack([strain, stress]), rcond=None)
-    strain_c = coef[2, 0] - 1j * coef[3, 0]
-    stress_c = coef[2, 1] - 1j * coef[3, 1]
+    strain, stress = np.asarray(strain, float), np.asarray(stress, float)
+    batch = strain.ndim == 2
+    strain, stress = np.atleast_2d(strain), np.atleast_2d(stress)
+    coef, *_ = np.linalg.lstsq(np.column_stack(cols), np.vstack([strain, stress]).T, rcond=None)
+    k = strain.shape[0]
+    strain_c = coef[2, :k] - 1j * coef[3, :k]
+    stress_c = coef[2, k:] - 1j * coef[3, k:]
     g_star = stress_c / strain_c
-    return float(g_star.real), float(g_star.imag)
+    if batch:
+        return g_star.real.copy(), g_star.imag.copy()
+    return float(g_star.real[0]), float(g_star.imag[0])
 
 
 def oscillation_moduli(model: ConstitutiveModel, p: Params, frequency_hz: float, strain_amplitude,
@@ -334,7 +395,12 @@ def oscillation_moduli(model: ConstitutiveModel, p: Params, frequency_hz: float,
     period = 1.0 / frequency_hz
     t = np.linspace(0.0, n_cycles * period, n_cycles * points_per_cycle + 1)
     rim = amps[:, None] * np.sin(2.0 * np.pi * frequency_hz * t)[None, :]
-    if target == "apparent_stress":
+    if getattr(model, "separable", False) and target in ("apparent_stress", "corrected_stress"):
+        # QLV: the relaxation function applied once per amplitude to the (apparent) elastic stress
+        elastic = (apparent_elastic_stress(model, p, rim, n_gauss) if target == "apparent_stress"
+                   else np.asarray(model.elastic_shear_stress(p, rim.ravel()), float).reshape(rim.shape))
+        stress = model.relaxed_stress(p, t, elastic)
+    elif target == "apparent_stress":
         r, w = gauss_radii(n_gauss, radius_m)
         strain = ((r / radius_m)[None, :, None] * rim[:, None, :]).reshape(-1, t.size)
         sigma = stress_histories(model, p, t, strain).reshape(amps.size, n_gauss, t.size)
@@ -345,9 +411,7 @@ def oscillation_moduli(model: ConstitutiveModel, p: Params, frequency_hz: float,
     else:
         raise ValueError("target must be 'apparent_stress' or 'corrected_stress'")
     sel = t >= (n_cycles - n_analysed) * period - 1e-12 * period
-    moduli = np.array([first_harmonic_moduli(t[sel][:-1], rim[a, sel][:-1], stress[a, sel][:-1], frequency_hz)
-                       for a in range(amps.size)])
-    return moduli[:, 0], moduli[:, 1]
+    return first_harmonic_moduli(t[sel][:-1], rim[:, sel][:, :-1], stress[:, sel][:, :-1], frequency_hz)
 
 
 # ----------------------------------------------------------------------------------------------------------

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from numba import njit
@@ -296,9 +297,12 @@ class QLVModel(InstantaneousLawModel):
     """
 
     concatenated_histories = True
+    #: one reduced relaxation function acts on sigma_e at every strain: a plate's torque is the QLV response of the
+    #: plate's elastic torque (:func:`tissuemech.models.plate.creep_rim_strain`)
+    separable: ClassVar[bool] = True
 
     def __init__(self, instantaneous: ConstitutiveModel, n_prony: int = 4, taus_s: Sequence[float] | None = None,
-                 free_taus: bool = False, name: str | None = None):
+                 free_taus: bool = False, name: str | None = None, fluid: bool = False):
         if not instantaneous.supports("elastic_shear"):
             raise ValueError(f"instantaneous law {instantaneous.name!r} has no elastic_shear response")
         if n_prony < 1:
@@ -306,20 +310,28 @@ class QLVModel(InstantaneousLawModel):
         taus = default_taus(n_prony) if taus_s is None else np.asarray(taus_s, float)
         if taus.shape != (n_prony,) or np.any(taus <= 0):
             raise ValueError(f"need {n_prony} positive relaxation times, got {taus!r}")
-        specs = check_param_names(instantaneous.param_specs, prony_ratio_specs(n_prony),
+        if fluid and free_taus:
+            raise ValueError("a fluid QLV model has fixed relaxation times")
+        if fluid:
+            # the slowest branch is the reference (its modulus ratio is 1): the terminal relaxation of a fluid
+            taus = np.sort(taus)
+        specs = check_param_names(instantaneous.param_specs, prony_ratio_specs(n_prony - 1 if fluid else n_prony),
                                   tau_specs(n_prony, taus) if free_taus else ())
         responses = {"shear_history", "creep", "oscillation", "elastic_shear"}
         if instantaneous.supports("normal_stress"):
             responses.add("normal_stress")
-        super().__init__(name=name or f"qlv_{instantaneous.name}_prony{n_prony}", family="qlv",
-                         param_specs=specs, responses=frozenset(responses),
+        weights = ("beta_i = G_i/G_n (n: the slowest branch); g_i = beta_i/(1+sum beta), g_n = 1/(1+sum beta), "
+                   "g_inf = 0" if fluid else "beta_i = G_i/G_inf; g_i = beta_i/(1+sum beta)")
+        super().__init__(name=name or f"qlv_{instantaneous.name}_{'fluid' if fluid else 'prony'}{n_prony}",
+                         family="qlv", param_specs=specs, responses=frozenset(responses),
                          structure={"instantaneous": instantaneous.name, "n_prony": n_prony,
                                     "free_taus": bool(free_taus),
                                     "taus_s": None if free_taus else [float(t) for t in taus],
-                                    "weights": "beta_i = G_i/G_inf; g_i = beta_i/(1+sum beta)"})
+                                    "fluid": bool(fluid), "weights": weights})
         self.instantaneous = instantaneous
         self.n_prony = n_prony
         self.free_taus = bool(free_taus)
+        self.fluid = bool(fluid)
         self._taus = taus
 
     # --- parameter views ----------------------------------------------------------------------------
@@ -330,11 +342,15 @@ class QLVModel(InstantaneousLawModel):
         return self._taus.copy()
 
     def prony_weights(self, p: Params) -> tuple[float, np.ndarray, np.ndarray]:
-        """``(g_inf, g, taus)`` of the reduced relaxation function G_r(t) = g_inf + sum g_i exp(-t/tau_i)."""
-        beta = np.array([float(p[f"beta_{i + 1}"]) for i in range(self.n_prony)])
+        """``(g_inf, g, taus)`` of the reduced relaxation function G_r(t) = g_inf + sum g_i exp(-t/tau_i)
+        (``g_inf = 0`` for a fluid)."""
+        n_beta = self.n_prony - 1 if self.fluid else self.n_prony
+        beta = np.array([float(p[f"beta_{i + 1}"]) for i in range(n_beta)])
         if np.any(beta < 0):
             raise ValueError(f"Prony ratios beta must be >= 0, got {beta}")
         denom = 1.0 + beta.sum()
+        if self.fluid:
+            return 0.0, np.append(beta, 1.0) / denom, self.taus(p)
         return 1.0 / denom, beta / denom, self.taus(p)
 
     def instantaneous_params(self, p: Params) -> dict[str, float]:
@@ -356,6 +372,14 @@ class QLVModel(InstantaneousLawModel):
             return g_inf * se, g * se
         return drives, taus
 
+    def relaxed_stress(self, p: Params, time_s: np.ndarray, elastic_stress: np.ndarray,
+                       restart: np.ndarray | None = None) -> np.ndarray:
+        """QLV stress (Pa) of elastic-stress histories ``elastic_stress`` (k, n) on one time grid (n,): the reduced
+        relaxation function applied to them (any quantity linear in sigma_e, e.g. a plate's apparent elastic stress);
+        ``restart`` as in :meth:`shear_stress_histories`."""
+        _, g, taus = self.prony_weights(p)
+        return qlv_stress_batch(time_s, elastic_stress, g, taus, restart)
+
     def shear_stress_histories(self, p: Params, time_s: np.ndarray, strain: np.ndarray,
                                restart: np.ndarray | None = None) -> np.ndarray:
         """QLV stress (Pa) of a batch of strain histories ``strain`` (k, n) on one time grid ``time_s`` (n,).
@@ -376,18 +400,25 @@ class QLVModel(InstantaneousLawModel):
         g_r = g_inf + np.sum(g[:, None] * np.exp(-t[None, :] / taus[:, None]), axis=0)
         return float(self.elastic_shear_stress(p, np.array([strain0]))[0]) * g_r
 
+    def elastic_stress_for(self, p: Params, time_s: np.ndarray, stress_pa: np.ndarray) -> np.ndarray:
+        """The elastic-stress history sigma_e(t) (Pa) whose QLV response is the imposed ``stress_pa(time_s)``.
+
+        The per-step equation of the exact recursion is linear in the new elastic stress, so this is one compiled
+        pass. Because QLV applies one reduced relaxation function to sigma_e, the same holds for any quantity
+        linear in sigma_e (the plate's apparent rim stress: :func:`tissuemech.models.plate.creep_rim_strain`).
+        """
+        _, g, taus = self.prony_weights(p)
+        return _qlv_creep_elastic_kernel(np.ascontiguousarray(time_s, dtype=float),
+                                         np.ascontiguousarray(stress_pa, dtype=float), g, taus)
+
     def creep_strain(self, p: Params, time_s: np.ndarray, stress_pa: np.ndarray) -> np.ndarray:
         """Strain under a homogeneous imposed stress history (stress control, e.g. creep-recovery).
 
-        The per-step equation of the exact recursion is linear in the new elastic stress, so the elastic
-        stress history is obtained in one compiled pass and the strain by inverting the (monotone)
-        instantaneous law -- the per-step scalar Newton of science.md section 1.0 collapses to this
-        inversion. ``forward(creep(stress)) == stress`` at every sample.
+        :meth:`elastic_stress_for`, then the strain by inverting the (monotone) instantaneous law -- the per-step
+        scalar Newton of science.md section 1.0 collapses to this inversion. ``forward(creep(stress)) == stress``
+        at every sample.
         """
-        _, g, taus = self.prony_weights(p)
-        se = _qlv_creep_elastic_kernel(np.ascontiguousarray(time_s, dtype=float),
-                                       np.ascontiguousarray(stress_pa, dtype=float), g, taus)
-        return invert_monotone(lambda x: self.elastic_shear_stress(p, x), se)
+        return invert_monotone(lambda x: self.elastic_shear_stress(p, x), self.elastic_stress_for(p, time_s, stress_pa))
 
     def complex_modulus(self, p: Params, angular_frequency_rad_s: np.ndarray) -> np.ndarray:
         """Small-strain G*(omega) = G0 [g_inf + sum g_i i omega tau_i/(1 + i omega tau_i)], G0 = sigma_e'(0)."""
@@ -415,16 +446,23 @@ class QLVModel(InstantaneousLawModel):
 
 def qlv_params(model: QLVModel, instantaneous_params: Mapping[str, float], g: Sequence[float],
                taus_s: Sequence[float] | None = None) -> dict[str, float]:
-    """Parameter mapping for ``model`` from published Prony weights ``g_i`` (``sum g < 1``).
+    """Parameter mapping for ``model`` from published Prony weights ``g_i`` (``sum g < 1``; a fluid model's
+    weights sum to 1, in the order of its ascending times).
 
     Example: the thesis series ``g = (0.00033, 0.23447, 0.21368, 0.14447)`` with a linear law
     ``{"G0": 200.0}``.
     """
     g = np.asarray(g, float)
+    p = {k: float(v) for k, v in instantaneous_params.items()}
+    if getattr(model, "fluid", False):
+        # weights in the order of the model's (ascending) times; they sum to 1, the slowest is the reference
+        if g.shape != (model.n_prony,) or np.any(g < 0) or not np.isclose(g.sum(), 1.0) or g[-1] <= 0:
+            raise ValueError(f"a fluid needs {model.n_prony} weights g >= 0 summing to 1 (the slowest > 0), got {g}")
+        p.update({f"beta_{i + 1}": float(gi / g[-1]) for i, gi in enumerate(g[:-1])})
+        return p
     if g.shape != (model.n_prony,) or np.any(g < 0) or g.sum() >= 1.0:
         raise ValueError(f"need {model.n_prony} weights g >= 0 with sum < 1, got {g}")
     g_inf = 1.0 - g.sum()
-    p = {k: float(v) for k, v in instantaneous_params.items()}
     p.update({f"beta_{i + 1}": float(gi / g_inf) for i, gi in enumerate(g)})
     if model.free_taus:
         if taus_s is None:
@@ -441,6 +479,8 @@ def qlv_params(model: QLVModel, instantaneous_params: Mapping[str, float], g: Se
 #: short instantaneous-law tag in QLV/beyond-QLV keys -> hyperelastic registry key
 INSTANTANEOUS_KEYS = {
     "neo_hookean": "neo_hookean",
+    "gent": "gent",
+    "exp": "exponential",
     "mooney_rivlin": "mooney_rivlin",
     "rp2": "reduced_polynomial2",
     "rp3": "reduced_polynomial3",
