@@ -49,6 +49,7 @@ from .uq import predictive_band
 FIT_ABSCISSA: dict[str, str] = {
     "stress_relaxation": "time",
     "creep_recovery": "time",
+    "amplitude_sweep": "shear_strain",
     "constant_shear_rate": "shear_strain",
     "frequency_sweep": "angular_frequency",
     "flow_curve": "shear_rate",
@@ -58,6 +59,9 @@ FIT_ABSCISSA: dict[str, str] = {
 
 #: observables drawn in a more readable unit: name -> (factor, axis label)
 _DISPLAY_UNITS: dict[str, tuple[float, str]] = {"torque": (1e6, "torque M [µN m]")}
+
+#: abscissa labels that differ from the canonical variable's for a test: (test, variable) -> label
+_ABSCISSA_LABELS: dict[tuple[str, str], str] = {("amplitude_sweep", "shear_strain"): "strain amplitude γ₀ [–]"}
 
 
 def _match_in_order(values: np.ndarray, reference: np.ndarray) -> np.ndarray | None:
@@ -124,13 +128,17 @@ def fit_panels(fit: FitRecord | xr.Dataset, curves: Sequence,
     return panels
 
 
-def _quiet_minor_labels(axis, values: np.ndarray) -> None:
-    """Drop minor-tick labels of a log axis spanning more than a decade (they overlap in narrow panels);
-    shorter spans keep them, as they may be the only labels."""
-    values = np.asarray(values, float)
-    values = values[np.isfinite(values) & (values > 0)]
-    if values.size and np.log10(values.max() / values.min()) >= 1.0:
-        axis.set_minor_formatter(NullFormatter())
+def _log_y_share(values: np.ndarray) -> tuple[bool, int]:
+    """Whether a "log axes" panel can draw ``values`` on a log y axis, and how many of them it leaves out.
+
+    A log axis shows only positive values: it is used when at least half of the finite values are positive (a
+    relaxation whose stress rings through zero just after the step keeps its log axis, the few points at or below
+    zero left out and counted in the panel title); signed data (simple shear through zero) stay linear.
+    """
+    finite = np.asarray(values, float)
+    finite = finite[np.isfinite(finite)]
+    positive = int(np.sum(finite > 0))
+    return (finite.size > 0 and positive >= 0.5 * finite.size), int(finite.size - positive)
 
 
 def figure_scope_fit(fit: FitRecord | xr.Dataset, curves: Sequence, title: str | None = None,
@@ -164,17 +172,25 @@ def figure_scope_fit(fit: FitRecord | xr.Dataset, curves: Sequence, title: str |
                 if "band" in s:
                     ax.fill_between(x, factor * s["band"][0][order], factor * s["band"][1][order], color=colour,
                                     alpha=0.35, lw=0)
+            panel = "linear axes"
             if log:
-                if all_positive(xs):
+                log_x = all_positive(xs)
+                log_y, hidden = _log_y_share(ys)
+                if log_x:
                     ax.set_xscale("log")
-                    _quiet_minor_labels(ax.xaxis, xs)
-                if all_positive(ys):
+                if log_y:
                     ax.set_yscale("log")
-                    _quiet_minor_labels(ax.yaxis, ys)
-            ax.set_xlabel(axis_label(series[0]["xname"]) if series[0]["xname"] != "point" else "point index")
+                panel = ("log axes" if log_x and log_y else "log x, linear y (signed values)" if log_x
+                         else "log y, linear x (signed values)" if log_y else "linear axes (signed values)")
+                if log_y and hidden:
+                    panel += f"; {hidden} value(s) ≤ 0 not shown"
+            xname = series[0]["xname"]
+            ax.set_xlabel("point index (curve not found)" if xname == "point"
+                          else _ABSCISSA_LABELS.get((test, xname), axis_label(xname)))
             ax.set_ylabel(ylabel)
-            ax.set_title(f"{test}: {'log' if log else 'linear'} axes", fontsize=9)
+            ax.set_title(f"{test}: {panel}", fontsize=9)
         if len(series) <= 8:
+            axes[row][0].plot([], [], "-", color="0.3", label="model")
             axes[row][0].legend(fontsize=7)
     if not panels:
         for ax in axes.ravel():
@@ -359,31 +375,75 @@ def plot_meshes(vtu_dirs: Mapping[str, str | Path], out_dir, max_per_experiment:
 # ------------------------------------------------------------------------------------------------------
 # timing
 # ------------------------------------------------------------------------------------------------------
-def plot_timing(timing_csv, step_path, realtime_path) -> list[Path]:
-    """TLED wall time per explicit step and real-time factor against the number of tetrahedra.
+#: line styles and markers of the timing figures' second and third varying column
+_LINESTYLES = ("-", "--", ":", "-.")
+_MARKERS = ("o", "s", "^", "D", "v")
 
-    One curve per law / precision / device (and kernel and mesh, when the ``benchmarks/fem_timing.py`` table
-    has those columns); the real-time figure marks
-    factor 1 (a simulated second costs one wall-clock second) as the reference.
+
+def figure_timing(table: pd.DataFrame, column: str, *, ylabel: str, title: str) -> Figure:
+    """One timing quantity against the number of tetrahedra, one line per law / kernel / mesh / ... .
+
+    The grouping columns (``law``, ``precision``, ``device`` and, where the ``benchmarks/fem_timing.py`` table has
+    them, ``kernel`` and ``mesh``) that take one value are named in the title; the first varying one sets the
+    colour, the second the line style, the third the marker, and the legend has one entry per value of each (4
+    laws x 2 kernels x 2 meshes: 8 entries, not 16). A fourth varying column joins the third.
     """
+    keys = ["law", "precision", "device"] + [k for k in ("kernel", "mesh") if k in table.columns]
+    varying = [k for k in keys if table[k].astype(str).nunique() > 1]
+    fixed = [f"{table[k].astype(str).iloc[0]}" for k in keys if k not in varying and len(table)]
+    if len(varying) > 3:
+        merged = " ".join(varying[2:])
+        table = table.assign(**{merged: table[varying[2:]].astype(str).agg(" ".join, axis=1)})
+        varying = varying[:2] + [merged]
+    values = {k: sorted(table[k].astype(str).unique()) for k in varying}
+    fig, (ax,) = new_figure(width=6.4, height=4.4)
+    for key, rows in table.groupby(varying, sort=True) if varying else [((), table)]:
+        key = (key,) if not isinstance(key, tuple) else key
+        rows = rows.sort_values("n_elements")
+        style = {"color": "C0", "ls": "-", "marker": "o"}
+        for dim, value in zip(varying, key):
+            i = values[dim].index(str(value))
+            slot = varying.index(dim)
+            if slot == 0:
+                style["color"] = f"C{i % 10}"
+            elif slot == 1:
+                style["ls"] = _LINESTYLES[i % len(_LINESTYLES)]
+            else:
+                style["marker"] = _MARKERS[i % len(_MARKERS)]
+        ax.plot(rows["n_elements"].to_numpy(float), rows[column].to_numpy(float), lw=1.4, ms=4, **style)
+    handles, labels = [], []
+    for slot, dim in enumerate(varying):
+        for i, value in enumerate(values[dim]):
+            style = ({"color": f"C{i % 10}", "ls": "-"} if slot == 0 else
+                     {"color": "0.3", "ls": _LINESTYLES[i % len(_LINESTYLES)]} if slot == 1 else
+                     {"color": "0.3", "ls": "none", "marker": _MARKERS[i % len(_MARKERS)]})
+            handles += ax.plot([], [], lw=1.4, **style)
+            labels.append(f"{dim} {value}" if slot else value)
+    ax.set_xscale("log")
+    positive = table[column].to_numpy(float)
+    if all_positive(positive):
+        ax.set_yscale("log")
+    ax.set_xlabel("tetrahedra")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title + (f" ({', '.join(fixed)})" if fixed else ""), fontsize=10)
+    if handles:
+        ax.legend(handles, labels, fontsize=7, ncols=2 if len(handles) > 5 else 1)
+    return fig
+
+
+def plot_timing(timing_csv, step_path, realtime_path) -> list[Path]:
+    """TLED wall time per explicit step and real-time factor against the number of tetrahedra
+    (:func:`figure_timing`); the real-time figure marks factor 1 (a simulated second costs one wall-clock
+    second) as the reference."""
     table = pd.read_csv(timing_csv)
     required = {"n_elements", "law", "precision", "device", "steps_per_s", "real_time_factor"}
     missing = sorted(required - set(table.columns))
     if missing:
         raise ValueError(f"{timing_csv}: timing table lacks columns {missing}")
-    step, realtime = {}, {}
-    keys = ["law", "precision", "device"] + [k for k in ("kernel", "mesh") if k in table.columns]
-    for key, rows in table.groupby(keys, sort=True):
-        rows = rows.sort_values("n_elements")
-        name = " ".join(str(k) for k in key)
-        n = rows["n_elements"].to_numpy(float)
-        step[name] = (n, 1.0 / rows["steps_per_s"].to_numpy(float))
-        realtime[name] = (n, rows["real_time_factor"].to_numpy(float))
-    log_y = all(all_positive(v[1]) for v in step.values())
-    written = save_figure(figure_curves(step, xlabel="tetrahedra", ylabel="wall time per step [s]", log_x=True,
-                                        log_y=log_y, title="TLED explicit step time"), step_path)
-    fig = figure_curves(realtime, xlabel="tetrahedra", ylabel="real-time factor [–]", log_x=True,
-                        log_y=all(all_positive(v[1]) for v in realtime.values()),
+    table = table.assign(step_s=1.0 / table["steps_per_s"].to_numpy(float))
+    written = save_figure(figure_timing(table, "step_s", ylabel="wall time per step [s]",
+                                        title="TLED explicit step time"), step_path)
+    fig = figure_timing(table, "real_time_factor", ylabel="real-time factor [–]",
                         title="TLED real-time factor (> 1: faster than real time)")
     fig.axes[0].axhline(1.0, color="k", ls="--", lw=1)
     written += save_figure(fig, realtime_path)
