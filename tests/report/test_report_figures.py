@@ -5,8 +5,6 @@ labels, hidden torsion curves, a ranking figure titled after one scope without a
 "log axes" relaxation panel with a linear y axis, amplitude-sweep fits against point index."""
 from __future__ import annotations
 
-import base64
-import io
 import json
 import re
 
@@ -193,28 +191,31 @@ def test_caption_text_drops_markup_and_templates(tmp_path):
     assert caption_text(tmp_path / "missing.rst") == ""
 
 
-def test_summary_page_embeds_every_figure_with_its_caption(tmp_path, repo_root):
+def test_summary_pages_link_every_figure_with_its_caption(tmp_path, repo_root):
     from tissuemech.plots import plot_timings
 
     results = tmp_path / "results"
     plot_timings(["a", "b"], [1.0, 2.0], results / "demo" / "figures" / "averages" / "flow_curve__default__x")
     plot_timings(["a"], [1.0], results / "demo" / "figures" / "fits" / "flow_curve" / "cross")
-    pd.DataFrame({"scope": ["flow_curve"], "model": ["cross"], "rank": [1],
+    pd.DataFrame({"scope": ["flow_curve"], "model": ["cross"], "rank": [1], "recommended": [True],
                   "recommendation": ["cross fits best"]}).to_csv(results / "demo" / "ranking.csv", index=False)
     config = {"fit": {"seed": 424242, "plate_target": "torque"}, "fem": {"poisson_ratio": 0.45},
               "diagnosis": {"alpha": 0.05}}
-    page = build_summary(results, ["demo"], tmp_path / "summary.html", captions_dir=repo_root / "workflow" / "report",
+    main = build_summary(results, ["demo"], results / "summary.html", captions_dir=repo_root / "workflow" / "report",
                          config=config)
-    text = page.read_text()
-    assert "Raw runs (thin grey lines) and the sample average" in text
-    # captions rendered like the Snakemake report: Jinja with the config and dataset, then reStructuredText
-    assert "Model <strong>&lt;model&gt;</strong> fitted to scope <strong>&lt;scope&gt;</strong> of dataset\ndemo" in text
-    assert "multistart seed 424242" in text and "Poisson ratio 0.45" in text
-    assert "cross fits best" in text
-    images = re.findall(r'src="data:image/png;base64,([^"]+)"', text)
-    assert len(images) == 2
-    for data in images:
-        with Image.open(io.BytesIO(base64.b64decode(data))) as image:
+    text = main.read_text()
+    assert "multistart seed 424242" in text and "Poisson ratio 0.45" in text   # the workflow caption
+    assert "cross fits best" in text                                         # the scope's recommendation
+    page = (results / "demo" / "summary.html").read_text()
+    assert "Raw runs (thin grey lines) and the sample average" in page
+    # captions rendered like the Snakemake report: Jinja with the config and dataset, then reStructuredText; a
+    # wildcard that differs between the figures of a section is named under each figure
+    assert ("Model <strong>each model below</strong> fitted to scope <strong>flow_curve</strong> of dataset\ndemo"
+            in page)
+    sources = re.findall(r'<img loading="lazy" decoding="async" src="([^"]+)"', page)
+    assert sorted(sources) == ["figures/averages/flow_curve__default__x.png", "figures/fits/flow_curve/cross.png"]
+    for src in sources:
+        with Image.open(results / "demo" / src) as image:
             image.verify()
 
 
