@@ -714,7 +714,9 @@ def diagnosis_html(path: Path) -> str:
         effect = s.get("effect", "") if isinstance(s, dict) else ""
         evidence = s.get("evidence", "") if isinstance(s, dict) else str(s)
         name = CAUSE_TITLES.get(effect, effect) or "a model feature"
-        out.append(f"<li>Not identifiable from these data: {html.escape(name[:1].lower() + name[1:])}."
+        scope = (f"the {str(s['data']).replace('_', ' ')} tests alone" if isinstance(s, dict) and s.get("data")
+                 else "these data")
+        out.append(f"<li>Not identifiable from {html.escape(scope)}: {html.escape(name[:1].lower() + name[1:])}."
                    f"<details><summary>why</summary>{_esc(evidence)}</details></li>")
     n_unexplained = len(d.get("unexplained", []))
     if n_unexplained:
