@@ -60,7 +60,23 @@ class PowerOfTenFormatter(LogFormatter):
     matplotlib's default log labels are mathtext (``$\\mathdefault{10^{-3}}$``); parsing them (pyparsing) and
     laying them out took a third of the time of drawing our figures (26 average figures: 12.7 -> 8.9 CPU s,
     issue 17). Which ticks get a label is :class:`matplotlib.ticker.LogFormatter`'s choice, unchanged.
+
+    An axis spanning one or two decades has its minor ticks labelled too: matplotlib picks 2, 3, 4 and 6 × each
+    power, here 2 and 5 (:meth:`set_locs`), and every label between 0.01 and 10⁵ is written as a plain number
+    (``0.02``, ``5``, ``20``), so that the labels fit side by side (``2×10⁰ 3×10⁰ 4×10⁰`` overlapped on a 6-inch
+    residual map).
+
+    >>> PowerOfTenFormatter()._num_to_string(2e-3, 1e-4, 1.0)
+    '2×10⁻³'
+    >>> f = PowerOfTenFormatter(); f._sublabels = {1, 2, 3, 4, 6, 10}
+    >>> [f._num_to_string(x, 1.0, 60.0) for x in (2.0, 10.0, 40.0)]
+    ['2', '10', '40']
     """
+
+    def set_locs(self, locs=None):
+        super().set_locs(locs)
+        if self._base == 10 and self._sublabels is not None and 1 < len(self._sublabels) < 10:
+            self._sublabels = {1.0, 2.0, 5.0, 10.0}
 
     def _num_to_string(self, x, vmin, vmax):
         if self._base != 10:
@@ -69,6 +85,8 @@ class PowerOfTenFormatter(LogFormatter):
         coefficient = x / 10.0 ** exponent
         if not math.isclose(coefficient, round(coefficient), rel_tol=1e-6):
             return f"{x:.3g}"
+        if self._sublabels is not None and len(self._sublabels) > 1 and 1e-2 <= x < 1e5:
+            return f"{x:g}"
         power = "10" + str(exponent).translate(_SUPERSCRIPT)
         return power if round(coefficient) == 1 else f"{round(coefficient)}×{power}"
 
@@ -425,16 +443,35 @@ def plot_residual_map(residuals, x, row_labels, path: str | Path, *, xlabel: str
 # curves (FEM force-depth, torque-time, before/after comparisons)
 
 
+def _same_curve(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray], rtol: float = 1e-3) -> bool:
+    """Whether two (x, y) curves would be drawn on top of each other (same x, y within ``rtol`` of the y span)."""
+    (xa, ya), (xb, yb) = ((np.asarray(x, float), np.asarray(y, float)) for x, y in (a, b))
+    if xa.shape != xb.shape or ya.shape != yb.shape or not np.allclose(xa, xb, rtol=1e-9, equal_nan=True):
+        return False
+    span = np.nanmax(np.abs(np.concatenate([ya, yb]))) if np.isfinite(ya).any() else 0.0
+    return bool(np.allclose(ya, yb, rtol=0.0, atol=rtol * span, equal_nan=True))
+
+
 def figure_curves(series: Mapping[str, tuple[np.ndarray, np.ndarray]], *, xlabel: str, ylabel: str,
                   reference: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None, log_x: bool = False,
                   log_y: bool = False, title: str | None = None) -> Figure:
-    """Named (x, y) curves as lines, optional reference curves (e.g. closed form, measurement) as markers."""
+    """Named (x, y) curves as lines, optional reference curves (e.g. closed form, measurement) as markers.
+
+    Every curve stays visible and in the legend: a curve that lies on an earlier one (a rate-independent card
+    simulated at two rates gives the same torque) is drawn dashed over it and its legend entry says which curve it
+    covers. With more than six entries the legend goes below the axes, so that it hides no curve.
+    """
     fig, (ax,) = new_figure()
+    drawn: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for i, (name, (x, y)) in enumerate(series.items()):
-        ax.plot(np.asarray(x, dtype=float), np.asarray(y, dtype=float), "-", color=f"C{i % 10}", lw=1.6, label=name)
+        under = next((other for other, curve in drawn.items() if _same_curve(curve, (x, y))), None)
+        style = {"ls": (0, (4, 3)), "lw": 2.2, "zorder": 3} if under else {"ls": "-", "lw": 1.6, "zorder": 2}
+        ax.plot(np.asarray(x, dtype=float), np.asarray(y, dtype=float), color=f"C{i % 10}",
+                label=name if under is None else f"{name} (dashed: same as {under})", **style)
+        drawn[name] = (x, y)
     for i, (name, (x, y)) in enumerate((reference or {}).items()):
         ax.plot(np.asarray(x, dtype=float), np.asarray(y, dtype=float), "o", ms=3.5, mfc="none",
-                color=f"C{(i + len(series)) % 10}", label=name)
+                color=f"C{(i + len(series)) % 10}", label=name, zorder=4)
     if log_x:
         ax.set_xscale("log")
     if log_y:
@@ -443,7 +480,12 @@ def figure_curves(series: Mapping[str, tuple[np.ndarray, np.ndarray]], *, xlabel
     ax.set_ylabel(ylabel)
     if title:
         ax.set_title(title, fontsize=10)
-    ax.legend(fontsize=8)
+    n_entries = len(series) + len(reference or {})
+    if n_entries > 6:
+        fig.set_size_inches(fig.get_figwidth() * 1.3, fig.get_figheight() + 0.17 * n_entries)
+        fig.legend(loc="outside lower center", fontsize=7, ncols=1)
+    elif n_entries:
+        ax.legend(fontsize=8)
     return fig
 
 

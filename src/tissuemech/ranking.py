@@ -564,31 +564,68 @@ def _run_jobs(jobs, workers: int) -> list:
         return [f.result() for f in futures]
 
 
-def plot_ranking(table: pd.DataFrame, path=None):
-    """Two-panel figure: ΔAICc (log scale, +1) and held-out NRMSE per model, best first. Returns the figure;
-    writes it (PNG/PDF by extension) when ``path`` is given."""
-    import matplotlib
+def plot_ranking(table: pd.DataFrame, path=None, title: str | None = None):
+    """The ranking figure: one pair of panels per scope, ΔAICc (log scale, +1) and held-out NRMSE per model, best
+    first; the recommended model (column ``recommended``) is marked with a star and its name in bold, flagged fits
+    are red. Returns the figure; writes it as PNG + SVG when ``path`` is given.
 
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
+    ``table`` is one scope's ranking or ``ranking.csv`` (several scopes, in their order; a model named
+    ``"<scope>: <model>"`` is shown as ``<model>`` in its scope's panel). The title names the dataset (column
+    ``dataset``) unless ``title`` is given.
+    """
+    from matplotlib.figure import Figure
 
-    fig, axes = plt.subplots(1, 2, figsize=(10, 0.35 * max(len(table), 4) + 1.2), sharey=True)
-    labels = table["model"].tolist()[::-1]
-    y = np.arange(len(labels))
-    colors = ["tab:red" if f else "tab:blue" for f in (table["n_flags"] > 0).tolist()[::-1]]
-    axes[0].barh(y, table["delta_aicc"].to_numpy(float)[::-1] + 1.0, color=colors)
-    axes[0].set_xscale("log")
-    axes[0].set_xlabel("ΔAICc + 1")
-    axes[0].axvline(STRONG_EVIDENCE + 1, color="k", ls=":", lw=1)
-    axes[0].set_yticks(y, labels)
-    cvn = table["cv_nrmse"].to_numpy(float)[::-1] if "cv_nrmse" in table else np.full(len(y), np.nan)
-    axes[1].barh(y, np.nan_to_num(cvn), color=colors)
-    axes[1].set_xlabel("held-out NRMSE (CV)")
-    scope = str(table["scope"].iloc[0]) if len(table) else ""
-    fig.suptitle(f"model ranking {scope} (red: flagged fit)")
-    fig.tight_layout()
+    table = table.dropna(subset=["model"]) if "model" in table else table
+    scopes = list(dict.fromkeys(table["scope"].astype(str))) if "scope" in table and len(table) else [""]
+    groups = [table[table["scope"].astype(str) == s] if s else table for s in scopes]
+    heights = [max(len(g), 1) + 1.2 for g in groups]
+    fig = Figure(figsize=(10, 0.32 * sum(heights) + 1.0), layout="constrained")
+    grid = fig.add_gridspec(len(groups), 2, height_ratios=heights)
+    recommended_label = False
+    for row, (scope, group) in enumerate(zip(scopes, groups)):
+        left, right = fig.add_subplot(grid[row, 0]), fig.add_subplot(grid[row, 1])
+        names = [str(m).split(": ", 1)[1] if str(m).startswith(f"{scope}: ") else str(m) for m in group["model"]]
+        chosen = (group["recommended"].fillna(False).astype(bool).to_numpy() if "recommended" in group
+                  else np.zeros(len(group), bool))
+        flagged = (pd.to_numeric(group["n_flags"], errors="coerce").fillna(0).to_numpy() > 0 if "n_flags" in group
+                   else np.zeros(len(group), bool))
+        y = np.arange(len(group))[::-1]
+        colours = ["tab:red" if f else "tab:blue" for f in flagged]
+        daicc = pd.to_numeric(group["delta_aicc"], errors="coerce").to_numpy(float) + 1.0 if "delta_aicc" in group \
+            else np.full(len(group), np.nan)
+        cvn = pd.to_numeric(group["cv_nrmse"], errors="coerce").to_numpy(float) if "cv_nrmse" in group \
+            else np.full(len(group), np.nan)
+        left.barh(y, np.where(np.isfinite(daicc), daicc, 0.0), color=colours)
+        right.barh(y, np.nan_to_num(cvn), color=colours)
+        for ax, values in ((left, daicc), (right, cvn)):
+            for yi, v, c in zip(y, values, chosen):
+                if c and np.isfinite(v):
+                    ax.plot(v, yi, "*", color="gold", mec="k", ms=12, zorder=5)
+                    recommended_label = True
+            ax.set_ylim(-0.7, len(group) - 0.3)
+        left.set_xscale("log")
+        left.set_xlim(left=0.8)
+        left.axvline(STRONG_EVIDENCE + 1, color="k", ls=":", lw=1)
+        left.set_yticks(y, [f"★ {n}" if c else n for n, c in zip(names, chosen)], fontsize=8)
+        for label, c in zip(left.get_yticklabels(), chosen):
+            if c:
+                label.set_fontweight("bold")
+        right.set_yticks(y, [""] * len(y))
+        if not np.isfinite(cvn).any():
+            right.text(0.5, 0.5, "no held-out prediction in this scope", ha="center", va="center",
+                       transform=right.transAxes, fontsize=8, color="0.4")
+            right.set_xticks([])
+        left.set_title(f"{scope}: ΔAICc + 1 (dotted: strong evidence)" if scope else "ΔAICc + 1", fontsize=9)
+        right.set_title(f"{scope}: held-out NRMSE (cross-validation)" if scope else "held-out NRMSE", fontsize=9)
+        if row == len(groups) - 1:
+            left.set_xlabel("ΔAICc + 1")
+            right.set_xlabel("held-out NRMSE")
+    dataset = str(table["dataset"].iloc[0]) if "dataset" in table and len(table) else ""
+    heading = title or (f"model ranking of {dataset}, every scope" if dataset else "model ranking")
+    fig.suptitle(heading + " (red: flagged fit" + ("; ★ recommended" if recommended_label else "") + ")",
+                 fontsize=11)
     if path is not None:
-        save_figure(fig, path, dpi=120)  # PNG and SVG side by side
+        save_figure(fig, path, dpi=110)  # PNG and SVG side by side
     return fig
 
 

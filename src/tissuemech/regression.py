@@ -442,7 +442,7 @@ def update(reference_dir=DEFAULT_REFERENCE_DIR, fresh: pd.DataFrame | None = Non
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m tissuemech.regression",
+    parser = argparse.ArgumentParser(prog="tissuemech regression",
                                      description="Check or update the committed reference table of fitted parameters.")
     mode = parser.add_mutually_exclusive_group(required=True)
     mode.add_argument("--check", action="store_true", help="refit and compare; exit 1 with a table of what moved")

@@ -9,7 +9,7 @@ import pytest
 
 from tissuemech.diagnosis.findings import fix_record, make_finding, untested_finding, write_diagnosis_json
 from tissuemech.records import Finding, FindingError
-from tissuemech.summary import _diagnosis
+from tissuemech.summary import diagnosis_html
 
 
 def _named_finding() -> dict:
@@ -56,6 +56,6 @@ def test_the_writer_refuses_a_malformed_finding_and_writes_nothing(tmp_path):
 def test_the_report_prints_detected_findings_with_their_fix(tmp_path):
     quiet = dict(untested_finding("elapsed_time_drift", "no clock"), detected=False)
     path = write_diagnosis_json({"findings": [_named_finding(), quiet]}, tmp_path / "diagnosis.json")
-    text = _diagnosis(path)
-    assert "<b>torque_offset</b>" in text and "gain 0.25" in text and "qlv_rp3_prony4+offset" in text
+    text = diagnosis_html(path)
+    assert "<code>torque_offset</code>" in text and "gain 0.25" in text and "qlv_rp3_prony4+offset" in text
     assert "elapsed_time_drift" not in text

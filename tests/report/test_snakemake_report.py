@@ -148,27 +148,9 @@ def test_figures_have_svg_twins_and_jobs_have_logs_and_benchmarks(small_run):
     assert "fit figures" in (small_run / "logs" / DATASET / "fit_flow_curve.log").read_text()
 
 
-def _chromium() -> str:
-    for name in ("chromium", "chromium-browser", "google-chrome", "chrome"):
-        found = shutil.which(name)
-        if found:
-            return found
-    pytest.skip("no headless chromium on this machine")
-
-
-def _headless(page: Path, *args: str) -> str:
-    assert page.is_file(), page
-    profile = page.parent / f".chromium-profile-{page.stem}"
-    done = subprocess.run([_chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-                           f"--user-data-dir={profile}", "--virtual-time-budget=20000", *args, page.as_uri()],
-                          capture_output=True, text=True, timeout=180)
-    assert done.returncode == 0, done.stderr[-2000:]
-    return done.stdout
-
-
-def test_report_renders_in_headless_chromium(small_run, tmp_path):
+def test_report_renders_in_headless_chromium(small_run, tmp_path, headless):
     report_html = small_run / "results" / "report.html"
-    dom = _headless(report_html, "--dump-dom")
+    dom = headless(report_html, "--dump-dom").stdout
     rendered = _Scripts()
     rendered.feed(dom)
     text = " ".join(rendered.text)
@@ -176,13 +158,13 @@ def test_report_renders_in_headless_chromium(small_run, tmp_path):
     # outside <script> they exist only when the app ran
     assert "Statistics" in text and "Results" in text and "soft-tissue rheometry" in text
     shot = tmp_path / "report.png"
-    _headless(report_html, f"--screenshot={shot}", "--window-size=1280,900")
+    headless(report_html, f"--screenshot={shot}", "--window-size=1280,900")
     with Image.open(shot) as image:
         colours = image.convert("L").getcolors(maxcolors=1 << 16)
         assert colours is not None and len(colours) > 20, "blank screenshot"
 
 
-def test_embedded_figures_decode_in_chromium(report, tmp_path):
+def test_embedded_figures_decode_in_chromium(report, tmp_path, headless):
     results = _script_json(report.scripts, "results", "results")
     uris = [r["data_uri"] for r in results.values() if r["mime_type"].startswith("image/")]
     images = "".join(f'<img src="{uri}">' for uri in uris)
@@ -193,5 +175,5 @@ def test_embedded_figures_decode_in_chromium(report, tmp_path):
         "document.body.setAttribute('data-loaded', imgs.filter(i => i.complete && i.naturalWidth > 0).length);"
         "document.body.setAttribute('data-broken', imgs.filter(i => !(i.naturalWidth > 0)).length);});"
         "</script></body></html>")
-    dom = _headless(page, "--dump-dom")
+    dom = headless(page, "--dump-dom").stdout
     assert f'data-loaded="{len(uris)}"' in dom and 'data-broken="0"' in dom

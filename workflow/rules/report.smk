@@ -1,5 +1,5 @@
 # Report figures the stages do not draw (meshes, timing; fit_scope draws the fit figures, rank the card figures)
-# and the self-contained summary page.
+# and the summary pages: results/summary.html (a verdict card per dataset) and results/<dataset>/summary.html.
 # `snakemake --report results/report.html` collects every output marked report(...) with its caption
 # (workflow/report/*.rst); the summary page is the same content without Snakemake, built by the default target.
 
@@ -85,6 +85,7 @@ rule summary:
         uq=lambda wildcards: uq_targets(),
     output:
         html="results/summary.html",
+        pages=[f"results/{name}/summary.html" for name in DATASETS],
     log:
         "logs/summary.log",
     benchmark:
