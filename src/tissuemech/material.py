@@ -119,28 +119,41 @@ def window_taus(window: Mapping, per_decade: float = 1.0) -> np.ndarray:
     return decade_aligned_taus(t0, max(t1, 10.0 ** (np.floor(np.log10(t0)) + 1.0)), per_decade)
 
 
-def merged_times(grid: np.ndarray, weights: np.ndarray) -> np.ndarray:
+def merged_times(grid: np.ndarray, weights: np.ndarray, per_decade: float | None = None) -> np.ndarray:
     """Active relaxation times of an NNLS solution on ``grid``, a pair of neighbouring active times merged.
 
     One mode between two grid times shows in NNLS as weight on both neighbours and nowhere else; the data do
     not resolve two modes a grid step apart, so such a pair is one time, at the weight-averaged log time (a
     0.25-decade pair of exponentials and one exponential at its weighted geometric mean differ by well under
     the noise of a relaxation). Three or more consecutive active times are a broad spectrum (a fractional
-    relaxation activates a whole band of the grid): they are kept, since one exponential cannot stand for a
-    band. Returns the times [s], ascending.
+    relaxation activates a whole band of the grid): without ``per_decade`` they are kept, since one exponential
+    cannot stand for a band; with ``per_decade`` a band keeps that many times per decade of it (consecutive groups
+    of grid times, each at its weighted log mean: one Prony time per decade follows a smooth spectrum within a few
+    per cent, and a model fitted on every grid time of a 14-decade mastercurve has no determined weight).
+    Returns the times [s], ascending.
     """
     weights = np.asarray(weights, float)
     active = np.flatnonzero(weights > 0)
     if active.size == 0:
         return np.array([])
-    logs = np.log(np.asarray(grid, float))
+    grid = np.asarray(grid, float)
+    logs = np.log(grid)
+    step = float(np.median(np.diff(np.log10(grid)))) if grid.size > 1 else 1.0
     out = []
     for run in np.split(active, np.flatnonzero(np.diff(active) > 1) + 1):
         if run.size == 2:
             out.append(float(np.exp(np.average(logs[run], weights=weights[run]))))
-        else:
+        elif per_decade is None or run.size == 1:
             out.extend(float(np.exp(logs[i])) for i in run)
+        else:
+            size = max(int(round(1.0 / (per_decade * step))), 1)
+            for chunk in np.array_split(run, int(np.ceil(run.size / size))):
+                out.append(float(np.exp(np.average(logs[chunk], weights=weights[chunk]))))
     return np.array(out)
+
+
+#: relaxation times per decade of a band of active NNLS times kept by the material model (:func:`merged_times`)
+MATERIAL_TIMES_PER_DECADE = 1.0
 
 
 def as_strain_controlled(curve: F.Curve) -> F.Curve:
@@ -240,7 +253,8 @@ def nnls_relaxation_times(curves: Sequence[F.Curve], window: Mapping | None = No
     if not total > 0:
         return out
     g0 = initial_shear_modulus(model.instantaneous, model.instantaneous_params(elastic))
-    out.update(taus_s=merged_times(grid, coef[1:]), weights=coef / total, modulus_pa=float(g0 * total),
+    out.update(taus_s=merged_times(grid, coef[1:], MATERIAL_TIMES_PER_DECADE), weights=coef / total,
+               modulus_pa=float(g0 * total),
                equilibrium_share=float(coef[0] / total))
     return out
 
@@ -397,6 +411,11 @@ def fit_material(curves: Sequence[F.Curve], target: str, laws: Sequence[str] = M
     factories = {c.key: c.factory for c in cands}
 
     def add(tag: str, times: np.ndarray, is_fluid: bool, source: Mapping) -> None:
+        for key, factory in factories.items():
+            # the same law on the same times is the same candidate
+            if (law_tag(key) == tag and ("_fluid" in key) == is_fluid and len(factory.taus_s) == len(times)
+                    and np.allclose(factory.taus_s, times, rtol=1e-6)):
+                return
         cand = candidates({**source, "taus_s": times}, [tag], is_fluid)[-1 if is_fluid else 0]
         key, variant = cand.key, 1
         while key in fits or key in failures:

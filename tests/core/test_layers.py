@@ -24,7 +24,7 @@ LAYERS: tuple[frozenset[str], ...] = tuple(frozenset(names.split()) for names in
     "records",
     "models spectra curves lve",
     "fitting io synth plots posterior cards_febio cards_niftysim pipeline scopes",
-    "ranking cards tts",
+    "adequacy ranking material cards tts",
     "diagnosis stages fem uq",
     "summary cli regression",
 ))

@@ -12,7 +12,7 @@
 * :func:`baseline_adequacy` -- whether a fitted baseline describes the data well enough to blame anything on
   an effect: no varying parameter at a bound, a covariance (finite standard errors), no gross misfit.
 * :func:`ranked_candidates` -- the fit records in the order of the dataset's ``ranking.csv``.
-* :func:`resolved_window_s` / :func:`window_taus` / :func:`nnls_relaxation_times` / :func:`spectrum_model` -- the relaxation-time
+* :func:`resolved_window_s` / :func:`window_taus` / :func:`nnls_relaxation_times` / :func:`tissuemech.models.registry.model_on_times` -- the relaxation-time
   window the tests resolve (sweep frequencies, relaxation rise and hold times, ramp durations), a log grid
   spanning it, the times NNLS selects on a dense grid over that window,
   and a registered QLV/Pipkin-Rogers model rebuilt on that grid (instead of the registry's fixed 0.1-100 s
@@ -20,7 +20,6 @@
 """
 from __future__ import annotations
 
-import re
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
@@ -31,12 +30,11 @@ import scipy
 
 from .. import fitting
 from ..models.base import ConstitutiveModel, ResponseNotSupported
-from ..models.beyond_qlv import PipkinRogersModel
 from ..models.plate import oscillation_moduli
-from ..models.qlv import QLVModel, instantaneous_law
-from ..models.registry import get_model
+from ..models.registry import get_model, model_on_times
+from .. import material
+from ..material import NNLS_GRID_BELOW_DECADES, NNLS_TIMES_PER_DECADE, merged_times, window_taus
 from ..ranking import recommended_mask
-from ..spectra import decade_aligned_taus
 
 
 def read_fit_record(path: str | Path) -> dict:
@@ -208,69 +206,9 @@ def predict_runs(model: ConstitutiveModel, params: Mapping[str, float], runs: Se
 
 
 def resolved_window_s(runs: Sequence[xr.Dataset]) -> dict:
-    """Relaxation-time window [s] the tests resolve, from the runs' own channels.
-
-    * frequency/amplitude sweeps: 1/omega_max .. 1/omega_min (rad/s);
-    * relaxation and creep: the rise time (first time the strain reaches 98 % of its hold value; the first
-      sampling interval for an ideal step) .. the hold duration;
-    * constant-rate ramps: the first sampling interval .. the ramp duration.
-
-    Returns ``{"t_min_s", "t_max_s", "sources": [sentences]}``; NaN bounds when no run gives a time scale.
-    """
-    lo, hi, src = [], [], []
-    for r in runs:
-        test = str(r.attrs.get("test", ""))
-        if test in ("frequency_sweep", "amplitude_sweep"):
-            w = r["angular_frequency"].values if "angular_frequency" in r else (
-                2 * np.pi * r["frequency"].values if "frequency" in r else
-                np.array([2 * np.pi * float(r.attrs["frequency_hz"])]) if "frequency_hz" in r.attrs else np.array([]))
-            w = np.abs(np.asarray(w, float))
-            w = w[np.isfinite(w) & (w > 0)]
-            if w.size:
-                lo.append(1.0 / w.max())
-                hi.append(1.0 / w.min())
-                src.append(f"{test}: 1/omega {1 / w.max():.3g}-{1 / w.min():.3g} s")
-        elif "time" in r and r["time"].size >= 2:
-            t = np.asarray(r["time"].values, float)
-            t = t[np.isfinite(t)]
-            if t.size < 2:
-                continue
-            dt = np.diff(np.sort(t))
-            dt = dt[dt > 0]
-            span = float(t.max() - t.min())
-            first = float(dt.min()) if dt.size else np.nan
-            if test in ("stress_relaxation", "creep_recovery") and "shear_strain" in r:
-                g = np.abs(np.asarray(r["shear_strain"].values, float))
-                if np.isfinite(g).any() and np.nanmax(g) > 0:
-                    rise = float(r["time"].values[np.argmax(g >= 0.98 * np.nanmax(g))] - t.min())
-                    first = rise if rise > 0 else first
-            if np.isfinite(first) and first > 0 and span > 0:
-                lo.append(first)
-                hi.append(span)
-                src.append(f"{test}: {first:.3g}-{span:.3g} s")
-    return {"t_min_s": float(min(lo)) if lo else np.nan, "t_max_s": float(max(hi)) if hi else np.nan,
-            "sources": sorted(set(src))}
-
-
-def window_taus(window: Mapping, per_decade: float = 1.0) -> np.ndarray:
-    """Log-spaced relaxation times [s] spanning ``window`` (:func:`resolved_window_s`), ``per_decade`` per
-    decade, from the decade at or below ``t_min_s`` to the one at or above ``t_max_s``; empty without a window."""
-    t0, t1 = window.get("t_min_s", np.nan), window.get("t_max_s", np.nan)
-    if not (np.isfinite(t0) and np.isfinite(t1) and 0 < t0 <= t1):
-        return np.array([])
-    # at least one decade: up to the decade above t_min's
-    return decade_aligned_taus(t0, max(t1, 10.0 ** (np.floor(np.log10(t0)) + 1.0)), per_decade)
-
-
-#: grid density of :func:`nnls_relaxation_times` (times per decade); dense enough that a mode lies within
-#: 0.125 decade of a grid time, where a one-per-decade grid misses modes between decades (issue #12 item 2)
-NNLS_TIMES_PER_DECADE = 4
-#: decades the grid of :func:`nnls_relaxation_times` reaches below the fastest resolved time. A mode much faster
-#: than a ramp's rise acts on it as a viscosity (stress h tau d(gamma)/dt while the strain rises): the data
-#: resolve its product h tau, not tau, and a time a tenth of the rise carries it within 10 % after the first
-#: tenth of the rise. Without it, a relaxation with modes below the window (a fractional one, a 3 ms mode)
-#: left its loading-phase misfit as structure along strain in the relaxations
-NNLS_GRID_BELOW_DECADES = 1.0
+    """Relaxation-time window [s] the runs resolve: :func:`tissuemech.material.resolved_window_s` of their curves
+    (sweeps: 1/omega; relaxations: rise time to hold duration; creep and ramps: first sample to duration)."""
+    return material.resolved_window_s(curves_of_runs(runs, "measured", 10 ** 9))
 
 
 def loading_unit(run: xr.Dataset) -> str:
@@ -338,7 +276,7 @@ def nnls_relaxation_times(runs: Sequence[xr.Dataset], target: str, relaxation: s
                 units.append(loading_unit(r))
     if grid.size == 0 or not curves:
         return out
-    model = spectrum_model(model_key, grid)
+    model = model_on_times(model_key, grid)
     noise = fitting.NoiseModel()
     observed = [fitting.target_observations(c, target) for c in curves]
     scales = [{k: noise.sigma(k, y, sd.get(k)) for k, y in obs.items()} for obs, sd in observed]
@@ -391,31 +329,6 @@ def nnls_relaxation_times(runs: Sequence[xr.Dataset], target: str, relaxation: s
     return out
 
 
-def merged_times(grid: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """Active relaxation times of an NNLS solution on ``grid``, a pair of neighbouring active times merged.
-
-    One mode between two grid times shows in NNLS as weight on both neighbours and nowhere else; the data do
-    not resolve two modes a grid step apart, so such a pair is one time, at the weight-averaged log time (a
-    0.25-decade pair of exponentials and one exponential at its weighted geometric mean differ by well under
-    the noise of a relaxation). Three or more consecutive active times are a broad spectrum (a fractional
-    relaxation activates a whole band of the grid): they are kept, since one exponential cannot stand for a
-    band (merging them left structure along the predicted level in fractional null datasets). Fewer times make
-    every later fit (candidates, folds, the Pipkin-Rogers extension) smaller. Returns the times [s], ascending.
-    """
-    weights = np.asarray(weights, float)
-    active = np.flatnonzero(weights > 0)
-    if active.size == 0:
-        return np.array([])
-    logs = np.log(np.asarray(grid, float))
-    out = []
-    for run in np.split(active, np.flatnonzero(np.diff(active) > 1) + 1):
-        if run.size == 2:
-            out.append(float(np.exp(np.average(logs[run], weights=weights[run]))))
-        else:
-            out.extend(float(np.exp(logs[i])) for i in run)
-    return np.array(out)
-
-
 def level_normalised(runs: Sequence[xr.Dataset], levels: Mapping[str, float]) -> list[xr.Dataset]:
     """Copies of ``runs`` with the measured stress and torque divided by their loaded piece's level
     (:func:`nnls_relaxation_times`), for fitting the shape common to all pieces; runs of a piece without a
@@ -432,12 +345,6 @@ def level_normalised(runs: Sequence[xr.Dataset], levels: Mapping[str, float]) ->
                 r[name] = r[name] / c
         out.append(r)
     return out
-
-
-def spectrum_model(model_key: str, taus_s: Sequence[float]) -> ConstitutiveModel:
-    """The model ``model_key`` rebuilt on the relaxation times ``taus_s`` [s] (fixed-time QLV and Pipkin-Rogers
-    keys; :func:`tissuemech.models.registry.model_on_times`); every other model as registered."""
-    return model_on_times(model_key, taus_s)
 
 
 def curves_of_runs(runs: Sequence[xr.Dataset], relaxation: str, n_points: int) -> list[fitting.Curve]:
@@ -459,8 +366,8 @@ def fit_runs(model_key: str, runs: Sequence[xr.Dataset], target: str, relaxation
     """Fit a registered model jointly to the runs (thinned per curve); returns the ``FitResult``.
 
     ``taus_s``: relaxation times [s] to rebuild a fixed-time QLV/Pipkin-Rogers model on
-    (:func:`spectrum_model`); None keeps the registered model."""
-    model = get_model(model_key) if taus_s is None else spectrum_model(model_key, taus_s)
+    (:func:`tissuemech.models.registry.model_on_times`); None keeps the registered model."""
+    model = get_model(model_key) if taus_s is None else model_on_times(model_key, taus_s)
     curves = curves_of_runs(runs, relaxation, n_points)
     problem = fitting.FitProblem(model=model, curves=curves, target=target, model_key=model_key, scope="diagnosis")
     return fitting.fit(problem, starts=[start] if start else (), n_random=n_random, seed=seed)
@@ -476,7 +383,7 @@ def extension_gain(runs: Sequence[xr.Dataset], baseline_key: str, extension_key:
     runs : the runs both models are fitted to (only the test kinds both describe)
     folds : ``(label, is_held_out(run))`` pairs; each fold fits on the other runs and scores the held-out
         ones (fitting.evaluate NRMSE)
-    taus_s : relaxation times [s] both models are rebuilt on (:func:`spectrum_model`), e.g.
+    taus_s : relaxation times [s] both models are rebuilt on (:func:`tissuemech.models.registry.model_on_times`), e.g.
         ``window_taus(resolved_window_s(runs))``; None keeps the registered models
     Returns
     -------
@@ -488,7 +395,7 @@ def extension_gain(runs: Sequence[xr.Dataset], baseline_key: str, extension_key:
     if taus_s is None:
         base_model, ext_model = get_model(baseline_key), get_model(extension_key)
     else:
-        base_model, ext_model = spectrum_model(baseline_key, taus_s), spectrum_model(extension_key, taus_s)
+        base_model, ext_model = model_on_times(baseline_key, taus_s), model_on_times(extension_key, taus_s)
     before, after, labels, n_held = [], [], [], []
     for label, held in folds:
         train = [r for r in runs if not held(r)]

@@ -65,12 +65,10 @@ from statsmodels.tools.sm_exceptions import MissingDataError
 
 from .. import fitting
 from ..canonical import read_netcdf, write_netcdf
-from ..models.registry import available_models, get_model
+from ..models.registry import FIXED_TIME_KEY, available_models, get_model, model_on_times
 from .. import stats as st
-from .baseline import (FIXED_TIME_KEY, baseline_adequacy, curves_of_runs, extension_gain, fit_runs,
-                       level_normalised, predict_runs, ranked_candidates,
-                       nnls_relaxation_times, read_fit_record, resolved_window_s, spectrum_model,
-                       window_taus)
+from .baseline import (baseline_adequacy, curves_of_runs, extension_gain, fit_runs, level_normalised, predict_runs,
+                       ranked_candidates, nnls_relaxation_times, read_fit_record, resolved_window_s, window_taus)
 from .catalogue import DiagnosisContext, curve_levels, explains
 from .findings import write_diagnosis_json
 from .causes import CAUSE_IDS, DETECTORS
@@ -491,7 +489,7 @@ def _offset_fix(runs: Sequence[xr.Dataset], baseline_key: str, fit_info: dict, n
         pieces = list(dict.fromkeys(piece(r) for r in use))[:3]
         folds = [(p, piece, [r for r in use if piece(r) == p]) for p in pieces if len(pieces) >= 2]
     free_level = len(groups) < 3
-    model = spectrum_model(baseline_key, taus) if taus else get_model(baseline_key)
+    model = model_on_times(baseline_key, taus) if taus else get_model(baseline_key)
     before, after, labels, n_held, offsets = [], [], [], [], []
     for label, key_of, held in folds:
         train = [r for r in use if key_of(r) != label]
@@ -614,7 +612,7 @@ def diagnose_runs(runs: Sequence[xr.Dataset], baseline: str | Sequence[str] = RU
     else:
         order = keys
     def assessed(key, fit, taus):
-        model = spectrum_model(key, taus)
+        model = model_on_times(key, taus)
         preds = predict_runs(model, fit.params, runs, target, relaxation)
         keep = [i for i, p in enumerate(preds) if p]
         kept = [runs[i] for i in keep]
@@ -688,7 +686,7 @@ def _fit_on_data_times(key: str, runs: Sequence[xr.Dataset], target: str, relaxa
     taus = spectrum["taus_s"]
     fit = fit_runs(key, level_normalised(runs, spectrum["levels"]), target, relaxation, n_points=n_points,
                    taus_s=taus if taus.size else None)
-    law = getattr(spectrum_model(key, taus), "instantaneous", None) if taus.size else None
+    law = getattr(model_on_times(key, taus), "instantaneous", None) if taus.size else None
     # a one-parameter law is its modulus times a fixed shape, absorbed by the weights: nothing to repeat
     if law is not None and len(law.param_names) > 1 and fit.success:
         again = nnls_relaxation_times(runs, target, relaxation, window, model_key=key, law_params=fit.params)
@@ -780,7 +778,7 @@ def run_diagnosis(runs_dir: str | Path, fits_dir: str | Path, out_json: str | Pa
 
 
 def is_fixed_time_qlv(model_key: str) -> bool:
-    """A fixed-time QLV key (``qlv_<law>_prony<n>``, :data:`~tissuemech.diagnosis.baseline.FIXED_TIME_KEY`): the
+    """A fixed-time QLV key (``qlv_<law>_prony<n>``, :data:`~tissuemech.models.registry.FIXED_TIME_KEY`): the
     baselines :func:`run_diagnosis` rebuilds on the data's times."""
     m = FIXED_TIME_KEY.fullmatch(model_key)
     return bool(m) and m.group(1) == "qlv"
