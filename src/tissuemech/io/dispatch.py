@@ -9,12 +9,13 @@ from __future__ import annotations
 import zipfile
 from pathlib import Path
 
-from .blocks import Block, decode_text
+from .blocks import Block
 from .consistency import check_redundant_columns
 from .errors import IngestError
 from .lims import looks_like_lims, read_lims
 from .rheocompass import looks_like_rheocompass, read_rheocompass, read_rheocompass_xlsx
 from .rspace import looks_like_rspace, read_rspace
+from .textfile import decode_text
 from .tidy import looks_like_tidy, read_tidy
 from .trios import looks_like_trios, read_trios_text, read_trios_xls
 

@@ -34,10 +34,11 @@ from pathlib import Path
 import numpy as np
 import openpyxl
 
-from .blocks import (Block, canonical_frame_at, cell_problem, check_time, decode_text, detect_decimal_comma,
+from .blocks import (Block, canonical_frame_at, cell_problem, check_time, detect_decimal_comma,
                      parse_number)
 from .errors import IngestError
 from .geometry import measuring_system
+from .textfile import decode_text
 
 #: lower-cased RheoCompass label -> canonical variable (English, French, German)
 LABELS: dict[str, str] = {

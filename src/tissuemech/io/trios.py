@@ -24,9 +24,10 @@ import numpy as np
 import xlrd
 
 from ..units import UnknownUnitError
-from .blocks import Block, canonical_frame, cell_problem, check_time, decode_text, parse_number
+from .blocks import Block, canonical_frame, cell_problem, check_time, parse_number
 from .errors import IngestError
 from .geometry import measuring_system, value_with_unit
+from .textfile import decode_text
 
 #: lower-cased TRIOS column -> canonical variable
 LABELS: dict[str, str] = {
