@@ -9,7 +9,8 @@ when ingest records it in ``radius_source``/``gap_source``; ``no plate radius`` 
 canonical columns with their SI units, the quality flags and the checks that were not testable, the ingest
 report's warnings (geometry conflicts, missing citation ...) and notes (a block chosen from the test kind, a gap
 read from an axial pre-step), and for a rejected run the problem (file, line/column, reason, and the likely
-mistake where there is one: ``did you mean `geometry`?``, ``looks like metres``, ``looks like a diameter``). Files of the folder that no sample-sheet row names are
+mistake where there is one: ``did you mean `geometry`?``, ``looks like metres``, ``looks like a diameter``).
+Files of the folder that no sample-sheet row names are
 listed as a note.
 
 Exit status: 0 when every run was read, 1 when the dataset description cannot be read or any run has an error.

@@ -22,7 +22,8 @@ from .errors import IngestError
 from .geometry import AXIAL_STEP_SOURCE, CONFLICT_REL, axial_step_gap, dataset_geometry, resolve_geometry
 from .plausibility import diameter_problem, ranges_with, temperature_problem
 from .quality import flag_run_files
-from .samples import READER_OPTIONS, STANDARD, dataset_warnings, load_dataset_yaml, load_samples, parse_row, source_folder
+from .samples import (READER_OPTIONS, STANDARD, dataset_warnings, load_dataset_yaml, load_samples, parse_row,
+                      source_folder)
 
 log = logging.getLogger(__name__)
 REPORT_COLUMNS = ("run", "file", "block", "test", "specimen", "sample", "status", "reason", "line", "column",
