@@ -60,6 +60,15 @@ def parse_number(cell: str, decimal_comma: bool) -> float:
     return value
 
 
+def is_number(cell: str, decimal_comma: bool = True) -> bool:
+    """True when a non-empty cell reads as a number (:func:`parse_number`; by default either decimal mark)."""
+    try:
+        parse_number(cell, decimal_comma)
+    except ValueError:
+        return False
+    return bool(str(cell).strip())
+
+
 def cell_problem(text: str, decimal_comma: bool) -> str:
     """Report wording of a cell :func:`parse_number` refused (text, infinity or overflow)."""
     try:

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import openpyxl
 
-from .blocks import (Block, canonical_frame_at, cell_problem, check_time, detect_decimal_comma,
+from .blocks import (Block, canonical_frame_at, cell_problem, check_time, detect_decimal_comma, is_number,
                      parse_number)
 from .errors import IngestError
 from .geometry import measuring_system
@@ -125,18 +125,11 @@ def _is_header(row: list[str]) -> bool:
     return first.endswith(":") and first.startswith(_HEADER_KEYS)
 
 
-def _is_number(cell: str) -> bool:
-    try:
-        parse_number(cell, True)
-    except ValueError:
-        return False
-    return bool(cell.strip())
-
 
 def _is_column_row(row: list[str]) -> bool:
     """A table export's column-name row: two or more labels, no number, not a header key row."""
     cells = [c.strip() for c in row if c.strip()]
-    return len(cells) >= 2 and not _is_header(row) and not any(_is_number(c) for c in cells)
+    return len(cells) >= 2 and not _is_header(row) and not any(is_number(c) for c in cells)
 
 
 def _read_rows(path: Path, table: list[list[str]], comma: bool, result: str = "result", first_index: int = 1,
@@ -232,7 +225,7 @@ def _read_rows(path: Path, table: list[list[str]], comma: bool, result: str = "r
             # an interval whose points are all flagged invalid by the instrument is not a block of data
             i = j
             continue
-        elif not blank and _is_number(cells[0]):
+        elif not blank and is_number(cells[0]):
             raise IngestError(path, "data row outside any block (a deleted 'Interval:' or column row?)", line=i + 1)
         i += 1
     if test_line is not None:
@@ -251,7 +244,7 @@ def _count(path: Path, cell: str, line: int, column, what: str) -> int:
 
 def _check_table_rows(path: Path, names: list[str], sub: list[str], units: list[str], i: int) -> None:
     """The table layout's sub-label row (empty or labels) and ``[unit]`` row (bracketed or empty cells)."""
-    if any(_is_number(c) for c in sub):
+    if any(is_number(c) for c in sub):
         raise IngestError(path, "expected the (empty) sub-label row under the column row, found data",
                           line=i + 2)
     bad = [c.strip() for c in units if c.strip() and not (c.strip().startswith("[") and c.strip().endswith("]"))]

@@ -30,7 +30,7 @@ import numpy as np
 
 from ..canonical import CANONICAL_VARIABLES
 from ..units import UnknownUnitError, unit_factor
-from .blocks import Block, canonical_frame, check_time, detect_decimal_comma, parse_column, parse_number
+from .blocks import Block, canonical_frame, check_time, detect_decimal_comma, is_number, parse_column
 from .errors import IngestError
 from .rheocompass import LABELS
 from .textfile import decode_text
@@ -53,13 +53,6 @@ def _separator(line: str) -> str:
     return "\t" if "\t" in line else ";" if ";" in line else ","
 
 
-def _is_number(cell: str) -> bool:
-    try:
-        parse_number(cell, True)
-    except ValueError:
-        return False
-    return bool(cell.strip())
-
 
 def _blank(cells: list[str]) -> bool:
     return not any(c.strip() for c in cells)
@@ -72,9 +65,9 @@ def looks_like_table(text: str) -> bool:
         return False
     sep = _separator(lines[0])
     names = [c.strip() for c in lines[0].split(sep) if c.strip()]
-    if len(names) < 2 or any(_is_number(n) for n in names):
+    if len(names) < 2 or any(is_number(n) for n in names):
         return False
-    return any(label_variable(n) for n in names) and any(_is_number(c) for line in lines[1:]
+    return any(label_variable(n) for n in names) and any(is_number(c) for line in lines[1:]
                                                           for c in line.split(sep))
 
 
@@ -156,7 +149,7 @@ def read_table(path, text: str | None = None, column_units: Mapping[str, str] | 
 
 def _is_number_row(row: list[str]) -> bool:
     cells = [c.strip() for c in row if c.strip()]
-    return bool(cells) and _is_number(cells[0])
+    return bool(cells) and is_number(cells[0])
 
 
 def _unit(path: Path, label: str, raw: str, k: int, names: list[str], units_row, unit_line, declared: dict,

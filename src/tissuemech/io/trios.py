@@ -25,7 +25,7 @@ import numpy as np
 import xlrd
 
 from ..units import UnknownUnitError
-from .blocks import Block, canonical_frame, cell_problem, check_time, parse_number
+from .blocks import Block, canonical_frame, cell_problem, check_time, is_number, parse_number
 from .errors import IngestError
 from .geometry import measuring_system, value_with_unit
 from .textfile import decode_text
@@ -148,7 +148,7 @@ def _step_block(path, name, index, cols, units, rows, line_no, meta_common) -> B
         # a step whose column row was lost reads its units row as labels: nothing is recognised
         raise IngestError(path, f"step {name!r}: no recognised column (column row missing or damaged?); "
                                 f"labels: {[c for c in cols if c][:8]}", line=line_no[0] - 2)
-    numeric_units = [u for u in units if str(u).strip() and _is_number(str(u))]
+    numeric_units = [u for u in units if str(u).strip() and is_number(str(u), decimal_comma=False)]
     if numeric_units:
         raise IngestError(path, f"step {name!r}: the units row holds numbers {numeric_units[:3]} (units row "
                                 "missing?)", line=line_no[0] - 1)
@@ -157,13 +157,6 @@ def _step_block(path, name, index, cols, units, rows, line_no, meta_common) -> B
     return Block(name=name, index=index, data=frame,
                  meta=dict(meta_common, labels=labels, first_data_line=line_no[0]))
 
-
-def _is_number(cell: str) -> bool:
-    try:
-        parse_number(cell, decimal_comma=False)
-    except ValueError:
-        return False
-    return True
 
 
 #: a TRIOS step sheet's name: the step and its 1-based position in the procedure ("Frequency sweep - 2")
