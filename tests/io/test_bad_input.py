@@ -109,6 +109,15 @@ def test_truncated_xlsx(tmp_path):
     assert_names(error_of(path), path, None, None, r"corrupt zip container \(truncated file\?\)")
 
 
+def test_xlsx_with_a_damaged_member_name_is_an_error_not_a_lost_sheet(tmp_path):
+    """Bytes overwritten in the central directory's name of sheet1: openpyxl alone would skip that sheet."""
+    data = (FIXTURES / "rheocompass_lookalike.xlsx").read_bytes()
+    at = data.rindex(b"xl/worksheets/sheet1.xml")
+    path = tmp_path / "damaged.xlsx"
+    path.write_bytes(data[:at] + b"xl/wor\xc8T`\xbd\x12&\xf9\xaagU\x0b\xbb\xe81.xml" + data[at + 24:])
+    assert_names(error_of(path), path, None, None, r"damaged \.xlsx workbook: member .* fails its CRC-32 check")
+
+
 # --- encoding --------------------------------------------------------------------------------------------------
 def test_wrong_encoding_names_line_and_byte(tmp_path):
     text = make.kinexus_text()

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import io
 import re
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -359,13 +360,21 @@ def read_rheocompass_xlsx(path) -> list[Block]:
     sub-label and ``[unit]`` rows) and the one with a title in row 1 and the column row in row 2. Numeric cells
     are numbers; cells written as text with a decimal comma are read too. Errors name the sheet, the row
     (as ``line``) and the column label. Sheets without a ``Point No.`` column row are skipped; blocks are
-    numbered through the workbook.
+    numbered through the workbook. Every zip member must pass its CRC-32 check (a damaged member name would
+    otherwise drop its sheet without a word).
     """
     path = Path(path)
+    raw = path.read_bytes()
+    try:
+        # every member's CRC-32: openpyxl skips a worksheet whose stored name was damaged, losing it silently
+        bad = zipfile.ZipFile(io.BytesIO(raw)).testzip()
+    except Exception as exc:  # noqa: BLE001 - zipfile raises BadZipFile, zlib errors, EOFError ... on damage
+        raise IngestError(path, f"not a readable .xlsx workbook (truncated or damaged file?): {exc}") from exc
+    if bad is not None:
+        raise IngestError(path, f"damaged .xlsx workbook: member {bad!r} fails its CRC-32 check")
     try:
         # a file object, because openpyxl refuses paths whose extension is not .xlsx (format comes from content)
-        with open(path, "rb") as fh:
-            book = openpyxl.load_workbook(io.BytesIO(fh.read()), data_only=True)
+        book = openpyxl.load_workbook(io.BytesIO(raw), data_only=True)
     except Exception as exc:  # openpyxl raises zipfile/KeyError/InvalidFileException for damaged files
         raise IngestError(path, f"not a readable .xlsx workbook (truncated or damaged file?): {exc}") from exc
     blocks: list[Block] = []
