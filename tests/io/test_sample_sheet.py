@@ -210,3 +210,18 @@ def test_the_check_names_file_line_and_column_for_every_row_error(tmp_path):
     row[4] = "1.5"
     result = check_dataset(dataset(tmp_path, [row]))
     assert not result.ok and "line 2, column 'order': order must be an integer" in result.runs[0].reason
+
+
+def test_plausible_ranges_by_value():
+    """Each documented bound, from both sides (strain by magnitude: a compression is written negative)."""
+    from tissuemech.io.plausibility import range_problem
+
+    assert range_problem("strain_pct", -10.0) is None and range_problem("strain_pct", 0.5) is None
+    assert "outside the plausible range 0.0001 to 5000 %" in range_problem("strain_pct", 1e5)
+    assert "outside" in range_problem("strain_pct", 1e-6)
+    assert "looks like micrometres (1000 µm = 1 mm); write 1" in range_problem("gap_mm", 1000.0)
+    assert range_problem("temperature_c", -40.0) is None and range_problem("temperature_c", 37.0) is None
+    assert "looks like kelvin (310.15 K = 37 °C)" in range_problem("temperature_c", 310.15)
+    assert range_problem("radius_mm", 4.0) is None and range_problem("gap_mm", 8.5) is None
+    assert "widen the range in dataset.yaml: plausible_ranges: {radius_mm: [low, high]}" in range_problem(
+        "radius_mm", 0.0125)
