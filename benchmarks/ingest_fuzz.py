@@ -3,7 +3,8 @@
     PYTHONPATH=src python benchmarks/ingest_fuzz.py --mutants 1500 --seed 20260113
 
 Spreads the mutants evenly over the exports (bundled ``raw/*/`` files, ``tests/io/fixtures`` and, when
-present, ``../shared/data/real``; the headerless Budday curves are left out: they need sample-sheet options)
+present, ``../shared/data/real``; the headerless Budday curves are left out: they need sample-sheet options; a
+table without units gets the units its folder's ``dataset.yaml`` declares, ``tissuemech.io.fuzz.reader_options_for``)
 and prints the count of each outcome: ``crash`` (exception other than IngestError) and ``wrong`` (silently
 wrong values) and ``lost`` (points missing that the mutant file still holds) must be 0; ``file_shorter`` (the
 mutation deleted a data row or cut the file's tail, and the reader returned every point left, in a format that
@@ -18,7 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from tissuemech.io.fuzz import fuzz_file
+from tissuemech.io.fuzz import fuzz_file, reader_options_for
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -45,7 +46,8 @@ def main() -> None:
     start = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         for path in files:
-            for kind, detail, outcome, message in fuzz_file(path, Path(tmp), per_file, args.seed):
+            for kind, detail, outcome, message in fuzz_file(path, Path(tmp), per_file, args.seed,
+                                                            **reader_options_for(path)):
                 totals[outcome] += 1
                 by_kind[(kind, outcome)] += 1
                 if outcome in ("crash", "wrong", "lost"):

@@ -72,7 +72,8 @@ REQUIRED_RUN_ATTRS: tuple[str, ...] = (
 
 
 #: optional geometry run attributes, present only when a source states them (never NaN, never a default):
-#: ``radius_m``/``gap_m`` in metres, ``radius_source``/``gap_source`` one of :data:`GEOMETRY_SOURCES`,
+#: ``radius_m``/``gap_m`` in metres, ``radius_source``/``gap_source`` one of :data:`GEOMETRY_SOURCES` (or
+#: ``export (axial step)``: a gap read from the TA ``Axial`` step before the block, ``io.geometry.axial_step_gap``),
 #: ``measuring_system`` as the export or dataset.yaml names it (e.g. ``PP25``)
 GEOMETRY_RUN_ATTRS: tuple[str, ...] = ("radius_m", "radius_source", "gap_m", "gap_source", "measuring_system")
 #: where a run's geometry came from, in order of precedence

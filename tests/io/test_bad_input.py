@@ -109,6 +109,15 @@ def test_truncated_xlsx(tmp_path):
     assert_names(error_of(path), path, None, None, r"corrupt zip container \(truncated file\?\)")
 
 
+def test_xlsx_with_a_damaged_member_name_is_an_error_not_a_lost_sheet(tmp_path):
+    """Bytes overwritten in the central directory's name of sheet1: openpyxl alone would skip that sheet."""
+    data = (FIXTURES / "rheocompass_lookalike.xlsx").read_bytes()
+    at = data.rindex(b"xl/worksheets/sheet1.xml")
+    path = tmp_path / "damaged.xlsx"
+    path.write_bytes(data[:at] + b"xl/wor\xc8T`\xbd\x12&\xf9\xaagU\x0b\xbb\xe81.xml" + data[at + 24:])
+    assert_names(error_of(path), path, None, None, r"damaged \.xlsx workbook: member .* fails its CRC-32 check")
+
+
 # --- encoding --------------------------------------------------------------------------------------------------
 def test_wrong_encoding_names_line_and_byte(tmp_path):
     text = make.kinexus_text()
@@ -304,3 +313,53 @@ def test_ingest_outputs_are_atomic(tmp_path, monkeypatch):
     assert run.read_bytes() == good_bytes
     assert sorted(os.listdir(out / "runs")) == [run.name]             # no temporary file left
     assert not [p for p in out.iterdir() if p.name.endswith(".tmp")]
+
+
+# --- ingest fuzz findings (issue 34) ----------------------------------------------------------------------------
+def test_a_100000_digit_point_number_is_an_ingest_error(tmp_path):
+    """Beyond Python's integer-string limit (4300 digits): an IngestError naming the cell, not a bare ValueError."""
+    t = np.arange(1.0, 6.0)
+    lines = rheocompass_text({"time": t, "shear_stress": 100 * np.exp(-t / 5)}, "relax", "Step strain",
+                             header="simple").splitlines()
+    n = line_of(lines, "3\t") if any(line.startswith("3\t") for line in lines) else line_of(lines, "\t3\t")
+    lines[n - 1] = lines[n - 1].replace("3", "9" * 100_000, 1)
+    path = tmp_path / "long.csv"
+    path.write_bytes(b"\xff\xfe" + ("\r\n".join(lines) + "\r\n").encode("utf-16-le"))
+    exc = error_of(path)
+    assert exc.line == n and re.search(r"point number is not a count: '9{40}'\.\.\.", exc.problem), str(exc)[:300]
+
+
+def test_a_100000_digit_value_is_an_ingest_error(tmp_path):
+    lines = lims_lines()
+    n = line_of(lines, "Data point", 1)
+    cells = lines[n - 1].split("\t")
+    k = make.LIMS_VARIABLES.index("Storage modulus") + 1
+    cells[k] = "9" * 100_000
+    lines[n - 1] = "\t".join(cells)
+    path = write_lines(tmp_path / "long.txt", lines)
+    assert_names(error_of(path), path, n, "Storage modulus", r"value out of range \(overflows to ±inf\)")
+
+
+TRIOS_TEXT = ("Filename\tlookalike\nInstrument name\t0000\nProcedure name\tPeak hold\nproceduresegments\tPeak hold"
+              "\n[step]\nPeak hold - 1\nStep time\tStress\tShear rate\ns\tPa\t1/s\n1\t10\t1\n2\t10\t1\n3\t10\t1\n")
+
+
+def test_trios_step_whose_column_row_was_deleted_is_an_error(tmp_path):
+    good = tmp_path / "good.txt"
+    good.write_text(TRIOS_TEXT, encoding="utf-8")
+    assert list(read_export(good)[0].data.columns) == ["time", "shear_stress", "shear_rate"]
+    path = tmp_path / "no_columns.txt"
+    path.write_text(TRIOS_TEXT.replace("Step time\tStress\tShear rate\n", ""), encoding="utf-8")
+    assert_names(error_of(path), path, 7, None, r"step 'Peak hold - 1': no recognised column \(column row missing "
+                                                r"or damaged\?\); labels: \['s', 'Pa', '1/s'\]")
+    path.write_text(TRIOS_TEXT.replace("s\tPa\t1/s\n", ""), encoding="utf-8")
+    assert_names(error_of(path), path, 8, None, r"step 'Peak hold - 1': the units row holds numbers")
+
+
+def test_a_text_export_cut_inside_its_last_number_is_an_error(tmp_path):
+    """A last row '3, 10, 15' cut to '3, 10, 1' would read as another shear rate: a last line without a line end
+    is refused."""
+    path = tmp_path / "cut.txt"
+    path.write_text(TRIOS_TEXT.replace("3\t10\t1\n", "3\t10\t1"), encoding="utf-8")
+    assert_names(error_of(path), path, 11, None, r"the file ends without a line end \(truncated inside its last "
+                                                 r"row\?\); if the file is complete, end it with a line break")

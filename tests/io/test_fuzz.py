@@ -5,13 +5,15 @@ differ from the undamaged file (a prefix-case flip must scale exactly its column
 Outcomes are judged by :func:`tissuemech.io.fuzz.judge` against the original file read by the same reader;
 the factor of a flipped prefix comes from the SI definitions (``test_units.py`` checks those by hand).
 """
+import random
 from pathlib import Path
 
 import pandas as pd
 import pytest
 
 from tissuemech.canonical import read_netcdf
-from tissuemech.io.fuzz import fuzz_file
+from tissuemech.io.dispatch import read_export
+from tissuemech.io.fuzz import fuzz_file, judge, mutate, reader_options_for
 from tissuemech.io.ingest import ingest_dataset
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -23,7 +25,10 @@ BUNDLED = [ROOT / "raw" / "porcine_brain_thesis" / "brain01_s01_01_as.csv",
            ROOT / "raw" / "porcine_brain_thesis" / "brain01_s07_01_csr0.005.csv",
            ROOT / "raw" / "agar_3pct_thesis" / "batch01_s10_01_cr40Pa.csv",
            FIXTURES / "kinexus_lookalike.csv", FIXTURES / "ta_lims_lookalike.txt",
-           FIXTURES / "rheocompass_lookalike.xlsx"]
+           FIXTURES / "rheocompass_lookalike.xlsx",
+           # the export variants of issue 34 (the two tables without units get them from fixtures/dataset.yaml)
+           FIXTURES / "rheocompass_table_lookalike.csv", FIXTURES / "rheocompass_table_headerless.csv",
+           FIXTURES / "plain_table_lookalike.txt", FIXTURES / "trios_axial_lookalike.txt"]
 REAL_FILES = ["rheocompass_cnf_hydrogel/HC1_stressrelaxation_20C_2.csv", "trios/hr30_multistep_minutes.csv",
               "trios/hr20_fungi_frequency_sweep.xls", "trios/arg2_hs60_las.xls", "ta_lims/ares_g2_frequency_sweep_tts.txt",
               "rheocompass_misc/flowcurve_laos_oscillation_fr.csv"]
@@ -38,7 +43,7 @@ def _check(results, name):
 
 @pytest.mark.parametrize("path", BUNDLED, ids=lambda p: p.name)
 def test_fuzz_bundled_exports(path, tmp_path):
-    outcomes = _check(fuzz_file(path, tmp_path, 14, SEED), path.name)
+    outcomes = _check(fuzz_file(path, tmp_path, 16, SEED, **reader_options_for(path)), path.name)
     assert "error" in outcomes                       # the mutations do damage: the test can fail
 
 
@@ -56,6 +61,24 @@ def test_prefix_flip_scales_the_column_by_the_si_factor(tmp_path):
     results = fuzz_file(src, tmp_path, 35, SEED)
     flips = [r for r in results if r[0] == "flip_prefix"]
     assert flips and {r[2] for r in flips} <= {"scaled", "same"} and any(r[2] == "scaled" for r in flips)
+
+
+@pytest.mark.parametrize("path", [p for p in BUNDLED if p.suffix != ".xlsx"], ids=lambda p: p.name)
+def test_a_100000_digit_cell_is_an_ingest_error(path, tmp_path):
+    """Number cells (point numbers, counts, values) replaced by 100,000 digits: an IngestError, never the bare
+    ValueError of Python's integer-string limit; a cell of a row the reader drops (a waveform row) changes nothing."""
+    options = reader_options_for(path)
+    blocks = read_export(path, **options)
+    rng = random.Random(f"{SEED}:{path.name}:long")
+    outcomes = []
+    for _ in range(4):
+        mutant = mutate(path.read_bytes(), "long_number", rng)
+        target = tmp_path / f"mutant{path.suffix}"
+        target.write_bytes(mutant.data)
+        outcome, message = judge(blocks, target, "long_number", **options)
+        assert outcome in ("error", "same"), f"{path.name} {mutant.detail}: {outcome} {message}"
+        outcomes.append(outcome)
+    assert "error" in outcomes
 
 
 TRUNCATED_XLS = b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1" + bytes(range(256)) * 2   # OLE2 signature, then cut

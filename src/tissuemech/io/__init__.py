@@ -1,8 +1,9 @@
 """Instrument export readers and dataset ingest (``dispatch.read_export``, ``ingest.ingest_dataset``).
 
 Formats (detected from content by :func:`tissuemech.io.dispatch.detect_format`, not from the extension):
-Anton Paar RheoCompass CSV/TXT and .xlsx (``rheocompass``), TA TRIOS text/CSV/.xls (``trios``), TA LIMS export
-(``lims``), Malvern Kinexus rSpace CSV (``rspace``), documented tidy CSV (``tidy``). Anton Paar ``.RhPts``
+Anton Paar RheoCompass CSV/TXT (its table export too) and .xlsx (``rheocompass``), TA TRIOS text/CSV/.xls
+(``trios``), TA LIMS export (``lims``), Malvern Kinexus rSpace CSV (``rspace``), documented tidy CSV (``tidy``),
+plain tables whose units come from a unit row or from ``dataset.yaml`` ``columns`` (``table``). Anton Paar ``.RhPts``
 object exports are recognised and refused. Every reader returns :class:`~tissuemech.io.blocks.Block` objects
 (one per interval/step/action) whose ``data`` columns carry canonical names in SI units:
 

@@ -7,8 +7,10 @@ pipeline will do. The dataset folder is only read; nothing is written into it. P
 nominal condition, the plate radius and gap with their source (``samples.csv`` / ``dataset.yaml`` / ``export``
 when ingest records it in ``radius_source``/``gap_source``; ``no plate radius`` when the data give none), the
 canonical columns with their SI units, the quality flags and the checks that were not testable, the ingest
-report's warnings (geometry conflicts, missing citation ...), and for a rejected run the problem (file,
-line/column, reason). Files of the folder that no sample-sheet row names are
+report's warnings (geometry conflicts, missing citation ...) and notes (a block chosen from the test kind, a gap
+read from an axial pre-step), and for a rejected run the problem (file, line/column, reason, and the likely
+mistake where there is one: ``did you mean `geometry`?``, ``looks like metres``, ``looks like a diameter``).
+Files of the folder that no sample-sheet row names are
 listed as a note.
 
 Exit status: 0 when every run was read, 1 when the dataset description cannot be read or any run has an error.
@@ -45,6 +47,7 @@ class RunCheck:
     status: str                   # "ok", "error" or another ingest status (reported as a warning)
     reason: str = ""
     warnings: str = ""            # the ingest report's ``warnings`` column, when it has one
+    notes: str = ""               # the ingest report's ``notes`` (a block chosen from the test kind, an axial-step gap)
     lines: list[str] = field(default_factory=list)
 
 
@@ -119,7 +122,8 @@ def check_dataset(dataset_dir: str | Path) -> DatasetCheck:
             return result
         for rec in report.to_dict("records"):
             entry = RunCheck(run=str(rec["run"]), file=str(rec["file"]), status=str(rec["status"]),
-                             reason=_text(rec.get("reason")), warnings=_text(rec.get("warnings")))
+                             reason=_text(rec.get("reason")), warnings=_text(rec.get("warnings")),
+                             notes=_text(rec.get("notes")))
             path = out / "runs" / f"{entry.run}.nc"
             if entry.status != "error" and path.is_file():
                 entry.lines = describe_run(read_netcdf(path))
@@ -148,6 +152,8 @@ def format_check(result: DatasetCheck) -> str:
             lines.append(f"    problem: {r.reason}")
         if r.warnings:
             lines.append(f"    warnings: {r.warnings}")
+        if r.notes:
+            lines.append(f"    notes: {r.notes}")
     lines += [f"note: {n}" for n in result.notes]
     n_err = sum(r.status == "error" for r in result.runs)
     n_warn = sum(r.status != "error" and (r.status != "ok" or bool(r.warnings)) for r in result.runs)

@@ -9,23 +9,27 @@ from __future__ import annotations
 import zipfile
 from pathlib import Path
 
-from .blocks import Block, decode_text
+from .blocks import Block
 from .consistency import check_redundant_columns
 from .errors import IngestError
 from .lims import looks_like_lims, read_lims
 from .rheocompass import looks_like_rheocompass, read_rheocompass, read_rheocompass_xlsx
 from .rspace import looks_like_rspace, read_rspace
+from .table import looks_like_table, read_table
+from .textfile import decode_text
 from .tidy import looks_like_tidy, read_tidy
 from .trios import looks_like_trios, read_trios_text, read_trios_xls
 
 SUPPORTED = ("Anton Paar RheoCompass CSV/TXT (UTF-16/UTF-8, EN/FR/DE) and .xlsx", "TA TRIOS text/CSV/.xls",
-             "TA LIMS export (.txt)", "Malvern Kinexus rSpace CSV", "tidy CSV")
+             "TA LIMS export (.txt)", "Malvern Kinexus rSpace CSV", "tidy CSV",
+             "plain tables (RheoCompass labels or canonical names; units from a [unit] row or dataset.yaml 'columns')")
 _OLE2 = b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1"
 
 
 def detect_format(path) -> str:
     """Name of the reader a file needs (``rheocompass``, ``rheocompass_xlsx``, ``trios_text``, ``trios_xls``,
-    ``lims``, ``rspace`` or ``tidy``); raises :class:`IngestError` for unsupported or unrecognised content."""
+    ``lims``, ``rspace``, ``tidy`` or ``table``); raises :class:`IngestError` for unsupported or unrecognised
+    content."""
     path = Path(path)
     if not path.is_file():
         raise IngestError(path, "file not found")
@@ -60,6 +64,8 @@ def _text_format(path: Path, text: str, columns=None) -> str:
         return "trios_text"
     if columns or looks_like_tidy(text):
         return "tidy"
+    if looks_like_table(text):
+        return "table"
     raise IngestError(path, f"unrecognised export format; supported: {', '.join(SUPPORTED)}", line=1)
 
 
@@ -69,11 +75,14 @@ def read_export(path, **options) -> list[Block]:
     Parameters
     ----------
     path : the file
-    options : reader options from the sample sheet (``columns``, ``units`` for headerless tidy files)
+    options : reader options: from the sample sheet ``columns``, ``units`` (headerless tidy files); from
+        ``dataset.yaml`` ``column_units`` (label -> unit pairs of its ``columns``, for tables without units)
 
     Raises
     ------
-    IngestError : unreadable, unsupported (e.g. ``.RhPts``) or malformed files, with file/line/column.
+    IngestError : unreadable, unsupported (e.g. ``.RhPts``) or malformed files, with file/line/column; a text
+        export whose last line has no line end (every real export ends its last line, and a file cut inside its
+        last number would otherwise read as another number).
     """
     path = Path(path)
     if not path.is_file():
@@ -87,6 +96,15 @@ def _read_blocks(path: Path, options: dict) -> list[Block]:
         kind = detect_format(path)
         return read_rheocompass_xlsx(path) if kind == "rheocompass_xlsx" else read_trios_xls(path)
     text = decode_text(path)
+    blocks = _read_text(path, text, options)
+    if text.strip() and not text.endswith(("\n", "\r")):
+        # every real export ends its last line: a file cut inside its last row would read as a shorter number
+        raise IngestError(path, "the file ends without a line end (truncated inside its last row?); if the file "
+                                "is complete, end it with a line break", line=len(text.splitlines()))
+    return blocks
+
+
+def _read_text(path: Path, text: str, options: dict) -> list[Block]:
     kind = _text_format(path, text, options.get("columns"))
     if kind == "lims":
         return read_lims(path, text)
@@ -96,4 +114,6 @@ def _read_blocks(path: Path, options: dict) -> list[Block]:
         return read_rspace(path, text)
     if kind == "trios_text":
         return read_trios_text(path, text)
+    if kind == "table":
+        return read_table(path, text, column_units=options.get("column_units"))
     return read_tidy(path, text, columns=options.get("columns"), units=options.get("units"))

@@ -1,9 +1,13 @@
 """Seeded mutation fuzzing of the readers: damage an export, read it, judge the outcome against the original.
 
 Used by ``tests/io/test_fuzz.py`` (CI-sized) and ``benchmarks/ingest_fuzz.py`` (large runs). Mutations
-(:data:`TEXT_MUTATIONS`, :data:`BINARY_MUTATIONS`): truncate, delete or duplicate a line, cut a row short,
+(:data:`TEXT_MUTATIONS`, :data:`BINARY_MUTATIONS`): truncate, delete or duplicate a line, cut a row short (at a
+field separator, re-ended with its line end),
 flip the case of a unit prefix (``mPa`` <-> ``MPa``, ``mN`` <-> ``MN``), put ``1e400`` in a numeric cell,
-swap the decimal separator of a cell; for ``.xls``/``.xlsx``: truncate and overwrite bytes.
+swap the decimal separator of a cell, replace a number cell (point numbers and counts included) by a
+100,000-digit number (beyond Python's integer-string limit); for ``.xls``/``.xlsx``: truncate and overwrite bytes.
+:func:`reader_options_for` gives an export the reader options its folder's ``dataset.yaml`` declares (the units
+of tables without a unit row), as ingest would.
 
 Outcomes (:func:`judge`):
 
@@ -28,17 +32,22 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from ..canonical import CANONICAL_VARIABLES
 from ..units import UnknownUnitError, unit_factor
 from .dispatch import read_export
 from .errors import IngestError
+from .ingest import reader_options
 
 TEXT_MUTATIONS = ("truncate", "delete_line", "duplicate_line", "cut_row", "flip_prefix", "overflow",
-                  "swap_decimal")
+                  "swap_decimal", "long_number")
 BINARY_MUTATIONS = ("truncate_bytes", "corrupt_bytes")
 _PREFIX = re.compile(r"(?<![A-Za-z])([mM])(?=(Pa|N)(?![A-Za-z]))")
 _NUMERIC_CELL = re.compile(r"(?<=[\t;,])[-+]?\d+[.,]\d+(?:[eE][-+]?\d+)?(?=[\t;,\r\n]|$)")
+#: a whole cell holding a number, integers (point numbers, counts) included
+_NUMBER_CELL = re.compile(r"(?<![^\t;,\n])[-+]?\d+(?:[.,]\d+)?(?:[eE][-+]?\d+)?(?![^\t;,\r\n])")
+LONG_NUMBER = "9" * 100_000
 
 
 @dataclass
@@ -52,6 +61,12 @@ class Mutant:
 
 def _encoding(raw: bytes) -> str:
     return "utf-16" if raw[:2] in (b"\xff\xfe", b"\xfe\xff") else "utf-8-sig" if raw[:3] == b"\xef\xbb\xbf" else "utf-8"
+
+
+def _field_separator(line: str) -> str:
+    """The line's field separator: tab or semicolon where the line has one, else the comma (a decimal comma of a
+    tab- or semicolon-separated file is not a field boundary: cutting there is the ``truncate`` damage)."""
+    return "\t" if "\t" in line else ";" if ";" in line else ","
 
 
 def mutate(raw: bytes, kind: str, rng: random.Random) -> Mutant:
@@ -80,13 +95,13 @@ def mutate(raw: bytes, kind: str, rng: random.Random) -> Mutant:
         elif kind == "duplicate_line":
             lines.insert(k, lines[k])
         else:
-            seps = [m.start() for m in re.finditer(r"[\t;,]", lines[k])]
+            seps = [m.start() for m in re.finditer(re.escape(_field_separator(lines[k])), lines[k])]
             if seps:
                 lines[k] = lines[k][: rng.choice(seps)] + "\r\n" * lines[k].endswith("\r\n") + "\n" * (
                     not lines[k].endswith("\r\n") and lines[k].endswith("\n"))
         text, detail = "".join(lines), f"line {k + 1}"
-    elif kind in ("flip_prefix", "overflow", "swap_decimal"):
-        pattern = _PREFIX if kind == "flip_prefix" else _NUMERIC_CELL
+    elif kind in ("flip_prefix", "overflow", "swap_decimal", "long_number"):
+        pattern = {"flip_prefix": _PREFIX, "long_number": _NUMBER_CELL}.get(kind, _NUMERIC_CELL)
         hits = list(pattern.finditer(text))
         if hits:
             m = rng.choice(hits)
@@ -95,9 +110,12 @@ def mutate(raw: bytes, kind: str, rng: random.Random) -> Mutant:
                 new = m.group(1).swapcase()
             elif kind == "overflow":
                 new = "1e400"
+            elif kind == "long_number":
+                new = LONG_NUMBER
             else:
                 new = m.group(0).translate(str.maketrans(".,", ",."))
-            text, detail = text[: m.start()] + new + text[m.end():], f"line {line}: {m.group(0)!r} -> {new!r}"
+            shown = new if len(new) < 40 else f"<{len(new):,} digits>"
+            text, detail = text[: m.start()] + new + text[m.end():], f"line {line}: {m.group(0)!r} -> {shown}"
     else:
         raise ValueError(f"unknown mutation {kind!r}")
     return Mutant(kind, detail, text.encode(enc))
@@ -177,6 +195,14 @@ def _judge_missing(kind: str, missing_blocks: int, shortened: list, kept_blocks:
 
 def _expected(column: str) -> str:
     return CANONICAL_VARIABLES[column][0]
+
+
+def reader_options_for(path: Path) -> dict:
+    """Reader options an export gets from the ``dataset.yaml`` of its folder (``columns``: units of tables
+    without a unit row), as :func:`tissuemech.io.ingest.reader_options` gives them; empty without one."""
+    described = Path(path).parent / "dataset.yaml"
+    meta = yaml.safe_load(described.read_text(encoding="utf-8")) if described.is_file() else None
+    return reader_options({}, meta if isinstance(meta, dict) else {})
 
 
 def fuzz_file(path: Path, workdir: Path, n: int, seed: int, **options) -> list[tuple[str, str, str, str]]:

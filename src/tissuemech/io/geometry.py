@@ -14,12 +14,17 @@ Nothing here defaults a plate radius or gap: a value is taken from a source that
   ``gap_mm``, ``measuring_system``, ``type``) or a string (``parallel plate, 25 mm`` is a *diameter*;
   ``PP25``). A list of gaps (a range) is not one gap and gives none.
 * :func:`resolve_geometry` applies the precedence and names conflicts (> 1 % apart).
+* :func:`axial_step_gap` reads the gap of a TA ``Axial`` pre-step that ends right before a step that logs no
+  gap (the TRIOS exports of ``instrument_formats.md`` 2.3): the last recorded gap, with a note saying whether it
+  was still changing when the step ended.
 """
 from __future__ import annotations
 
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+
+import numpy as np
 
 from ..canonical import GEOMETRY_SOURCES
 from ..units import to_si
@@ -32,6 +37,12 @@ _ANTON_PAAR = re.compile(r"^\s*(PP|CP|CC|PPR|CPR)\s*0*(\d+(?:[.,]\d+)?)(?:\s*-\s
 _TA_PLATE = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*mm\b.*\bparallel\s+plates?\b", re.IGNORECASE)
 _VALUE_UNIT = re.compile(r"^\s*([-+]?(?:\d+(?:[.,]\d*)?|[.,]\d+)(?:[eE][-+]?\d+)?)\s*(\S.*?)\s*$")
 _STRING_DIAMETER = re.compile(r"(\d+(?:[.,]\d+)?)\s*mm\b", re.IGNORECASE)
+#: a TA step name: the step and its 1-based position in the procedure ("Axial - 1", "Frequency sweep - 2")
+_TA_STEP = re.compile(r"^(?P<step>.+?) - (?P<number>\d{1,6})$")
+#: the source label of a gap read from a preceding axial step
+AXIAL_STEP_SOURCE = "export (axial step)"
+#: the gap moved by more than this fraction over the last tenth of the axial step: "still changing"
+SETTLED_REL = 1e-3
 
 
 def measuring_system(name: str) -> dict:
@@ -149,5 +160,59 @@ def resolve_geometry(sheet: Mapping, dataset: Mapping, export: Mapping) -> tuple
     return attrs, notes
 
 
-__all__ = ["CONFLICT_REL", "SOURCES", "dataset_geometry", "measuring_system",
-           "resolve_geometry", "value_with_unit"]
+def axial_step_gap(blocks: Sequence, block) -> tuple[float, str] | None:
+    """The gap [m] an ``Axial`` pre-step leaves for the step that follows it, and the report note saying so.
+
+    Used only when ``block`` is a TA step (``<step> - <k>``) directly preceded in the export by ``Axial - <k-1>``
+    (the procedure goes on to ``block`` right after the axial step ends, with nothing in between) and that step
+    logs a ``gap`` channel: the rheometer holds the gap where the axial step left it, so the last recorded gap is
+    the gap of ``block``. When the gap moved by more than :data:`SETTLED_REL` of its value over the last tenth of
+    the axial step's records (at least 3), the note says it was still closing or opening at the end, at what
+    rate, and how much one more record interval of that motion would change it (the step may end up to one
+    interval after its last record): the value is then the last one recorded, not a settled one.
+
+    Parameters
+    ----------
+    blocks : every block of the export (``name``, ``index``, ``data`` with ``gap`` [m] and ``time`` [s])
+    block : the block that needs a gap
+
+    Returns
+    -------
+    ``(gap_m, note)``, or None when no such axial step precedes ``block``.
+    """
+    this = _TA_STEP.match(str(block.name).strip())
+    previous = [b for b in blocks if b.index == block.index - 1]
+    if not this or not previous:
+        return None
+    axial = previous[0]
+    step = _TA_STEP.match(str(axial.name).strip())
+    if (not step or not step["step"].strip().lower().startswith("axial")
+            or int(step["number"]) != int(this["number"]) - 1 or "gap" not in axial.data):
+        return None
+    gap = axial.data["gap"].to_numpy(float)
+    keep = np.isfinite(gap) & (gap > 0)
+    if not keep.any():
+        return None
+    gap = gap[keep]
+    time = axial.data["time"].to_numpy(float)[keep] if "time" in axial.data else None
+    last = float(gap[-1])
+    where = f"at {time[-1]:.4g} s" if time is not None else f"record {gap.size}"
+    note = (f"gap {last * 1e3:.5g} mm: the last record ({where}) of the preceding step {axial.name!r} "
+            f"(source: {AXIAL_STEP_SOURCE})")
+    n = max(3, int(np.ceil(0.1 * gap.size)))
+    if gap.size >= n:
+        change = float(gap[-1] - gap[-n])
+        if abs(change) > SETTLED_REL * last:
+            note += (f"; the gap was still {'closing' if change < 0 else 'opening'} when that step ended "
+                     f"({change * 1e6:+.3g} µm over its last {n} records")
+            if time is not None and time[-1] > time[-n]:
+                rate = abs(change) / (time[-1] - time[-n])
+                interval = float(np.median(np.diff(time)))
+                note += (f", {rate * 1e6:.3g} µm/s; one record interval, {interval:.3g} s, more of it would be "
+                         f"{rate * interval * 1e6:.3g} µm, {rate * interval / last:.2%}")
+            note += "): the value is the last one recorded, not a settled one"
+    return last, note
+
+
+__all__ = ["AXIAL_STEP_SOURCE", "CONFLICT_REL", "SOURCES", "axial_step_gap", "dataset_geometry",
+           "measuring_system", "resolve_geometry", "value_with_unit"]

@@ -19,14 +19,15 @@ from ..canonical import make_run_dataset, sha256_of, write_netcdf, write_text
 from .blocks import Block
 from .dispatch import read_export
 from .errors import IngestError
-from .geometry import CONFLICT_REL, dataset_geometry, resolve_geometry
+from .geometry import AXIAL_STEP_SOURCE, CONFLICT_REL, axial_step_gap, dataset_geometry, resolve_geometry
+from .plausibility import diameter_problem, ranges_with, temperature_problem
 from .quality import flag_run_files
-from .samples import (NUMERIC, READER_OPTIONS, STANDARD, dataset_warnings, load_dataset_yaml, load_samples,
-                      row_problems, source_folder)
+from .samples import (READER_OPTIONS, STANDARD, dataset_warnings, load_dataset_yaml, load_samples, parse_row,
+                      source_folder)
 
 log = logging.getLogger(__name__)
 REPORT_COLUMNS = ("run", "file", "block", "test", "specimen", "sample", "status", "reason", "line", "column",
-                  "warnings")
+                  "warnings", "notes")
 #: test kinds measured between plates (a missing radius or gap is a report warning for these only)
 PLATE_TESTS = ("amplitude_sweep", "frequency_sweep", "constant_shear_rate", "stress_relaxation", "creep_recovery",
                "flow_curve")
@@ -54,36 +55,63 @@ REQUIRED_VARIABLES: dict[str, tuple[tuple[str, ...], ...]] = {
 }
 
 
+def missing_variables(block: Block, test: str) -> list[tuple[str, ...]]:
+    """The groups of :data:`REQUIRED_VARIABLES` of ``test`` of which ``block`` holds no data."""
+    return [alternatives for alternatives in REQUIRED_VARIABLES.get(test, ())
+            if not any(v in block.data and block.data[v].notna().any() for v in alternatives)]
+
+
 def check_required(block: Block, test: str, path) -> None:
-    """The block holds the variables its test kind needs (missing column -> IngestError naming it)."""
+    """The block holds the variables its test kind needs, at two points at least (a curve).
+
+    Raises IngestError naming the export: a missing column, or fewer than two points that hold every required
+    variable (an export with one data row).
+    """
+    missing = missing_variables(block, test)
+    if missing:
+        wanted = " or ".join(repr(v) for v in missing[0])
+        raise IngestError(path, f"missing column: block {block.name!r} has no {wanted} data, needed for a "
+                                f"{test} run; it has {list(block.data.columns)}",
+                          line=block.meta.get("first_data_line"), column=missing[0][0])
+    complete = np.ones(len(block.data), bool)
     for alternatives in REQUIRED_VARIABLES.get(test, ()):
-        present = [v for v in alternatives if v in block.data and block.data[v].notna().any()]
-        if not present:
-            wanted = " or ".join(repr(v) for v in alternatives)
-            raise IngestError(path, f"missing column: block {block.name!r} has no {wanted} data, needed for a "
-                                    f"{test} run; it has {list(block.data.columns)}",
-                              line=block.meta.get("first_data_line"), column=alternatives[0])
+        complete &= np.any([block.data[v].notna().to_numpy() for v in alternatives if v in block.data], axis=0)
+    if complete.sum() < 2:
+        raise IngestError(path, f"block {block.name!r} holds {int(complete.sum())} data point(s) with the {test} "
+                                "variables: a curve needs at least 2 (an export with one data row?)",
+                          line=block.meta.get("first_data_line"))
 
 
-def select_block(blocks: list[Block], block, path) -> Block:
-    """The block a sample-sheet row asks for (index from 1, or a name); the only block when none is given."""
+def select_block(blocks: list[Block], block, path, test: str | None = None) -> tuple[Block, str]:
+    """The block a sample-sheet row asks for (index from 1, or a name), and a note when it was chosen here.
+
+    Without a ``block``: the only block of the file; else, given the row's ``test``, the one block that holds
+    that test kind's variables (:data:`REQUIRED_VARIABLES`), with the note ``block chosen: ...``. Several or no
+    such blocks is an error listing them.
+    """
+    listing = ", ".join(f"{b.index}: {b.name}" for b in blocks)
     if block in (None, ""):
-        if len(blocks) > 1:
-            names = ", ".join(f"{b.index}: {b.name}" for b in blocks)
-            raise IngestError(path, f"file holds {len(blocks)} blocks; the sample sheet must select one with "
-                                    f"'block' ({names})")
-        return blocks[0]
+        if len(blocks) == 1:
+            return blocks[0], ""
+        matching = [b for b in blocks if test and not missing_variables(b, test)]
+        if len(matching) == 1:
+            b = matching[0]
+            return b, (f"block chosen: {b.index}: {b.name!r}, the only one of the file's {len(blocks)} blocks "
+                       f"with {test} data")
+        what = (f"{len(matching)} of them hold {test} data ({', '.join(f'{b.index}: {b.name}' for b in matching)})"
+                if matching else f"none holds {test} data" if test else "")
+        raise IngestError(path, f"file holds {len(blocks)} blocks ({listing}); {what}: the sample sheet must "
+                                "select one with 'block'")
     text = str(block).strip()
-    if text.isdigit():
+    if text.isdigit() and len(text) <= 9:
         k = int(text)
         for b in blocks:
             if b.index == k:
-                return b
+                return b, ""
     for b in blocks:
         if b.name == text:
-            return b
-    raise IngestError(path, f"block {text!r} not found (mismatched 'block'); available: "
-                            + ", ".join(f"{b.index}: {b.name}" for b in blocks))
+            return b, ""
+    raise IngestError(path, f"block {text[:80]!r} not found (mismatched 'block'); available: {listing}")
 
 
 def _number(v):
@@ -96,34 +124,65 @@ def _number(v):
     return None if math.isnan(f) else f
 
 
-def _export_geometry(block: Block) -> dict:
-    """Radius and gap the export states: header/measuring system, else a constant ``gap`` column (within 1 %)."""
+def _export_geometry(block: Block, blocks: list[Block] | None = None) -> tuple[dict, str]:
+    """Radius and gap the export states: header/measuring system, else a constant ``gap`` column (within 1 %),
+    else the gap an ``Axial`` pre-step left (:func:`tissuemech.io.geometry.axial_step_gap`, with its note)."""
     out = {k: block.meta[k] for k in ("radius_m", "gap_m") if block.meta.get(k) is not None}
     if "gap_m" not in out and "gap" in block.data:
         gap = block.data["gap"].to_numpy(float)
         gap = gap[np.isfinite(gap)]
         if gap.size and np.all(gap > 0) and np.ptp(gap) <= CONFLICT_REL * np.median(gap):
             out["gap_m"] = float(np.median(gap))
-    return out
+    if "gap_m" not in out and blocks:
+        axial = axial_step_gap(blocks, block)
+        if axial:
+            out["gap_m"] = axial[0]
+            return out, axial[1]
+    return out, ""
 
 
 def build_run(row: dict, block: Block, dataset: str, source_path: Path,
-              dataset_meta: dict | None = None) -> tuple[xr.Dataset, list[str]]:
-    """Canonical run dataset of one row, and its notes for the ingest report.
+              dataset_meta: dict | None = None, blocks: list[Block] | None = None,
+              where: tuple[Path, int] | None = None) -> tuple[xr.Dataset, list[str]]:
+    """Canonical run dataset of one row, and its warnings for the ingest report.
 
     Geometry follows ``samples.csv`` (``radius_mm``/``gap_mm``) > ``dataset.yaml`` (``geometry``) > the export
-    (:func:`tissuemech.io.geometry.resolve_geometry`): attributes ``radius_m``, ``radius_source``, ``gap_m``,
+    (:func:`tissuemech.io.geometry.resolve_geometry`; with ``blocks``, the gap of a preceding ``Axial`` step,
+    ``gap_source`` ``export (axial step)``): attributes ``radius_m``, ``radius_source``, ``gap_m``,
     ``gap_source`` are written only when some source states them (never NaN, never a default), and
-    ``measuring_system`` when the export or ``dataset.yaml`` names one. Notes: ``no plate radius``, ``no gap``
-    (for plate tests), geometry conflicts, ``dataset.yaml`` warnings. Other attributes: ``docs/architecture.md``.
+    ``measuring_system`` when the export or ``dataset.yaml`` names one. Warnings: ``no plate radius``, ``no gap``
+    (for plate tests), geometry conflicts, a stated temperature another than the logged one. A gap read from an
+    axial step carries its note in the attribute ``gap_note``. Other attributes: ``docs/architecture.md``.
+
+    Raises
+    ------
+    IngestError : naming ``where`` (the sample sheet and the row's line) or ``dataset.yaml``: a stated radius
+        twice the export's (``looks like a diameter``), a temperature in kelvin against the export's logged one
     """
     dataset_meta = dataset_meta or {}
     yaml_geometry = dataset_geometry(dataset_meta.get("geometry"))
     radius, gap = _number(row.get("radius_mm")), _number(row.get("gap_mm"))
     sheet_geometry = {k: v * 1e-3 for k, v in (("radius_m", radius), ("gap_m", gap)) if v is not None}
-    geometry, notes = resolve_geometry(sheet_geometry, yaml_geometry, _export_geometry(block))
+    export_geometry, geometry_note = _export_geometry(block, blocks)
+    sheet_path, line = where or (Path("samples.csv"), None)
+    for stated, source, path, at in ((sheet_geometry, "samples.csv", sheet_path, (line, "radius_mm")),
+                                     (yaml_geometry, "dataset.yaml", sheet_path.parent / "dataset.yaml",
+                                      (None, "geometry"))):
+        problem = diameter_problem(stated.get("radius_m"), export_geometry.get("radius_m"), source, CONFLICT_REL)
+        if problem:
+            raise IngestError(path, problem, line=at[0], column=at[1])
+    geometry, notes = resolve_geometry(sheet_geometry, yaml_geometry, export_geometry)
+    if geometry_note and geometry.get("gap_source") == "export":
+        geometry["gap_source"] = AXIAL_STEP_SOURCE
     if str(row["test"]) not in PLATE_TESTS:
         notes = [n for n in notes if n not in ("no plate radius", "no gap")]
+    temperature = _number(row.get("temperature_c"))
+    if "temperature" in block.data and block.data["temperature"].notna().any():
+        logged = float(block.data["temperature"].median())
+        error, warning = temperature_problem(temperature, logged, "samples.csv")
+        if error:
+            raise IngestError(sheet_path, error, line=line, column="temperature_c")
+        notes += [warning] if warning else []
     attrs = {
         "dataset": dataset, "run": run_id(row), "test": row["test"], "specimen": str(row["specimen"]),
         "sample": str(row["sample"]), "order": int(float(row["order"])), "source_file": str(row["file"]),
@@ -131,9 +190,11 @@ def build_run(row: dict, block: Block, dataset: str, source_path: Path,
         "format": block.meta.get("format", ""),
         **geometry,
         "measuring_system": block.meta.get("measuring_system") or yaml_geometry.get("measuring_system"),
-        "temperature_c": _number(row.get("temperature_c")),
+        "temperature_c": temperature,
         "started_at": row.get("started_at"),
     }
+    if geometry_note and geometry.get("gap_source") == AXIAL_STEP_SOURCE:
+        attrs["gap_note"] = geometry_note
     for key in ("shear_rate_1_per_s", "strain_pct", "stress_pa", "frequency_hz", "rise_time_s"):
         attrs[key] = _number(row.get(key))
     for key, value in row.items():
@@ -167,23 +228,36 @@ def _read_cached(cache: dict, path: Path, options: dict) -> list[Block]:
     return cache[key]
 
 
+def reader_options(row: dict, meta: dict) -> dict:
+    """Options of :func:`tissuemech.io.dispatch.read_export` for one row: the row's ``columns``/``units``
+    (headerless tidy files) and ``dataset.yaml``'s ``columns`` (units of plain tables) as ``column_units``."""
+    options = {k: row[k] for k in READER_OPTIONS if row.get(k)}
+    if meta.get("columns"):
+        options["column_units"] = tuple(sorted((str(k), str(v)) for k, v in meta["columns"].items()))
+    return options
+
+
 def ingest_dataset(dataset_dir, runs_dir, report_path) -> pd.DataFrame:
     """Ingest every row of ``dataset_dir/samples.csv`` into ``runs_dir``; write and return the report.
 
     Every exception while handling one row (a damaged export, a bad sheet row, a failed write) becomes that
     row's ``error`` line in the report and the other rows go on. A ``dataset.yaml`` or ``samples.csv`` that
-    cannot be read at all is written to the report as a single error row and then raised.
+    cannot be read at all is written to the report as a single error row and then raised. A row that selects
+    the same file, block and test as an earlier row is an error naming both lines.
 
     Report columns: :data:`REPORT_COLUMNS` (``line``/``column`` where known; ``warnings``: ``no plate radius``,
-    ``no gap``, geometry conflicts, missing ``citation``/``license`` joined by ``; ``).
+    ``no gap``, geometry and temperature conflicts, missing ``citation``/``license``; ``notes``: a block chosen
+    from the test kind, a gap read from an axial step; each joined by ``; ``).
     """
     dataset_dir, runs_dir = Path(dataset_dir), Path(runs_dir)
     runs_dir.mkdir(parents=True, exist_ok=True)
     dataset = dataset_dir.name
+    sheet_path = dataset_dir / "samples.csv"
     try:
         meta = load_dataset_yaml(dataset_dir)
         yaml_warnings = dataset_warnings(meta)
         dataset_geometry(meta.get("geometry"))
+        ranges = ranges_with(meta.get("plausible_ranges"))
         sheet = load_samples(dataset_dir)
         source = source_folder(dataset_dir)
     except Exception as exc:
@@ -194,39 +268,38 @@ def ingest_dataset(dataset_dir, runs_dir, report_path) -> pd.DataFrame:
             raise
         raise IngestError(dataset_dir / "dataset.yaml", str(exc)) from exc
     cache: dict = {}
+    seen: dict = {}                  # (export, block index, test) -> line of the first row that selected it
     records = []
-    for line, row in enumerate(sheet.to_dict("records"), start=2):
+    for line, row in zip(sheet.index, sheet.to_dict("records")):
         rid = run_id(row) if all(row.get(k) for k in ("specimen", "sample", "test", "order")) else f"row{line}"
         rec = {"run": rid, "file": row.get("file"), "block": row.get("block"), "test": row.get("test"),
                "specimen": row.get("specimen"), "sample": row.get("sample"), "status": "ok", "reason": "",
-               "line": None, "column": None, "warnings": ""}
+               "line": None, "column": None, "warnings": "", "notes": ""}
         try:
-            clean = {k: (int(float(v)) if k == "order" and v is not None and str(v).strip() else v)
-                     for k, v in row.items()}
-            for key in NUMERIC:
-                if key in clean and key != "order":
-                    clean[key] = _number(clean[key])
-            problems = row_problems(clean)
-            if problems:
-                field = problems[0].split(":", 1)[0]
-                raise IngestError(dataset_dir / "samples.csv", "; ".join(problems), line=line,
-                                  column=field if field in row else None)
-            path = source / str(row["file"])
+            clean = parse_row(row, line, sheet_path, sheet.attrs["decimal_comma"], ranges)
+            rec["run"] = rid = run_id(clean)
+            path = source / str(clean["file"])
             if not path.is_file():
-                raise IngestError(dataset_dir / "samples.csv", f"file {row['file']!r} not found", line=line,
-                                  column="file")
-            options = {k: row[k] for k in READER_OPTIONS if row.get(k)}
-            blocks = _read_cached(cache, path, options)
+                raise IngestError(sheet_path, f"file {clean['file']!r} not found", line=line, column="file")
+            blocks = _read_cached(cache, path, reader_options(clean, meta))
             try:
-                block = select_block(blocks, row.get("block"), path)
+                block, chosen = select_block(blocks, clean.get("block"), path, str(clean["test"]))
             except IngestError as exc:
                 # the sample sheet is what is wrong: name its line and column, and the export in the text
-                raise IngestError(dataset_dir / "samples.csv", f"{exc.problem} in {path.name}", line=line,
-                                  column="block") from exc
-            check_required(block, str(row["test"]), path)
-            ds, notes = build_run(clean, block, dataset, path, meta)
+                raise IngestError(sheet_path, f"{exc.problem} in {path.name}", line=line, column="block") from exc
+            key = (path.resolve(), block.index, str(clean["test"]))
+            if key in seen:
+                raise IngestError(sheet_path, f"duplicate row: same file {clean['file']!r}, block {block.name!r} "
+                                              f"and test {clean['test']!r} as line {seen[key]} (two identical "
+                                              "runs); remove one of the two rows", line=line, column="file")
+            seen[key] = line
+            check_required(block, str(clean["test"]), path)
+            ds, warnings = build_run(clean, block, dataset, path, meta, blocks, (sheet_path, line))
             write_netcdf(ds, runs_dir / f"{rid}.nc")
-            rec["warnings"] = "; ".join(notes + yaml_warnings)
+            rec["warnings"] = "; ".join(warnings + yaml_warnings)
+            rec["notes"] = "; ".join(filter(None, [chosen, ds.attrs.get("gap_note", "")]))
+            if chosen:
+                rec["block"] = block.name
         except Exception as exc:  # noqa: BLE001 - one bad row or file never takes the dataset down
             rec.update(status="error", **_error_fields(exc))
             log.warning("rejected %s: %s", rid, rec["reason"])

@@ -26,9 +26,10 @@ from pathlib import Path
 import numpy as np
 
 from ..units import UnknownUnitError
-from .blocks import Block, auxiliary_frame, canonical_frame_at, check_time, decode_text, pick_columns
+from .blocks import Block, auxiliary_frame, canonical_frame_at, check_time, pick_columns
 from .errors import IngestError
 from .geometry import measuring_system, value_with_unit
+from .textfile import decode_text
 
 #: canonical variable -> lower-cased LIMS/TRIOS variable names, preferred first (oscillation amplitude before
 #: the steady value of the same quantity; the first one holding numbers in a step is used)

@@ -24,8 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .blocks import Block, canonical_frame_at, check_time, decode_text, detect_decimal_comma, pick_columns
+from .blocks import Block, canonical_frame_at, check_time, detect_decimal_comma, pick_columns
 from .errors import IngestError
+from .textfile import decode_text
 
 #: canonical variable -> lower-cased rSpace column names (unit stripped), preferred first
 CANDIDATES: dict[str, tuple[str, ...]] = {

@@ -17,8 +17,9 @@ from pathlib import Path
 import numpy as np
 
 from ..canonical import CANONICAL_VARIABLES
-from .blocks import Block, canonical_frame, cell_problem, check_time, decode_text, parse_number
+from .blocks import Block, canonical_frame, cell_problem, check_time, parse_number
 from .errors import IngestError
+from .textfile import decode_text
 
 _HEADER_CELL = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*\[([^\]]*)\]\s*$")
 

@@ -10,7 +10,8 @@ Geometry (``Block.meta``): ``measuring_system`` from ``Geometry name`` (``8.0mm 
 radius, see :mod:`tissuemech.io.geometry`), ``radius_m``/``gap_m`` from ``Diameter``/``Gap`` with their
 units dimension-checked (concentric cylinders: none). Checks: every text data row has as many fields as
 the column row (a row cut short, or a decimal comma in a comma-separated file, would shift later columns),
-the header's ``proceduresegments`` step count against the ``[step]`` blocks found, ±inf/overflow cells; any
+the header's ``proceduresegments`` step count against the ``[step]`` blocks found, ±inf/overflow cells, a step
+whose column row holds no recognised label or whose units row holds numbers (a deleted column or units row); any
 failure of xlrd on a damaged ``.xls`` becomes an :class:`IngestError` naming the file.
 """
 from __future__ import annotations
@@ -24,9 +25,10 @@ import numpy as np
 import xlrd
 
 from ..units import UnknownUnitError
-from .blocks import Block, canonical_frame, cell_problem, check_time, decode_text, parse_number
+from .blocks import Block, canonical_frame, cell_problem, check_time, is_number, parse_number
 from .errors import IngestError
 from .geometry import measuring_system, value_with_unit
+from .textfile import decode_text
 
 #: lower-cased TRIOS column -> canonical variable
 LABELS: dict[str, str] = {
@@ -142,10 +144,19 @@ def _step_block(path, name, index, cols, units, rows, line_no, meta_common) -> B
         unit = units[k] if k < len(units) else ""
         seen.add(canon)
         columns.append((canon, unit, values, label))
+    if not columns:
+        # a step whose column row was lost reads its units row as labels: nothing is recognised
+        raise IngestError(path, f"step {name!r}: no recognised column (column row missing or damaged?); "
+                                f"labels: {[c for c in cols if c][:8]}", line=line_no[0] - 2)
+    numeric_units = [u for u in units if str(u).strip() and is_number(str(u), decimal_comma=False)]
+    if numeric_units:
+        raise IngestError(path, f"step {name!r}: the units row holds numbers {numeric_units[:3]} (units row "
+                                "missing?)", line=line_no[0] - 1)
     frame, labels = canonical_frame(path, columns)
     check_time(path, frame, line_no[0], np.asarray(line_no))
     return Block(name=name, index=index, data=frame,
                  meta=dict(meta_common, labels=labels, first_data_line=line_no[0]))
+
 
 
 #: a TRIOS step sheet's name: the step and its 1-based position in the procedure ("Frequency sweep - 2")
