@@ -398,8 +398,8 @@ REPLAY_AXES = {
     "constant_shear_rate": ("rim strain [-]", "apparent rim stress [Pa]", False, False),
     "stress_relaxation": ("time [s]", "apparent rim stress [Pa]", True, False),
     "creep_recovery": ("time [s]", "rim strain [-]", True, False),
-    "frequency_sweep": ("frequency [Hz]", "G' (o, solid) and G'' (^, dotted) [Pa]", True, True),
-    "amplitude_sweep": ("strain amplitude [-]", "G' (o, solid) and G'' (^, dotted) [Pa]", True, True),
+    "frequency_sweep": ("frequency [Hz]", "G' (o, thick lines) and G'' (^, thin lines) [Pa]", True, True),
+    "amplitude_sweep": ("strain amplitude [-]", "G' (o, thick lines) and G'' (^, thin lines) [Pa]", True, True),
 }
 
 
@@ -417,16 +417,15 @@ def figure_replay(points: pd.DataFrame, table: pd.DataFrame):
         for ci, cond in enumerate(dict.fromkeys(sel["condition"])):
             colour = f"C{ci % 10}"
             one = sel[sel["condition"] == cond]
-            for obs, marker, dotted in (("storage_modulus", "o", False), ("loss_modulus", "^", True),
-                                        ("shear_stress", "o", False), ("shear_strain", "o", False)):
+            for obs, marker, width in (("storage_modulus", "o", 1.4), ("loss_modulus", "^", 0.7),
+                                       ("shear_stress", "o", 1.2), ("shear_strain", "o", 1.2)):
                 o = one[one["observable"] == obs]
                 if o.empty:
                     continue
                 first = o[o["card"] == o["card"].iloc[0]]
                 ax.plot(first["x"], first["measured"], marker, color=colour, ms=4, mfc="none", ls="none")
-                for card, c in o.groupby("card", sort=False):
-                    ax.plot(c["x"], c["simulated"], color=colour, lw=1.2,
-                            ls=":" if dotted else styles.get(c["role"].iloc[0], "-"))
+                for _, c in o.groupby("card", sort=False):
+                    ax.plot(c["x"], c["simulated"], color=colour, lw=width, ls=styles.get(c["role"].iloc[0], "-"))
             scores = table[(table["test"] == kind) & (table["condition"] == cond) & (table["status"] == "ok")]
             text = ", ".join(f"{r.role} {r.nrmse:.2f}" for r in scores.itertuples())
             handles.append(Line2D([], [], color=colour, marker="o", mfc="none", label=f"{cond} (NRMSE {text})"))
