@@ -449,13 +449,16 @@ def run_fem_replay(cards: Sequence[ReplayCard], averages_path, out_csv, points_c
                    element_size_m: float, n_threads: int = 1) -> pd.DataFrame:
     """The FEM replay of a dataset's measured tests (:func:`tissuemech.fem.replay.replay`) with ``cards``
     (:func:`replay_cards`): ``replay.csv`` (one row per test x condition x card), the measured and simulated points
-    (``points_csv``) and their figure."""
+    (``points_csv``) and their figure. Without any card the table still lists every test, ``not replayed``."""
     settings = ReplaySettings(element_size_m=float(element_size_m), n_threads=n_threads)
 
     def progress(row):
         logger.info("replay %s %s %s: %s, NRMSE %.4g, %d elements, %.2f s", row["card"], row["test"],
                     row["condition"], row["status"], row["nrmse"], row["n_elements"], row["wall_s"])
 
+    # without a card the FEM can run, every test still gets its row, saying so
+    cards = list(cards) or [ReplayCard("", "baseline", None, "no card the FEM can run in the replay scopes "
+                                                              f"{', '.join(REPLAY_SCOPES)}")]
     table, points = replay(read_netcdf(averages_path), cards, settings, on_row=progress)
     write_text(table.to_csv(index=False), out_csv)
     write_text(points.to_csv(index=False), points_csv)

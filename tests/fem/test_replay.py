@@ -274,6 +274,11 @@ def test_replay_csv_contract(tmp_path):
     assert fix["gain"] == pytest.approx((creep["s/base"] - creep["s/ext"]) / creep["s/base"])
     # a stiffer, faster-relaxing card creeps differently from the data of the baseline's closed form
     assert fix["gain"] < 0
+    # no card the FEM can run: every test still has its row, saying why
+    none = run_fem_replay([], tmp_path / "averages.nc", out / "none.csv", out / "none_points.csv",
+                          tmp_path / "figures" / "none.png", element_size_m=3e-3)
+    assert len(none) == 4 and (none["status"].str.startswith("not replayed: ")).all()
+    assert none.set_index("test").loc["creep_recovery", "status"].startswith("not replayed: no card the FEM can run")
 
 
 def test_fix_simulation_averages_the_curves_neither_card_was_fitted_to():
@@ -327,3 +332,12 @@ def test_replay_cards_baseline_and_named_extensions(tmp_path):
     # without a diagnosis: the recommended card of the first scope the FEM can run (the joint one it cannot)
     alone = replay_cards(tmp_path / "ranking.csv", cards)
     assert [(c.name, c.role) for c in alone] == [("stress_relaxation/sls_card", "baseline")]
+
+
+def test_nrmse_is_rms_error_over_mean_magnitude():
+    """The one NRMSE (stats.nrmse) the replay, the FEM torsion and the fit records use, by hand."""
+    assert nrmse([1.0, -2.0, 3.0], [1.0, -2.0, 5.0]) == pytest.approx(np.sqrt(4.0 / 3.0) / 2.0)
+    assert nrmse([200.0, 40.0], [220.0, 30.0]) == pytest.approx(np.sqrt((400.0 + 100.0) / 2.0) / 120.0)
+    assert np.isnan(nrmse([0.0, 0.0], [1.0, 1.0])) and np.isnan(nrmse([], []))
+    with pytest.raises(ValueError, match="3 observations but 2 predictions"):
+        nrmse([1.0, 2.0, 3.0], [1.0, 2.0])
