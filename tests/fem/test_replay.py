@@ -13,7 +13,6 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
-import xarray as xr
 
 from tissuemech.canonical import make_run_dataset
 from tissuemech.curves import average_runs, write_averages
