@@ -509,11 +509,11 @@ def rank_scope(candidates: Sequence[Candidate], curves: Sequence[Curve], target:
     return table, fits, cv, rec
 
 
-def recommended_mask(ranking: pd.DataFrame) -> np.ndarray:
-    """The ``recommended`` column of a ranking table as booleans (missing or empty -> False)."""
-    if "recommended" not in ranking:
+def recommended_mask(ranking: pd.DataFrame, column: str = "recommended") -> np.ndarray:
+    """The ``recommended`` (or another boolean) column of a ranking table as booleans (missing or empty -> False)."""
+    if column not in ranking:
         return np.zeros(len(ranking), bool)
-    col = ranking["recommended"]
+    col = ranking[column]
     if col.dtype != bool:  # read back with empty cells, or as text
         col = col.map(lambda v: str(v).strip().lower() in ("true", "1", "1.0"))
     return col.to_numpy(bool)
@@ -527,23 +527,21 @@ def scope_model(scope_ranking_csv, model: str) -> str:
     if model != "baseline":
         return model
     table = pd.read_csv(scope_ranking_csv) if Path(scope_ranking_csv).stat().st_size > 0 else pd.DataFrame()
-    if "baseline" in table:
-        chosen = table[table["baseline"].map(lambda v: str(v).strip().lower() in ("true", "1", "1.0"))]
-        if not chosen.empty:
-            return str(chosen["model"].iloc[0])
-    return model
+    chosen = table[recommended_mask(table, "baseline")] if not table.empty else table
+    return str(chosen["model"].iloc[0]) if not chosen.empty else model
 
 
-def recommended_models(ranking_csv) -> dict[str, str]:
+def recommended_models(ranking_csv, column: str = "recommended") -> dict[str, str]:
     """``{scope: model}`` of the rows that ``ranking.csv`` marks ``recommended`` (the ranking stage's one choice per
-    scope, :func:`recommend`); scopes without a recommendation are absent."""
+    scope, :func:`recommend`), or another boolean ``column`` (``baseline``: the material scope's baseline,
+    :func:`tissuemech.material.baseline_model`); scopes without such a row are absent."""
     ranking = pd.read_csv(ranking_csv)
     if ranking.empty or not {"scope", "model"} <= set(ranking.columns):
         return {}
-    rows = ranking[recommended_mask(ranking)]
+    rows = ranking[recommended_mask(ranking, column)]
     several = rows["scope"][rows["scope"].duplicated()].unique()
     if len(several):
-        raise ValueError(f"{ranking_csv}: more than one recommended model in scope(s) {sorted(map(str, several))}")
+        raise ValueError(f"{ranking_csv}: more than one {column} model in scope(s) {sorted(map(str, several))}")
     return {str(s): str(m) for s, m in zip(rows["scope"], rows["model"])}
 
 

@@ -33,22 +33,25 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import xarray as xr
+from matplotlib.lines import Line2D
 
 from . import cards as cards_mod
+from .adequacy import ADEQUACY_FACTOR, misfit_in_noise_units
 from . import fitting as F
 from . import ranking as R
 from .canonical import read_netcdf, write_json, write_netcdf, write_text
 from .curves import as_str, select_average
 from .fem.experiments import flat_punch_indentation, rheometer_torsion
 from .fem.materials import available_laws
-from .adequacy import ADEQUACY_FACTOR, misfit_in_noise_units
+from .fem.replay import ReplayCard, ReplaySettings, replay
 from .fem.tled import DynamicRelaxationError, ElementInversionError
 from .material import MaterialFit, baseline_model, cross_test, fit_material
 from .models.registry import get_model
-from .plots import plot_cross_test, plot_force_depth, plot_torque
-from .records import MaterialCard
+from .plots import new_figure, plot_cross_test, plot_force_depth, plot_torque, save_figure
+from .records import Finding, MaterialCard
 from .scopes import (ALL_MODES_SCOPE, MASTERCURVE_SCOPE, MATERIAL_LAWS, MATERIAL_SCOPE,  # noqa: F401 (re-exported)
                      MATERIAL_TESTS, dataset_scopes)
+from .stats import nrmse
 from .tts import mastercurve_curve, tts_card
 
 logger = logging.getLogger(__name__)
@@ -380,22 +383,27 @@ def select_cards(ranking_csv, cards_root, scopes: Sequence[str] = TORSION_SCOPES
     the FEM never falls back to another model than the ranking's choice.
     """
     chosen_models = R.recommended_models(ranking_csv)
-    laws = available_laws()
     chosen: list[Path] = []
     for scope in scopes:
         model = chosen_models.get(scope)
         if model is None:
             continue
         path = Path(cards_root) / scope / f"{model}.json"
-        if not path.is_file():
-            logger.warning("select_cards: no card %s for the recommended model of %s", path, scope)
-            continue
-        law = MaterialCard.from_json(path).fem_law
-        if law not in laws:
-            logger.warning("select_cards: %s/%s: the FEM has no law %r", scope, model, law)
+        problem = fem_card_problem(path)
+        if problem:
+            logger.warning("select_cards: %s/%s (the recommended model): %s", scope, model, problem)
             continue
         chosen.append(path)
     return chosen
+
+
+def fem_card_problem(path: Path) -> str:
+    """Why the FEM cannot run the card file ``path`` (no file, or a law the TLED materials lack,
+    ``fem.materials.available_laws``); empty when it can."""
+    if not Path(path).is_file():
+        return f"no card {path}"
+    law = MaterialCard.from_json(path).fem_law
+    return "" if law in available_laws() else f"the FEM has no law {law!r}"
 
 
 def card_for_fem(path: Path) -> dict:
@@ -465,7 +473,7 @@ def run_fem_torsion(card_paths: Sequence, averages_path, out_nc, out_csv, figure
             series[label] = (gamma_sim, sim)
             measured[label] = meas
             rows.append({"card": card_name, "rate_1_s": rate,
-                         "nrmse": float(np.sqrt(np.mean((sim - meas) ** 2)) / np.mean(np.abs(meas))),
+                         "nrmse": nrmse(meas, sim),
                          "rel_error_at_max_strain": float((sim[-1] - meas[-1]) / meas[-1]),
                          "max_strain": float(gamma_sim[-1]),
                          "normal_force_at_max_strain_n": float(ds["normal_force"].values[-1]), "status": "ok"})
@@ -480,6 +488,119 @@ def run_fem_torsion(card_paths: Sequence, averages_path, out_nc, out_csv, figure
     write_netcdf(combined, out_nc)
     plot_torque(series, figure_path, xlabel="rim strain [-]", reference=reference,
                 title="TLED rheometer torsion vs measured torque")
+    return table
+
+
+#: scopes whose cards the FEM replay of the measured tests runs, best first (:func:`replay_cards`): the first with a
+#: card the FEM can run supplies the baseline card and the extension cards
+REPLAY_SCOPES = (MATERIAL_SCOPE, "stress_relaxation", "creep_recovery", "frequency_sweep", MASTERCURVE_SCOPE,
+                 "amplitude_sweep", "constant_shear_rate")
+
+
+def replay_cards(ranking_csv, cards_root, diagnosis_json=None, scopes: Sequence[str] = REPLAY_SCOPES) -> list[ReplayCard]:
+    """The cards the FEM replay runs: the baseline card first, then the card of each extension the diagnosis names.
+
+    Baseline: in the first of ``scopes`` that has one the FEM can run, the card of the diagnosis's baseline model
+    (``diagnosis.json`` ``model``: the model the named causes' fixes improve on), else the scope's baseline (the
+    material scope's ``baseline`` column) or recommended card (``ranking.csv``). Extensions: every named cause (``detected``) whose ``fix.model`` has a card in the baseline's
+    scope, with the cause as its role; an extension card the FEM cannot run is kept with the reason (its rows say
+    ``not replayed``). Without any runnable card the list is empty (logged).
+    """
+    recommended = R.recommended_models(ranking_csv)
+    baselines = R.recommended_models(ranking_csv, column="baseline")
+    diagnosis = json.loads(Path(diagnosis_json).read_text()) if diagnosis_json else {}
+    findings = [Finding.from_dict(f) for f in diagnosis.get("findings", [])]
+    for scope in scopes:
+        for model in dict.fromkeys(m for m in (diagnosis.get("model"), baselines.get(scope), recommended.get(scope))
+                                   if m):
+            path = Path(cards_root) / scope / f"{model}.json"
+            problem = fem_card_problem(path)
+            if problem:
+                logger.info("replay_cards: %s/%s: %s", scope, model, problem)
+                continue
+            chosen = [ReplayCard(f"{scope}/{model}", "baseline", MaterialCard.from_json(path))]
+            for f in findings:
+                ext = (f.fix or {}).get("model")
+                ext_path = Path(cards_root) / scope / f"{ext}.json"
+                if not f.detected or not isinstance(ext, str) or ext == model or not ext_path.is_file():
+                    continue
+                chosen.append(ReplayCard(f"{scope}/{ext}", f.effect, MaterialCard.from_json(ext_path),
+                                         fem_card_problem(ext_path)))
+            return chosen
+    logger.warning("replay_cards: no card the FEM can run in the scopes %s", list(scopes))
+    return []
+
+
+#: what the replay figure draws per test kind: (x label, y label, log x, log y)
+REPLAY_AXES = {
+    "constant_shear_rate": ("rim strain [-]", "apparent rim stress [Pa]", False, False),
+    "stress_relaxation": ("time [s]", "apparent rim stress [Pa]", True, False),
+    "creep_recovery": ("time [s]", "rim strain [-]", True, False),
+    "frequency_sweep": ("frequency [Hz]", "G' (o, thick lines) and G'' (^, thin lines) [Pa]", True, True),
+    "amplitude_sweep": ("strain amplitude [-]", "G' (o, thick lines) and G'' (^, thin lines) [Pa]", True, True),
+}
+
+
+def figure_replay(points: pd.DataFrame, table: pd.DataFrame):
+    """Measured averages (markers) and the simulation of each card (lines: baseline solid, extensions dashed), one
+    panel per replayed test kind, one colour per condition; each card's NRMSE per condition in the legend."""
+    kinds = [k for k in REPLAY_AXES if k in set(points["test"])]
+    fig, axes = new_figure(ncols=max(1, min(3, len(kinds))), nrows=max(1, -(-len(kinds) // 3)), width=4.6, height=3.6)
+    roles = list(dict.fromkeys(table.loc[table["status"] == "ok", "role"]))
+    styles = {r: ("-" if r == "baseline" else ("--", "-.")[i % 2]) for i, r in enumerate(roles)}
+    for ax, kind in zip(axes, kinds):
+        xlabel, ylabel, logx, logy = REPLAY_AXES[kind]
+        sel = points[points["test"] == kind]
+        handles = []
+        for ci, cond in enumerate(dict.fromkeys(sel["condition"])):
+            colour = f"C{ci % 10}"
+            one = sel[sel["condition"] == cond]
+            for obs, marker, width in (("storage_modulus", "o", 1.4), ("loss_modulus", "^", 0.7),
+                                       ("shear_stress", "o", 1.2), ("shear_strain", "o", 1.2)):
+                o = one[one["observable"] == obs]
+                if o.empty:
+                    continue
+                first = o[o["card"] == o["card"].iloc[0]]
+                ax.plot(first["x"], first["measured"], marker, color=colour, ms=4, mfc="none", ls="none")
+                for _, c in o.groupby("card", sort=False):
+                    ax.plot(c["x"], c["simulated"], color=colour, lw=width, ls=styles.get(c["role"].iloc[0], "-"))
+            scores = table[(table["test"] == kind) & (table["condition"] == cond) & (table["status"] == "ok")]
+            text = ", ".join(f"{r.role} {r.nrmse:.2f}" for r in scores.itertuples())
+            handles.append(Line2D([], [], color=colour, marker="o", mfc="none", label=f"{cond} (NRMSE {text})"))
+        handles += [Line2D([], [], color="k", ls=styles[r], label=f"simulated: {r}") for r in roles]
+        handles.append(Line2D([], [], color="k", marker="o", mfc="none", ls="none", label="measured mean"))
+        ax.set(xlabel=xlabel, ylabel=ylabel, title=kind.replace("_", " "))
+        if logx:
+            ax.set_xscale("log")
+        if logy:
+            ax.set_yscale("log")
+        ax.legend(handles=handles, fontsize=6)
+    for ax in axes[len(kinds):]:
+        ax.set_axis_off()
+    if not kinds:
+        axes[0].text(0.5, 0.5, "no test was replayed (see replay.csv)", ha="center", va="center")
+        axes[0].set_axis_off()
+    return fig
+
+
+def run_fem_replay(cards: Sequence[ReplayCard], averages_path, out_csv, points_csv, figure_path,
+                   element_size_m: float, n_threads: int = 1) -> pd.DataFrame:
+    """The FEM replay of a dataset's measured tests (:func:`tissuemech.fem.replay.replay`) with ``cards``
+    (:func:`replay_cards`): ``replay.csv`` (one row per test x condition x card), the measured and simulated points
+    (``points_csv``) and their figure. Without any card the table still lists every test, ``not replayed``."""
+    settings = ReplaySettings(element_size_m=float(element_size_m), n_threads=n_threads)
+
+    def progress(row):
+        logger.info("replay %s %s %s: %s, NRMSE %.4g, %d elements, %.2f s", row["card"], row["test"],
+                    row["condition"], row["status"], row["nrmse"], row["n_elements"], row["wall_s"])
+
+    # without a card the FEM can run, every test still gets its row, saying so
+    cards = list(cards) or [ReplayCard("", "baseline", None, "no card the FEM can run in the replay scopes "
+                                                              f"{', '.join(REPLAY_SCOPES)}")]
+    table, points = replay(read_netcdf(averages_path), cards, settings, on_row=progress)
+    write_text(table.to_csv(index=False), out_csv)
+    write_text(points.to_csv(index=False), points_csv)
+    save_figure(figure_replay(points, table), figure_path)
     return table
 
 

@@ -1,7 +1,8 @@
 """Generic statistics, below fitting and diagnosis (this module imports nothing of the package).
 
 * information criteria of a least-squares fit -- :func:`information_criteria` (AIC, AICc, BIC), the package's
-  one AICc (:func:`aicc` is its AICc); effective sample size of autocorrelated residuals
+  one AICc (:func:`aicc` is its AICc); the package's one normalised RMS error of a curve (:func:`nrmse`: fit
+  records, held-out scores, FEM torsion and the FEM replay of the measured tests); effective sample size of autocorrelated residuals
   (:func:`effective_sample_size`, ``science.md`` section 4.2);
 * residual-structure tests used to name what a fitted model gets wrong (``science.md`` section 4): runs test,
   Durbin-Watson, cluster-robust regression and coefficient tests, nested F-test, likelihood ratio, Holm and
@@ -265,6 +266,22 @@ def information_criteria(chisqr: float, n: float, k: int) -> dict[str, float]:
 def aicc(rss: float, n: float, k: int) -> float:
     """AICc of :func:`information_criteria` (RSS may be a weighted chi2)."""
     return information_criteria(rss, n, k)["aicc"]
+
+
+def nrmse(observed, predicted) -> float:
+    """Normalised RMS error of one curve: ``sqrt(mean((predicted - observed)^2)) / mean(|observed|)`` (1).
+
+    The arrays are flattened together, so a curve with several observables (G' and G'' of a sweep) is passed as
+    their concatenation. NaN when the observations are empty or their mean magnitude is 0.
+    """
+    y = np.ravel(np.asarray(observed, float))
+    f = np.ravel(np.asarray(predicted, float))
+    if y.shape != f.shape:
+        raise ValueError(f"nrmse: {y.size} observations but {f.size} predictions")
+    scale = float(np.mean(np.abs(y))) if y.size else 0.0
+    if scale <= 0.0:
+        return float("nan")
+    return float(np.sqrt(np.mean((f - y) ** 2)) / scale)
 
 
 # ------------------------------------------------------------------------------------------------

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from tissuemech.fem.experiments import (card_material, constant_shear_rate_history, flat_punch_indentation,
-                                        relaxation_history, rheometer_torsion)
+                                        relaxation_history, rheometer_creep, rheometer_torsion)
 from tissuemech.fem.mesh import read_mesh
 
 CARD = {"model": "neo_hookean", "parameters": {"mu": 1000.0}, "prony": {"g": [0.4, 0.2], "tau": [0.5, 5.0]},
@@ -30,6 +30,23 @@ def test_rheometer_relaxation_torque_is_qlv_of_the_elastic_torque(tmp_path):
     top = np.isclose(mesh.nodes[:, 2], gap) & np.isclose(np.hypot(mesh.nodes[:, 0], mesh.nodes[:, 1]), radius)
     # rim of the upper plate moved by the final angle
     assert np.hypot(*data["displacement"][top, :2].T) == pytest.approx(radius * 2 * np.sin(gamma[-1] * gap / radius / 2))
+
+
+def test_torque_control_reaches_every_target_and_creeps():
+    """Creep-recovery under torque control: the plate angle the controller finds gives each target torque within its
+    tolerance; under constant torque the rim strain grows (G(t) relaxes), and it recovers after unloading. (Against
+    the closed-form creep strain: tests/fem/test_replay.py.)"""
+    t = np.array([0.05, 0.5, 2.0, 8.0, 8.05, 9.0, 16.0])
+    torque = np.where(t <= 8.0, 2e-5, 0.0)
+    ds = rheometer_creep(CARD, t, torque, radius_m=12.5e-3, gap_m=2.5e-3, element_size_m=3e-3)
+    tol = ds.attrs["fem_torque_tolerance_nm"]
+    assert tol == pytest.approx(1e-3 * 2e-5)
+    np.testing.assert_allclose(ds.torque.values, torque, atol=tol)
+    strain = ds.shear_strain.values
+    assert np.all(np.diff(strain[:4]) > 0) and strain[3] > 1.5 * strain[0]  # creep: 1/(1 - 0.6) at most
+    assert 0 < strain[-1] < strain[4] < strain[3]  # recovery
+    np.testing.assert_allclose(ds.deflection_angle.values, strain * 2.5e-3 / 12.5e-3)
+    assert ds.attrs["fem_torque_solves_total"] >= t.size
 
 
 def test_constant_rate_torsion_is_rate_dependent():

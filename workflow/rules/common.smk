@@ -172,6 +172,18 @@ def has_shear_ramps(name):
     return "constant_shear_rate" in dataset_tests(name)
 
 
+def has_diagnosis(name):
+    """The dataset gets diagnosis.json (rule diagnose): a diagnosis scope and plate or multi-mode data."""
+    return bool(diagnosis_scope(name)) and (
+        is_rheometer_dataset(name) or is_multimode_dataset(name)
+    )
+
+
+def has_fem_replay(name):
+    """Parallel-plate data with fitted scopes: the FEM replays its measured tests (rule fem_replay)."""
+    return is_rheometer_dataset(name) and bool(dataset_scopes_of(name))
+
+
 def tts_temperatures(name):
     """Distinct nominal temperatures (sample sheet ``temperature_c``) of a dataset's frequency sweeps."""
     from tissuemech.curves import distinct_temperatures
@@ -203,12 +215,12 @@ def all_targets():
             targets.append(f"results/{name}/tts.nc")
         if dataset_scopes_of(name):
             targets += [f"results/{name}/ranking.csv", f"results/{name}/fits.csv"]
-        if diagnosis_scope(name) and (
-            is_rheometer_dataset(name) or is_multimode_dataset(name)
-        ):
+        if has_diagnosis(name):
             targets.append(f"results/{name}/diagnosis.json")
         if has_shear_ramps(name):
             targets.append(f"results/{name}/fem/torsion.csv")
+        if has_fem_replay(name):
+            targets.append(f"results/{name}/fem/replay.csv")
         if name in config["fem"].get("indentation_datasets", []):
             targets.append(f"results/{name}/fem/indentation.nc")
     targets.append("results/fem/timing.csv")

@@ -1,4 +1,5 @@
-# TLED experiments driven by the material cards: rheometer torsion, flat-punch indentation, timing.
+# TLED experiments driven by the material cards: rheometer torsion, the replay of the measured tests,
+# flat-punch indentation, timing.
 
 # the MNI brain geometry (nilearn wheel data, fTetWild): the timing rule always uses the mesh; flat-punch
 # indentation of it runs with the best card of the first selected indentation dataset, when one is selected
@@ -64,6 +65,52 @@ rule fem_torsion:
         pkg=script_hash("workflow/scripts/fem_torsion.py"),
     script:
         "../scripts/fem_torsion.py"
+
+
+def fem_replay_inputs(wildcards):
+    """The replay's inputs: its cards (through ranking.csv), the averages, and diagnosis.json where the dataset has
+    one (the named causes whose extension cards are replayed beside the baseline card).
+    """
+    inputs = {
+        "compiled": NUMBA_COMPILED,
+        "ranking": f"results/{wildcards.dataset}/ranking.csv",
+        "averages": f"results/{wildcards.dataset}/averages.nc",
+    }
+    if has_diagnosis(wildcards.dataset):
+        inputs["diagnosis"] = f"results/{wildcards.dataset}/diagnosis.json"
+    return inputs
+
+
+rule fem_replay:
+    input:
+        unpack(fem_replay_inputs),
+    output:
+        table=report(
+            "results/{dataset}/fem/replay.csv",
+            caption="../report/fem_replay_table.rst",
+            category="{dataset}",
+            subcategory="7 FEM experiments",
+            labels={"experiment": "replay", "item": "error table"},
+        ),
+        points="results/{dataset}/fem/replay_points.csv",
+        figure=report(
+            "results/{dataset}/figures/fem_replay.png",
+            caption="../report/fem_replay.rst",
+            category="{dataset}",
+            subcategory="7 FEM experiments",
+            labels={"experiment": "replay", "item": "measured vs simulated"},
+        ),
+    log:
+        "logs/{dataset}/fem_replay.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/fem_replay.tsv"
+    threads: FEM_THREADS
+    params:
+        cards_root="results/{dataset}/cards",
+        element_size_m=config["fem"]["cylinder_element_size_m"],
+        pkg=script_hash("workflow/scripts/fem_replay.py"),
+    script:
+        "../scripts/fem_replay.py"
 
 
 rule fem_indentation:

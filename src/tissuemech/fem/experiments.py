@@ -1,6 +1,7 @@
-"""Virtual experiments with the TLED solver: rheometer torsion and flat-punch indentation.
+"""Virtual experiments with the TLED solver: rheometer torsion (strain- and torque-controlled) and flat-punch
+indentation.
 
-Both are quasi-static (inertia is irrelevant at rheometer/indenter speeds): at every output time the
+All are quasi-static (inertia is irrelevant at rheometer/indenter speeds): at every output time the
 solver relaxes to equilibrium (dynamic relaxation) while the viscoelastic states advance between the
 times with the exact Prony recursion, so the time history (rate, hold) is honoured.
 
@@ -22,7 +23,8 @@ import numpy as np
 import xarray as xr
 
 from ..canonical import make_run_dataset
-from .materials import Material, make_material, material_from_card
+from ..models.plate import torsion_geometry_factor
+from .materials import Material, make_material, material_from_card, small_strain_shear_modulus
 from .mesh import (TetMesh, block_mesh, boundary_nodes, brain_mesh, cylinder_mesh, graded_layers, graded_ring_radii,
                    mesh_quality, write_mesh)
 from .tled import (RigidContact, build_model, fixed_group, rotation_group, run_explicit, solve_quasistatic,
@@ -97,21 +99,118 @@ def rheometer_torsion(card: Mapping, time_s, rim_strain, *, radius_m: float = RH
         raise ValueError("time_s must be increasing, positive and of the same length as rim_strain")
     material = card_material(card)
     mesh = rheometer_sample_mesh(radius_m, gap_m, element_size_m)
-    z = mesh.nodes[:, 2]
     angle = gamma * gap_m / radius_m
-    groups = [rotation_group("upper_plate", np.flatnonzero(np.isclose(z, gap_m)), np.concatenate([[0.0], t]),
-                             np.concatenate([[0.0], angle])),
-              fixed_group("lower_plate", np.flatnonzero(np.isclose(z, 0.0)))]
+    groups = _plate_groups(mesh, gap_m, np.concatenate([[0.0], t]), np.concatenate([[0.0], angle]))
     res = solve_quasistatic(build_model(mesh, material, groups, anp=anp), t, n_threads=n_threads)
     torque = res.torque_nm["upper_plate"]
     normal = -res.reaction_force_n["upper_plate"][:, 2]
     if vtu_path is not None:
         write_mesh(vtu_path, mesh, {"displacement": np.asarray(res.displacement_m, float)})
+    return _torsion_dataset(t, angle, torque, normal, radius_m, gap_m,
+                            {"test": test, "source": "tissuemech.fem TLED (dynamic relaxation)",
+                             **_provenance(card, material, mesh, res.iterations)})
+
+
+def _plate_groups(mesh: TetMesh, gap_m: float, time_s, angle_rad) -> list:
+    """The rheometer's boundary groups: the upper plate (z = gap) rotated rigidly by ``angle_rad(time_s)``, the
+    lower plate (z = 0) fixed (bonded sample, fixed gap)."""
+    z = mesh.nodes[:, 2]
+    return [rotation_group("upper_plate", np.flatnonzero(np.isclose(z, gap_m)), time_s, angle_rad),
+            fixed_group("lower_plate", np.flatnonzero(np.isclose(z, 0.0)))]
+
+
+def _torsion_dataset(t, angle, torque, normal, radius_m: float, gap_m: float, attrs: Mapping) -> xr.Dataset:
+    """Canonical run of a torsion simulation: rim strain ``theta R / h``, apparent rim stress ``2M/(pi R^3)``."""
     return make_run_dataset(
-        {"time": t, "shear_strain": gamma, "deflection_angle": angle, "torque": torque, "normal_force": normal,
-         "shear_stress": 2.0 * torque / (np.pi * radius_m**3), "gap": np.full(t.size, gap_m)},
-        {"test": test, "radius_m": radius_m, "gap_m": gap_m, "source": "tissuemech.fem TLED (dynamic relaxation)",
-         **_provenance(card, material, mesh, res.iterations)})
+        {"time": t, "shear_strain": angle * radius_m / gap_m, "deflection_angle": angle, "torque": torque,
+         "normal_force": normal, "shear_stress": 2.0 * torque / (np.pi * radius_m**3), "gap": np.full(t.size, gap_m)},
+        {"radius_m": radius_m, "gap_m": gap_m, **attrs})
+
+
+class TorqueControlError(RuntimeError):
+    """The torque controller of :func:`rheometer_creep` did not reach the target torque at some time."""
+
+
+def rheometer_creep(card: Mapping, time_s, torque_nm, *, radius_m: float, gap_m: float,
+                    element_size_m: float = 1.5e-3, test: str = "creep_recovery", anp: bool = True,
+                    torque_tolerance: float = 1e-3, max_solves: int = 12,
+                    n_threads: int | str | None = "auto") -> xr.Dataset:
+    """Torque-controlled torsion of the bonded sample (creep, creep-recovery), quasi-static.
+
+    The solver's boundary conditions prescribe displacements, so the torque is controlled as a stress-controlled
+    rheometer does it, by feedback on the plate angle: at each output time the upper plate is rotated *rigidly*
+    (the same prescribed rotation as :func:`rheometer_torsion`, so the plate stays a rigid plate and the torque is
+    the plate's reaction moment) by the angle at which the equilibrium torque equals the target. That angle is found
+    by a secant iteration, each trial a dynamic-relaxation solve from the previous time's equilibrium and
+    viscoelastic state (advanced over the step as in :func:`rheometer_torsion`); only the accepted trial's state is
+    kept. The first trial continues the previous step's creep rate, the slope starts at the elastic torsional
+    stiffness ``G0 pi R^4 / (2h)`` and is then updated from the trials. Neither a distributed external moment on
+    the plate nodes (the TLED has no rigid tie: the plate would warp) nor a torsional spring (a new boundary type
+    in the kernels) is needed.
+
+    Parameters
+    ----------
+    card : material card dict (see module docstring)
+    time_s : increasing times (s, > 0); the sample starts at rest at t = 0
+    torque_nm : target torque (N m) at those times (linear in between, as the strain of :func:`rheometer_torsion`)
+    radius_m, gap_m : plate radius and gap (m), from the measurement (no defaults)
+    torque_tolerance : accepted torque error, relative to the largest target magnitude
+    max_solves : trials per time before :class:`TorqueControlError`
+
+    Returns
+    -------
+    canonical dataset as :func:`rheometer_torsion` (``shear_strain`` is the rim strain the controller reached,
+    ``torque`` the reached torque), attrs ``fem_torque_solves_total``.
+    """
+    t = np.asarray(time_s, float)
+    target = np.asarray(torque_nm, float)
+    if t.shape != target.shape or t.ndim != 1 or t.size == 0 or np.any(np.diff(t) <= 0) or t[0] <= 0:
+        raise ValueError("time_s must be increasing, positive and of the same length as torque_nm")
+    material = card_material(card)
+    mesh = rheometer_sample_mesh(radius_m, gap_m, element_size_m)
+    tol = torque_tolerance * max(float(np.max(np.abs(target))), np.finfo(float).tiny)
+    stiffness = small_strain_shear_modulus(material) * torsion_geometry_factor(radius_m, gap_m)  # N m / rad
+    angle, torque, normal, iterations = (np.zeros(t.size) for _ in range(4))
+    u, state = np.zeros((mesh.n_nodes, 3)), None
+    t_prev = theta_prev = theta_prev2 = dt_prev = 0.0
+    m_prev, solves = 0.0, 0
+
+    def trial(theta: float, dt: float, start):
+        groups = _plate_groups(mesh, gap_m, np.array([0.0, dt]), np.array([theta_prev, theta]))
+        model = build_model(mesh, material, groups, anp=anp, reorder=False)
+        return solve_quasistatic(model, [dt], u0_m=start, state=state, n_threads=n_threads)
+
+    for k, (tk, mk) in enumerate(zip(t, target)):
+        dt = tk - t_prev
+        creep = (theta_prev - theta_prev2) * dt / dt_prev if k > 0 else 0.0
+        theta = theta_prev + creep + (mk - m_prev) / stiffness
+        tried: list[tuple[float, float]] = []
+        start = u
+        while True:
+            if len(tried) >= max_solves:
+                raise TorqueControlError(f"torque control: no angle within {max_solves} trials gives the torque "
+                                         f"{mk:.6g} N m at t = {tk:.6g} s (last {tried[-1][1]:.6g} N m)")
+            res = trial(theta, dt, start)
+            solves += 1
+            m = float(res.torque_nm["upper_plate"][0])
+            tried.append((theta, m))
+            if abs(m - mk) <= tol:
+                break
+            if len(tried) >= 2:
+                (ta, ma), (tb, mb) = tried[-2], tried[-1]
+                if tb != ta and (mb - ma) / (tb - ta) > 0:
+                    stiffness = (mb - ma) / (tb - ta)
+            theta = theta + (mk - m) / stiffness
+            start = res.displacement_m
+        u, state = res.displacement_m, res.state
+        angle[k], torque[k], normal[k] = theta, m, -res.reaction_force_n["upper_plate"][0, 2]
+        iterations[k] = res.iterations[0]
+        theta_prev2, theta_prev, m_prev, t_prev, dt_prev = theta_prev, theta, m, tk, dt
+    return _torsion_dataset(t, angle, torque, normal, radius_m, gap_m,
+                            {"test": test, "source": "tissuemech.fem TLED (dynamic relaxation, torque control by "
+                                                     "the plate angle)",
+                             "fem_torque_solves_total": solves, "fem_torque_tolerance_nm": tol,
+                             **_provenance(card, material, mesh, iterations)})
 
 
 def flat_punch_indentation(card: Mapping, punch_diameter_m: float = 8e-3, max_depth_m: float = 2e-3,

@@ -17,7 +17,7 @@ import xarray as xr
 from ..canonical import to_jsonable
 from ..models.base import ConstitutiveModel
 from ..records import FitRecord
-from ..stats import effective_sample_size, information_criteria
+from ..stats import effective_sample_size, information_criteria, nrmse
 from ._data import Curve, curve_ranges
 from ._problem import FitProblem, NoiseModel
 
@@ -268,10 +268,10 @@ def _record(problem: FitProblem, best, nfev: int, chis: list[float]) -> FitResul
     raw = np.concatenate([f - y for t in terms for (y, f, _) in t.values()])
     curve_rmse, curve_nrmse = {}, {}
     for c, t in zip(problem.curves, terms):
-        e = np.concatenate([f - y for (y, f, _) in t.values()])
-        scale = np.mean(np.abs(np.concatenate([y for (y, _, _) in t.values()])))
-        curve_rmse[c.label] = float(np.sqrt(np.mean(e ** 2)))
-        curve_nrmse[c.label] = float(curve_rmse[c.label] / scale) if scale > 0 else float("nan")
+        y = np.concatenate([y for (y, _, _) in t.values()])
+        f = np.concatenate([f for (_, f, _) in t.values()])
+        curve_rmse[c.label] = float(np.sqrt(np.mean((f - y) ** 2)))
+        curve_nrmse[c.label] = nrmse(y, f)
     ic = information_criteria(chisqr, n, k)
     ic_eff = information_criteria(chisqr * n_eff / n, n_eff, k)  # chi2 rescaled to n_eff independent points
     for name in names:
@@ -319,7 +319,7 @@ def evaluate(model: ConstitutiveModel, params: Mapping[str, float], curves: Sequ
         y = np.concatenate([y for (y, _, _) in t.values()])
         w = np.concatenate([w for (_, _, w) in t.values()])
         raw.append(e)
-        nr.append(np.sqrt(np.mean(e ** 2)) / np.mean(np.abs(y)))
+        nr.append(nrmse(y, np.concatenate([f for (_, f, _) in t.values()])))
         chi += float(np.sum(w ** 2))
         n += w.size
     raw = np.concatenate(raw)
