@@ -74,8 +74,8 @@ def dataset_files(wildcards):
     files = sorted(str(p) for p in folder.rglob("*") if p.is_file())
     source = yaml.safe_load((folder / "dataset.yaml").read_text()).get("source_dir")
     if source:
-        sheet = pd.read_csv(folder / "samples.csv", dtype=str)
-        files += sorted(str(folder / source / f) for f in sheet["file"])
+        sheet = sample_sheet_of(folder)
+        files += sorted(str(folder / source / f) for f in sheet["file"].dropna())
     return files
 
 
@@ -83,7 +83,14 @@ def dataset_files(wildcards):
 def sample_sheet(name):
     """A dataset's sample sheet, read once per Snakemake process (raw/ does not change during a run; the target
     and input functions asked for it ~350 times per DAG). Callers must not modify it."""
-    return pd.read_csv(Path(DATASETS[name]) / "samples.csv", dtype=str)
+    return sample_sheet_of(DATASETS[name])
+
+
+def sample_sheet_of(folder):
+    """samples.csv as the ingest reads it (comma, semicolon or tab separated; tissuemech.io.samples.load_samples)."""
+    from tissuemech.io.samples import load_samples
+
+    return load_samples(folder)
 
 
 def dataset_tests(name):
@@ -192,9 +199,10 @@ def tts_temperatures(name):
     if "test" not in sheet or "temperature_c" not in sheet:
         return []
     sweeps = sheet[sheet["test"] == "frequency_sweep"]
-    return distinct_temperatures(
-        pd.to_numeric(sweeps["temperature_c"], errors="coerce")
-    )
+    values = sweeps["temperature_c"].astype("string")
+    if sheet.attrs.get("decimal_comma"):
+        values = values.str.replace(",", ".", regex=False)
+    return distinct_temperatures(pd.to_numeric(values, errors="coerce"))
 
 
 def has_tts(name):
