@@ -10,7 +10,7 @@ printed too (mesh + time thinning + sweep protocol).
 Usage (the bundled brain after ``make run``)::
 
     python benchmarks/fem_replay.py results/porcine_brain_thesis/averages.nc \\
-        results/porcine_brain_thesis/cards/viscoelastic_joint/qlv_rp3_prony4.json --sizes 2.5e-3,1.5e-3,1e-3
+        results/porcine_brain_thesis/cards/material/<baseline model>.json --sizes 2.5e-3,1.5e-3,1e-3
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Posterior diagnostics of the bundled brain's joint viscoelastic fits (QLV and beyond-QLV) at given settings.
+"""Posterior diagnostics of the bundled brain's material model (the material scope's baseline) at given settings.
 
 Run after the fits exist (``snakemake results/porcine_brain_thesis/ranking.csv``):
     PYTHONPATH=src .venv/bin/python benchmarks/posterior_brain.py [--walkers 8 --steps 1400 --burn 400]
@@ -10,12 +10,16 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import yaml
+
 from tissuemech import fitting as F
 from tissuemech import uq
 from tissuemech.canonical import read_netcdf
+from tissuemech.ranking import scope_model
+from tissuemech.scopes import dataset_scopes
 
 ROOT = Path("results/porcine_brain_thesis")
-SCOPE, TESTS = "viscoelastic_joint", ["constant_shear_rate", "stress_relaxation"]
+SCOPE = "material"
 
 
 def main():
@@ -24,12 +28,16 @@ def main():
     ap.add_argument("--steps", type=int, default=1400)
     ap.add_argument("--burn", type=int, default=400)
     ap.add_argument("--seed", type=int, default=20261124)
-    ap.add_argument("--models", default="qlv_rp3_prony4,pr_rp3_prony4")
+    ap.add_argument("--models", default="baseline", help="model keys of the scope, or 'baseline'")
     a = ap.parse_args()
     averages = read_netcdf(ROOT / "averages.nc")
+    config = yaml.safe_load(Path("config/config.yaml").read_text())
+    tests = sorted({str(t) for t in averages["test"].values})
+    spec = dataset_scopes(tests, config["fit"])[SCOPE]
     for key in a.models.split(","):
+        key = scope_model(ROOT / "ranking" / f"{SCOPE}.csv", key)
         record = F.FitRecord.from_netcdf(ROOT / "fits" / SCOPE / f"{key}.nc")
-        problem = uq.problem_for_record(averages, record, TESTS)
+        problem = uq.problem_for_record(averages, record, spec)
         post, info = uq.sample_record_posterior(problem, record, walkers=a.walkers, steps=a.steps, burn=a.burn,
                                                 seed=a.seed)
         table = uq.posterior_table(record, post)

@@ -54,12 +54,17 @@ from .canonical import write_text
 from .curves import average_runs
 from .io.ingest import ingest_dataset
 from .pipeline import load_runs
-from .stages import dataset_scopes, scope_curves
+from .material import baseline_model, fit_material
+from .scopes import MATERIAL_LAWS
+from .stages import dataset_scopes, scope_curves, spec_curves
 
 #: model fits redone on every check: dataset -> scope (``stages.dataset_scopes``) -> registry keys. Chosen to
 #: cover every response kind the fitter handles (flow, shear history of relaxation and CSR ramps, creep,
 #: oscillation, the LVE part of amplitude sweeps) and every family (viscous, linear elastic and viscoelastic,
 #: fractional, hyperelastic, QLV, beyond-QLV), while staying well under a minute on two cores.
+#: the model name that stands for the material scope's baseline (its key is the data's choice)
+MATERIAL_BASELINE = "baseline"
+
 REFERENCE_FITS: dict[str, dict[str, tuple[str, ...]]] = {
     "agar_3pct_thesis": {
         "amplitude_sweep": ("linear_elastic",),
@@ -73,7 +78,8 @@ REFERENCE_FITS: dict[str, dict[str, tuple[str, ...]]] = {
         "stress_relaxation": ("prony3",),
         "creep_recovery": ("burgers",),
         "frequency_sweep": ("springpot",),
-        "viscoelastic_joint": ("qlv_rp3_prony4", "pr_rp3_prony4"),
+        # the material scope chooses its model from the data: the table holds its baseline under the chosen key
+        "material": (MATERIAL_BASELINE,),
     },
 }
 
@@ -219,6 +225,23 @@ def reference_rows(dataset: str, result) -> list[dict]:
     return rows
 
 
+def material_rows(dataset: str, averages, spec: Mapping, settings: Mapping, scope: str) -> list[dict]:
+    """Reference rows of a material scope: :func:`tissuemech.material.fit_material` as the fit stage runs it, and the
+    parameters of its baseline model under the key the data chose (a change of the chosen law or relaxation times
+    shows as rows missing from the table and rows new to it)."""
+    curves = spec_curves(averages, spec)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        mf = fit_material(curves, settings["plate_target"], laws=spec.get("laws") or MATERIAL_LAWS,
+                          seed=int(settings["seed"]), scope=scope, dataset=dataset)
+    key = baseline_model(mf.table)
+    if key is None:
+        return [{"dataset": dataset, "scope": scope, "model": MATERIAL_BASELINE, "parameter": "<fit failed>",
+                 "unit": "", "value": float("nan"), "stderr": float("nan"), "tolerance": float("nan"),
+                 "reason": f"no baseline: {mf.recommendation.get('statement', '')}"}]
+    return reference_rows(dataset, mf.fits[key])
+
+
 def fresh_table(raw_dir=DEFAULT_RAW_DIR, config_path=DEFAULT_CONFIG,
                 selection: Mapping[str, Mapping[str, Sequence[str]]] | None = None) -> pd.DataFrame:
     """Redo the reference fits and return them in the reference-table layout (:data:`COLUMNS`).
@@ -239,6 +262,9 @@ def fresh_table(raw_dir=DEFAULT_RAW_DIR, config_path=DEFAULT_CONFIG,
             if scope not in available:
                 raise ValueError(f"{dataset}: scope {scope!r} not produced by the pipeline for tests {tests} "
                                  f"(scopes: {sorted(available)})")
+            if available[scope].get("material"):
+                rows += material_rows(dataset, averages, available[scope], settings, scope)
+                continue
             curves = scope_curves(averages, available[scope]["tests"])
             for key in models:
                 try:

@@ -211,13 +211,15 @@ def figure_scope_fit(fit: FitRecord | xr.Dataset, curves: Sequence, title: str |
     return fig
 
 
-def plot_scope_fits(averages_path, fits_dir, spec: Mapping | Sequence[str], out_dir, tts_path=None) -> list[Path]:
+def plot_scope_fits(averages_path, fits_dir, spec: Mapping | Sequence[str], out_dir, tts_path=None,
+                    models: Sequence[str] | None = None) -> list[Path]:
     """``<out_dir>/<model>.png/.svg`` for every fit record ``<fits_dir>/<model>.nc`` of a scope.
 
     The curves are rebuilt from the averages exactly as the fit stage builds them from the scope's ``spec`` (or
     its test kinds) (:func:`tissuemech.stages.spec_curves`, with the dataset's ``tts.nc`` as ``tts_path`` for the ``mastercurve``
     scope, whose one curve is drawn in reduced frequency), so each fitted point is drawn at its own
-    time/strain/rate/frequency.
+    time/strain/rate/frequency. ``models``: only these records (the material scope draws its baseline and
+    recommended model, not every candidate law).
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -225,7 +227,8 @@ def plot_scope_fits(averages_path, fits_dir, spec: Mapping | Sequence[str], out_
     tts = read_netcdf(tts_path) if tts_path is not None else None
     curves_by_relaxation: dict[str, list] = {}
     written: list[Path] = []
-    for path in progress(sorted(Path(fits_dir).glob("*.nc")), f"fit figures {Path(fits_dir).name}"):
+    paths = [p for p in sorted(Path(fits_dir).glob("*.nc")) if models is None or p.stem in models]
+    for path in progress(paths, f"fit figures {Path(fits_dir).name}"):
         fit = FitRecord.from_netcdf(path)
         relaxation = fit.relaxation
         if relaxation not in curves_by_relaxation:

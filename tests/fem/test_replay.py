@@ -310,13 +310,13 @@ def write_card(folder, scope, model, card):
 def test_replay_cards_baseline_and_named_extensions(tmp_path):
     from tissuemech.stages import replay_cards
 
-    pd.DataFrame({"scope": ["viscoelastic_joint", "viscoelastic_joint", "stress_relaxation"],
+    pd.DataFrame({"scope": ["material", "material", "stress_relaxation"],
                   "model": ["qlv_nh", "pr_rp3_prony4", "sls_card"], "recommended": [False, True, True]}
                  ).to_csv(tmp_path / "ranking.csv", index=False)
     cards = tmp_path / "cards"
-    write_card(cards, "viscoelastic_joint", "qlv_nh", LINEAR_CARD)
-    write_card(cards, "viscoelastic_joint", "pr_rp3_prony4", {"model": "pr_rp3_prony4", "poisson_ratio": 0.49})
-    write_card(cards, "viscoelastic_joint", "not_named", extension_card())
+    write_card(cards, "material", "qlv_nh", LINEAR_CARD)
+    write_card(cards, "material", "pr_rp3_prony4", {"model": "pr_rp3_prony4", "poisson_ratio": 0.49})
+    write_card(cards, "material", "not_named", extension_card())
     write_card(cards, "stress_relaxation", "sls_card", LINEAR_CARD)
     fix = {"metric": "held_out_nrmse", "before": 0.2, "after": 0.1, "gain": 0.5}
     diagnosis = {"model": "qlv_nh", "findings": [
@@ -325,10 +325,10 @@ def test_replay_cards_baseline_and_named_extensions(tmp_path):
         {"effect": "wall_slip", "detected": False, "fix": {**fix, "model": "not_named"}}]}
     (tmp_path / "diagnosis.json").write_text(json.dumps(diagnosis))
     chosen = replay_cards(tmp_path / "ranking.csv", cards, tmp_path / "diagnosis.json")
-    assert [(c.name, c.role) for c in chosen] == [("viscoelastic_joint/qlv_nh", "baseline"),
-                                                  ("viscoelastic_joint/pr_rp3_prony4", "nonseparable_relaxation")]
+    assert [(c.name, c.role) for c in chosen] == [("material/qlv_nh", "baseline"),
+                                                  ("material/pr_rp3_prony4", "nonseparable_relaxation")]
     assert chosen[0].reason == "" and chosen[1].reason == "the FEM has no law 'pr_rp3_prony4'"
-    # without a diagnosis: the recommended card of the first scope the FEM can run (the joint one it cannot)
+    # without a diagnosis: the recommended card of the first scope the FEM can run (the material one it cannot)
     alone = replay_cards(tmp_path / "ranking.csv", cards)
     assert [(c.name, c.role) for c in alone] == [("stress_relaxation/sls_card", "baseline")]
 

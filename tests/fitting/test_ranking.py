@@ -180,20 +180,20 @@ def test_select_cards_takes_the_recommended_card_of_each_scope(tmp_path):
     for scope, model, law in (("constant_shear_rate", "neo_hookean", "neo_hookean"),
                               ("constant_shear_rate", "ogden1", "ogden1"),
                               ("stress_relaxation", "maxwell", "maxwell"),
-                              ("viscoelastic_joint", "qlv_rp3_prony4", "reduced_polynomial3")):
+                              ("material", "qlv_rp3_prony4", "reduced_polynomial3")):
         (tmp_path / "cards" / scope).mkdir(parents=True, exist_ok=True)
         (tmp_path / "cards" / scope / f"{model}.json").write_text(f'{{"model": "{model}", "elastic_law": "{law}"}}')
     ranking = tmp_path / "ranking.csv"
     # ogden1 ranks first in its scope but the ranking recommends neo_hookean; no FEM law for maxwell
-    pd.DataFrame({"scope": ["constant_shear_rate", "constant_shear_rate", "stress_relaxation", "viscoelastic_joint",
+    pd.DataFrame({"scope": ["constant_shear_rate", "constant_shear_rate", "stress_relaxation", "material",
                             "creep_recovery"],
                   "model": ["ogden1", "neo_hookean", "maxwell", "qlv_rp3_prony4", None],
                   "rank": [1, 2, 1, 1, np.nan], "recommended": [False, True, True, True, False]}).to_csv(ranking)
     chosen = stages.select_cards(ranking, tmp_path / "cards")
-    assert [(p.parent.name, p.stem) for p in chosen] == [("viscoelastic_joint", "qlv_rp3_prony4"),
+    assert [(p.parent.name, p.stem) for p in chosen] == [("material", "qlv_rp3_prony4"),
                                                          ("constant_shear_rate", "neo_hookean")]
     assert R.recommended_models(ranking) == {"constant_shear_rate": "neo_hookean", "stress_relaxation": "maxwell",
-                                             "viscoelastic_joint": "qlv_rp3_prony4"}
+                                             "material": "qlv_rp3_prony4"}
 
 
 def test_time_dependence_from_relaxation_and_sweep():

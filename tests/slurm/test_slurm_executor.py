@@ -135,7 +135,7 @@ def _small_workflow(folder: Path) -> Path:
     config_path = folder / "config" / "config.yaml"
     config = yaml.safe_load(config_path.read_text())
     config.update(raw_dir="raw", datasets=[DATASET], external_datasets={})
-    config["fit"].update(multistart=1, models=FIT_MODELS, joint_models=[])
+    config["fit"].update(multistart=1, models=FIT_MODELS, material={"enabled": False})
     config_path.write_text(yaml.safe_dump(config, sort_keys=False))
     return folder
 

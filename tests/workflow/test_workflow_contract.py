@@ -137,11 +137,11 @@ def test_dry_run_of_the_repository_is_clean(tmp_path):
         for rule in ("ingest", "average", "fit_scope", "rank"):
             assert by_dataset[name][rule] >= 1, f"{name}: no {rule} job in the dry run"
     assert by_dataset[""]["all"] == 1 and by_dataset[""]["fem_timing"] == 1 and by_dataset[""]["summary"] == 1
-    # config posterior: every fit of the bundled brain's joint scope is sampled (the QLV and the beyond-QLV one),
-    # and fits.csv is written by the dataset's one rank job, which waits for the posterior tables
+    # config posterior: the bundled brain's material scope samples its baseline model (one job), and fits.csv is
+    # written by the dataset's one rank job, which waits for the posterior tables
     post = config["posterior"]
-    if "porcine_brain_thesis" in post["datasets"] and not post.get("models"):
-        assert by_dataset["porcine_brain_thesis"]["posterior"] == len(config["fit"]["joint_models"])
+    if "porcine_brain_thesis" in post["datasets"] and post.get("scopes") == ["material"]:
+        assert by_dataset["porcine_brain_thesis"]["posterior"] == 1
     for name in expected:
         assert by_dataset[name]["rank"] == (1 if by_dataset[name]["fit_scope"] else 0), name
     # the averages' LVE limits and spectra are written by the average job: no job of their own
@@ -176,7 +176,7 @@ def tiny_run(tmp_path_factory):
     config["raw_dir"] = "raw"
     config["datasets"] = []  # discovery: every raw/<name>/samples.csv
     config["external_datasets"] = {}
-    config["fit"].update(multistart=1, joint_models=[],
+    config["fit"].update(multistart=1, material={"enabled": False},
                          models={"amplitude_sweep": ["linear_elastic"], "stress_relaxation": ["maxwell"]})
     # FEM off: no indentation experiment, no brain mesh (the runs stop at ranking anyway, but the DAG of the
     # default target must resolve)

@@ -12,6 +12,9 @@ with job_log(snakemake.log[0], end_process=True) as log:
         tts_path=snakemake.input.get("tts"),
     )
     log.info("scope %s: ranked %d models", snakemake.wildcards.scope, len(table))
+    shown = None
+    if snakemake.params.spec.get("material") and not table.empty and "baseline" in table:
+        shown = set(table.loc[table["baseline"].astype(bool) | table["recommended"].astype(bool), "model"])
     written = plot_scope_fits(snakemake.input.averages, snakemake.output.fits, snakemake.params.spec,
-                              snakemake.output.figures, tts_path=snakemake.input.get("tts"))
+                              snakemake.output.figures, tts_path=snakemake.input.get("tts"), models=shown)
     log.info("%s/%s: %d fit figures", snakemake.wildcards.dataset, snakemake.wildcards.scope, len(written))
