@@ -373,7 +373,9 @@ def _nonseparable_fix(runs, baseline_key: str, target: str, taus_s: Sequence[flo
     if not baseline_key.startswith("qlv_"):
         return None
     ext = "pr_" + baseline_key[len("qlv_"):]
-    if ext not in available_models():
+    if ext not in available_models() and not (FIXED_TIME_KEY.fullmatch(ext) and "_fluid" not in ext):
+        # a fixed-time Pipkin-Rogers model on the baseline's times (models.registry.model_on_times); a fluid QLV
+        # has no Pipkin-Rogers counterpart
         return None
     use = [r for r in runs if r.attrs.get("test") in ("constant_shear_rate", "stress_relaxation")]
     rates = sorted({float(r.attrs["shear_rate_1_per_s"]) for r in use
