@@ -308,13 +308,10 @@ def run_posterior(averages_path, fits_dir, scope: str, model: str, tests, out_nc
 # specimen variability: per-piece levels and the mixed-effects model (tissuemech.stats.mixed_effects)
 # ------------------------------------------------------------------------------------------------------
 def reference_shear_modulus(model_key: str, params: Mapping[str, float]) -> float:
-    """Initial shear modulus of a fitted model (Pa): the elastic law's small-strain tangent, or for a Prony
-    series ``G_inf + sum G_i``; NaN where neither is defined."""
-    model = get_model(model_key)
-    if model.supports("elastic_shear"):
-        return float(initial_shear_modulus(model, params))
-    prony = [v for k, v in params.items() if k == "G_inf" or (k.startswith("G_") and k[2:].isdigit())]
-    return float(sum(prony)) if prony else float("nan")
+    """Initial shear modulus of a fitted model (Pa): ``models.base.initial_shear_modulus``, the one rule (the
+    elastic law's small-strain tangent, or a linear viscoelastic model's relaxation modulus at t = 0); NaN where
+    neither is defined."""
+    return float(initial_shear_modulus(get_model(model_key), params))
 
 
 def piece_levels(runs, record: F.FitRecord, tests, exclude_flagged: bool = True) -> pd.DataFrame:
