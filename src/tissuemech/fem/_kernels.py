@@ -5,7 +5,8 @@ relaxation), each one compiled function (no Python per step).
 A numba kernel file, kept whole: the passes call each other and inline :mod:`.materials`' stress routines.
 The method, the array layout and the Python API are described in :mod:`.tled`, which assembles the model and
 calls the loops. numba's cache does not see changes of inlined code in another file, so after editing
-``materials.py`` touch this module (or clear ``NUMBA_CACHE_DIR``).
+``materials.py`` or the Pipkin-Rogers weight law (``models/beyond_qlv.py``) touch this module and
+``vectorised.py`` (or clear ``NUMBA_CACHE_DIR``; the pipeline's source-keyed cache sees them).
 """
 from __future__ import annotations
 
