@@ -179,13 +179,6 @@ def _element_force_pass(u, elements, dndx, vol0, chunk_lo, fbuf, kind, w1fn, w2f
                             h_state[e, i, 4] = h4
                             h_state[e, i, 5] = h5
                             w_prev[e, i] = wb
-                    if commit:
-                        s_prev[e, 0] = se0
-                        s_prev[e, 1] = se1
-                        s_prev[e, 2] = se2
-                        s_prev[e, 3] = se3
-                        s_prev[e, 4] = se4
-                        s_prev[e, 5] = se5
                 else:
                     d0 = se0 - s_prev[e, 0]
                     d1 = se1 - s_prev[e, 1]
@@ -219,13 +212,13 @@ def _element_force_pass(u, elements, dndx, vol0, chunk_lo, fbuf, kind, w1fn, w2f
                             h_state[e, i, 3] = h3
                             h_state[e, i, 4] = h4
                             h_state[e, i, 5] = h5
-                    if commit:
-                        s_prev[e, 0] = se0
-                        s_prev[e, 1] = se1
-                        s_prev[e, 2] = se2
-                        s_prev[e, 3] = se3
-                        s_prev[e, 4] = se4
-                        s_prev[e, 5] = se5
+                if commit:  # both laws: the previous instantaneous stress S_e
+                    s_prev[e, 0] = se0
+                    s_prev[e, 1] = se1
+                    s_prev[e, 2] = se2
+                    s_prev[e, 3] = se3
+                    s_prev[e, 4] = se4
+                    s_prev[e, 5] = se5
                 t11, t22, t33, t12, t23, t13 = push_forward(f11, f12, f13, f21, f22, f23, f31, f32, f33,
                                                             s0, s1, s2, s3, s4, s5)
             if kind != KIND_SVK:
