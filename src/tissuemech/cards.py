@@ -431,7 +431,7 @@ def _kelvin_voigt_material(model: ConstitutiveModel, p: Mapping[str, float], ran
     """Retardation-spectrum models (generalized Kelvin-Voigt): their Prony series is known exactly; the linear
     shear law with the instantaneous modulus."""
     g_inf, g_k, theta = model.relaxation_spectrum(p)
-    g0 = float(g_inf + np.sum(g_k))
+    g0 = initial_shear_modulus(model, p)  # G(0) = g_inf + sum g_k of the interconverted spectrum
     prony = {"g": [float(x) for x in g_k / g0], "tau": [float(x) for x in theta], "g_inf": float(g_inf / g0),
              "fit_rel_error": 0.0,
              "source": "exact interconversion of the Kelvin-Voigt retardation spectrum (relaxation times "
