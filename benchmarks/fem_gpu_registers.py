@@ -35,9 +35,8 @@ LAWS = {"SVK": ("saint_venant_kirchhoff", {"mu": 1000.0}, {}),
         "MR": ("mooney_rivlin", {"C10": 300.0, "C01": 100.0}, {}),
         "LP2": ("lopez_pamies2", {"mu1": 900.0, "alpha1": 1.2, "mu2": 100.0, "alpha2": 3.0}, {}),
         "QLV4": ("neo_hookean", {"mu": 1000.0}, dict(prony_g=(0.3, 0.2, 0.1, 0.05), prony_tau_s=(0.01, 0.1, 1.0, 10.0))),
-        "BQLV2": ("neo_hookean", {"mu": 600.0}, dict(branch_law="reduced_polynomial2", prony_tau_s=(0.1, 1.0),
-                                                     branch_parameters=[{"C10": 200.0, "C20": 50.0},
-                                                                        {"C10": 100.0, "C20": 10.0}]))}
+        "PR4": ("neo_hookean", {"mu": 1000.0}, dict(prony_tau_s=(0.01, 0.1, 1.0, 10.0), pipkin_rogers={
+            "beta": [0.3 / 0.35, 0.2 / 0.35, 0.1 / 0.35, 0.05 / 0.35], "kappa": [0.537] * 4, "gamma_s": 0.1223}))}
 
 
 class _HostArray(np.ndarray):

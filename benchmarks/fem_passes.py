@@ -33,10 +33,10 @@ from tissuemech.fem.tled import _vector_setup, initial_states, numba_threads  # 
 
 def pass_times(model, calls: int, repeats: int) -> dict[str, float]:
     """Median microseconds per call of each pass of the NH + ANP step at a random small displacement."""
-    h_state, s_prev, _ = initial_states(model, None)
-    vec, _, _ = _vector_setup(model, "vectorised", h_state, s_prev)
+    h_state, s_prev, w_prev = initial_states(model, None)
+    vec, _, _ = _vector_setup(model, "vectorised", h_state, s_prev, w_prev)
     (conn, d9, vol0, node_ptr, inc_elem, inc_slot, inv_vnode, elo, nlo, g, pe, p_node, fe, n_bad, n_far,
-     _sprev, _hstate, jm23a, _s_relaxed, w1a, w2a) = vec[1]
+     _sprev, _hstate, jm23a, _s_relaxed, w1a, w2a, _wprev) = vec[1]
     nn = model.kernel_mesh.n_nodes
     u = np.random.default_rng(0).normal(scale=1e-5, size=(nn, 3)).astype(fe.dtype)
     fint = np.zeros((nn, 3), fe.dtype)

@@ -1,7 +1,8 @@
 """Real-time factor of the TLED explicit step on the MNI brain (issue 17 targets), with float32 vs float64 agreement.
 
 For each brain mesh given (e.g. the pipeline's ``results/fem/brain_mesh.vtu`` and an older or finer one) and each law
-(neo-Hookean, QLV with 4 Prony terms on neo-Hookean; mu = 1 kPa, nu = 0.49, rho = 1040 kg/m^3, ANP, the lowest
+(neo-Hookean, QLV with 4 Prony terms on neo-Hookean, with ``--laws NH,QLV4-NH,PR4-NH`` also the nonseparable
+extension Pipkin-Rogers with the same small-strain weights; mu = 1 kPa, nu = 0.49, rho = 1040 kg/m^3, ANP, the lowest
 5 % of the brain fixed, an initial shear-velocity field), the explicit step runs at the critical step
 ``0.7 min altitude / c_d`` on 1 and 2 threads (alternating, ``--repeats`` times, median kept) in float64 and float32
 storage. Printed: element updates per wall second (median of the repeats), the real-time factor (simulated / wall
@@ -53,8 +54,9 @@ def mass_scaling_indentation(mesh, factor: float, law: str = "QLV4-NH", precisio
 
     from fem_timing import LAWS
 
-    key, params, g, tau = LAWS[law]
-    mat = make_material(key, params, poisson_ratio=0.49, density_kg_m3=1040.0, prony_g=g, prony_tau_s=tau)
+    key, params, g, tau, *pr = LAWS[law]
+    mat = make_material(key, params, poisson_ratio=0.49, density_kg_m3=1040.0, prony_g=g, prony_tau_s=tau,
+                        pipkin_rogers=pr[0] if pr else None)
     x = mesh.nodes
     height = (x[:, 2] - x[:, 2].min()) / np.ptp(x[:, 2])
     top = x[np.argmax(x[:, 2])]

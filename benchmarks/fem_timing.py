@@ -45,6 +45,10 @@ LAWS = {
     "NH": ("neo_hookean", {"mu": 1000.0}, (), ()),
     "LP2": ("lopez_pamies2", {"mu1": 900.0, "alpha1": 1.2, "mu2": 100.0, "alpha2": 3.0}, (), ()),
     "QLV4-NH": ("neo_hookean", {"mu": 1000.0}, (0.3, 0.2, 0.1, 0.05), (0.01, 0.1, 1.0, 10.0)),
+    # the nonseparable extension: Pipkin-Rogers with QLV4-NH's small-strain weights (beta_i = g_i / g_inf) and the
+    # bundled brain's fitted weight law (kappa, gamma_s of pr_rp3_prony4)
+    "PR4-NH": ("neo_hookean", {"mu": 1000.0}, (), (0.01, 0.1, 1.0, 10.0),
+               {"beta": [0.3 / 0.35, 0.2 / 0.35, 0.1 / 0.35, 0.05 / 0.35], "kappa": [0.537] * 4, "gamma_s": 0.1223}),
     # stretch-based (spectral decomposition per element; generic kernel), Budday-like cortex parameters
     "OG1": ("ogden1", {"mu1": 1000.0, "alpha1": -25.0}, (), ()),
 }
@@ -57,8 +61,9 @@ def cube_with_n_elements(n_elements: float):
 
 
 def setup(mesh, law: str, precision: str, anp: bool):
-    key, params, g, tau = LAWS[law]
-    mat = make_material(key, params, poisson_ratio=0.49, density_kg_m3=1040.0, prony_g=g, prony_tau_s=tau)
+    key, params, g, tau, *pr = LAWS[law]
+    mat = make_material(key, params, poisson_ratio=0.49, density_kg_m3=1040.0, prony_g=g, prony_tau_s=tau,
+                        pipkin_rogers=pr[0] if pr else None)
     x = mesh.nodes
     height = (x[:, 2] - x[:, 2].min()) / np.ptp(x[:, 2])
     # cube: the bottom face; brain: the lowest 5 % (the support of the indentation experiment)

@@ -2,17 +2,32 @@
 
 Card shape (JSON, SI units)::
 
-    {"model": key, "family": ..., "parameters": {...}, "units": {...}, "standard_errors": {...},
-     "elastic_law": law key, "elastic_parameters": {...}, "initial_shear_modulus": Pa,
+    {"schema_version": "1.0", "model": key, "family": ..., "parameters": {...}, "units": {...},
+     "standard_errors": {...}, "elastic_law": law key, "elastic_parameters": {...}, "initial_shear_modulus": Pa,
      "prony": {"g": [...], "tau": [...], "g_inf": ..., "normalisation": ..., "source": ...} | null,
+     "pipkin_rogers": {"beta": [...], "kappa": [...], "gamma_s": ..., "weights": ..., "strain_measure": ...} | null,
      "poisson_ratio": nu, "bulk_modulus": Pa, "validity": {...}, "provenance": {...},
-     "fit_quality": {...}, "abaqus_form": ..., "febio_form": type | null, "febio_parameters": {...} | null,
-     "febio_reason": str | null, "valid_range": {...}, "uncertainty": {...}, "notes": [...],
+     "fit_quality": {...}, "abaqus_form": ... | null, "abaqus_constants": [...],
+     "abaqus_marlow_table": {"nominal_strain": [...], "nominal_stress_pa": [...]},   # MARLOW cards only
+     "abaqus_reason": str,   # cards without an Abaqus form
+     "febio_form": type | null, "febio_parameters": {...} | null, "febio_reason": str | null,
+     "niftysim_reason": str | null, "valid_range": {...}, "uncertainty": {...}, "notes": [...],
      "time_temperature_shift": {...}}   # only cards fitted to a TTS mastercurve (tts.tts_card)
 
+The card holds plain JSON values only (``records.MaterialCard`` reads and validates it, schema version included),
+and every file format is written from it alone (:func:`write_card_files`), so a card read back from disk writes the
+same Abaqus, FEBio and NiftySim files.
+
 ``elastic_law``/``elastic_parameters`` are the (instantaneous) hyperelastic law a FE code needs -- for a
-QLV model the instantaneous law, for a linear viscoelastic model a linear law with the instantaneous
+QLV or Pipkin-Rogers model the instantaneous law, for a linear viscoelastic model a linear law with the instantaneous
 modulus G0 (a neo-Hookean law is exactly linear in simple shear).
+
+The nonseparable extension (Pipkin-Rogers, ``models.beyond_qlv.PipkinRogersModel``) is a TLED law: its card holds
+the small-strain Prony series (weights ``beta_i / (1 + sum beta)``) and the fitted weight law in ``pipkin_rogers``
+unchanged (:func:`pipkin_rogers_block`); the solver reads both (``fem.materials.material_from_card``). Abaqus has no
+strain-dependent Prony weights (:data:`ABAQUS_PIPKIN_ROGERS_REASON`) and FEBio's reactive viscoelasticity does not
+hold the law (``cards_febio.FEBIO_PIPKIN_ROGERS_REASON``): no block, the reason in ``abaqus_reason`` /
+``febio_reason``.
 
 Conventions (checked by :func:`abaqus_simple_shear_stress`, an independent evaluation of the Abaqus energy
 forms, against the fitted model):
@@ -66,7 +81,6 @@ is the configuration's ``fem.poisson_ratio``, a required argument of :func:`make
 """
 from __future__ import annotations
 
-import json
 import math
 import re
 import xml.etree.ElementTree as ET
@@ -76,14 +90,15 @@ from pathlib import Path
 import numpy as np
 import scipy
 
-from .canonical import to_jsonable, write_text
-from .cards_febio import (FEBIO_SOURCE_COMMIT, febio_card_material, febio_document, febio_material_element,
-                          febio_simple_shear_stress)
+from .canonical import write_text
+from .cards_febio import (FEBIO_PIPKIN_ROGERS_REASON, FEBIO_SOURCE_COMMIT, febio_card_material, febio_document,
+                          febio_material_element, febio_simple_shear_stress)
 from .cards_niftysim import niftysim_file_text, niftysim_reason
 from .fitting import FitResult
 from .models.base import ConstitutiveModel, bulk_modulus, initial_shear_modulus
 from .models.qlv import LinearElasticShear
-from .records import MaterialCard
+from .models.registry import get_model
+from .records import MaterialCard, finite_strain_law
 from .spectra import prony_nnls_weights, prony_oscillation_basis, prony_relaxation_basis
 
 #: Abaqus Arruda-Boyce series coefficients
@@ -346,17 +361,20 @@ def fitted_strain_max(ranges: Mapping) -> float | None:
 
 
 def material_fields(law: ConstitutiveModel | None, lp: Mapping[str, float], poisson_ratio: float,
-                    prony: dict | None = None, strain_max: float | None = None) -> tuple[dict, list[str], bool]:
+                    prony: dict | None = None, strain_max: float | None = None,
+                    pipkin_rogers: dict | None = None) -> tuple[dict, list[str], bool]:
     """The material part of a card, the one place it is assembled (:func:`make_card` and the cards of posterior
-    draws, ``uq.elastic_card``): from the elastic law, its parameters ``lp``, the Poisson ratio and the Prony
-    series (``g``, ``tau``, ``g_inf``, ``source``, ... or None).
+    draws, ``uq.elastic_card``): from the elastic law, its parameters ``lp``, the Poisson ratio, the Prony
+    series (``g``, ``tau``, ``g_inf``, ``source``, ... or None) and the Pipkin-Rogers weight law
+    (:func:`pipkin_rogers_block`, or None).
 
     Returns ``(fields, notes, singular_origin)``: ``fields`` = ``prony`` (with its ``normalisation`` statement),
-    ``elastic_law``, ``elastic_parameters``, ``initial_shear_modulus``, ``poisson_ratio`` and ``bulk_modulus``
-    (``models.base.bulk_modulus(G0, nu)``). A law whose tangent still grows as gamma -> 0 (``singular_origin``)
-    gets the secant modulus at ``strain_max / 20`` as its initial shear modulus (NaN, with a note, when
-    ``strain_max`` -- the fit's largest strain -- is not given); a linear elastic shear law is written as the
-    neo-Hookean law with mu = G0. ``law`` None (no solid law): NaN moduli, ``elastic_law`` None.
+    ``pipkin_rogers``, ``elastic_law``, ``elastic_parameters``, ``initial_shear_modulus``, ``poisson_ratio`` and
+    ``bulk_modulus`` (``models.base.bulk_modulus(G0, nu)``). A law whose tangent still grows as gamma -> 0
+    (``singular_origin``) gets the secant modulus at ``strain_max / 20`` as its initial shear modulus (NaN, with a
+    note, when ``strain_max`` -- the fit's largest strain -- is not given); a linear elastic shear law is written as
+    the neo-Hookean law with mu = G0 (``records.finite_strain_law``). ``law`` None (no solid law): NaN moduli,
+    ``elastic_law`` None.
     """
     notes: list[str] = []
     if prony is not None:
@@ -379,12 +397,13 @@ def material_fields(law: ConstitutiveModel | None, lp: Mapping[str, float], pois
         mu0 = float(np.asarray(law.elastic_shear_stress(lp, np.array([gamma_ref])), float)[0] / gamma_ref)
         notes.append(f"the law has an unbounded initial tangent modulus; initial_shear_modulus is its secant "
                      f"modulus at gamma = {gamma_ref:.3g}")
-    fields = {"prony": prony, "elastic_law": None if law is None else law.name, "elastic_parameters": lp}
-    if law is not None and law.name.startswith("linear_elastic"):
-        # a linear shear law is written as the neo-Hookean law with mu = G0: identical in simple shear at any
-        # strain, and a finite-strain law every FE code (and the project's FEM) knows
-        fields["elastic_law"], fields["elastic_parameters"] = "neo_hookean", {"mu": mu0}
-        notes.append("linear elastic shear law written as neo-Hookean (mu = G0; identical in simple shear)")
+    fields = {"prony": prony, "pipkin_rogers": pipkin_rogers, "elastic_law": None if law is None else law.name,
+              "elastic_parameters": dict(lp)}
+    if law is not None:
+        name, params = finite_strain_law(law.name, dict(lp), mu0)
+        if name != law.name:
+            fields["elastic_law"], fields["elastic_parameters"] = name, params
+            notes.append("linear elastic shear law written as neo-Hookean (mu = G0; identical in simple shear)")
     fields["initial_shear_modulus"] = mu0
     fields["poisson_ratio"] = float(poisson_ratio)
     fields["bulk_modulus"] = bulk_modulus(mu0, poisson_ratio) if np.isfinite(mu0) else float("nan")
@@ -412,7 +431,7 @@ def _kelvin_voigt_material(model: ConstitutiveModel, p: Mapping[str, float], ran
     """Retardation-spectrum models (generalized Kelvin-Voigt): their Prony series is known exactly; the linear
     shear law with the instantaneous modulus."""
     g_inf, g_k, theta = model.relaxation_spectrum(p)
-    g0 = float(g_inf + np.sum(g_k))
+    g0 = initial_shear_modulus(model, p)  # G(0) = g_inf + sum g_k of the interconverted spectrum
     prony = {"g": [float(x) for x in g_k / g0], "tau": [float(x) for x in theta], "g_inf": float(g_inf / g0),
              "fit_rel_error": 0.0,
              "source": "exact interconversion of the Kelvin-Voigt retardation spectrum (relaxation times "
@@ -455,13 +474,48 @@ def _spectrum_material(model: ConstitutiveModel, p: Mapping[str, float], ranges:
     return law, {"G0": pr["G0"]}, prony, notes
 
 
+def is_pipkin_rogers(model: ConstitutiveModel) -> bool:
+    """True for a Pipkin-Rogers model (``models.beyond_qlv.PipkinRogersModel``: strain-dependent Prony weights)."""
+    return isinstance(model.structure, Mapping) and model.structure.get("kind") == "pipkin_rogers" and \
+        hasattr(model, "weight_law_parameters")
+
+
+def pipkin_rogers_block(model: ConstitutiveModel, p: Mapping[str, float]) -> dict:
+    """The card's ``pipkin_rogers`` block of a Pipkin-Rogers fit: the fitted ``beta_i``, ``kappa_i`` and ``gamma_s``
+    unchanged (``PipkinRogersModel.weight_law_parameters``), the weight law and the 3-D strain measure the TLED
+    solver uses (``I1bar - 3`` of the isochoric deformation, ``gamma^2`` in simple shear)."""
+    w = model.weight_law_parameters(p)
+    return {"beta": w["beta"], "kappa": w["kappa"], "gamma_s": w["gamma_s"],
+            "weights": "g_i = beta_i m_i / (1 + sum_j beta_j m_j), g_inf = 1 / (1 + sum_j beta_j m_j), "
+                       "m_i = 1 + kappa_i s, s = x / (x + gamma_s^2)",
+            "strain_measure": "x = I1bar - 3 of the isochoric deformation (= gamma^2 in simple shear)",
+            "source": "models.beyond_qlv.PipkinRogersModel (the fitted parameters, unchanged)"}
+
+
+def _pipkin_rogers_material(model: ConstitutiveModel, p: Mapping[str, float], ranges: Mapping) -> FamilyMaterial:
+    """Pipkin-Rogers: the instantaneous law and the small-strain Prony series (weights ``beta_i / (1 + sum beta)``,
+    the model's times); the strain-dependent weights are the card's ``pipkin_rogers`` block
+    (:func:`pipkin_rogers_block`)."""
+    law, lp = model.instantaneous, {k: float(p[k]) for k in model.instantaneous.param_names}
+    w = model.weight_law_parameters(p)
+    beta = np.asarray(w["beta"], float)
+    prony = {"g": [float(x) for x in beta / (1.0 + beta.sum())], "tau": w["tau_s"],
+             "g_inf": float(1.0 / (1.0 + beta.sum())),
+             "source": "Pipkin-Rogers weights at small strain (gamma -> 0); the strain-dependent weights are the "
+                       "card's 'pipkin_rogers' block"}
+    return law, lp, prony, []
+
+
 def family_material(model: ConstitutiveModel, p: Mapping[str, float], ranges: Mapping) -> FamilyMaterial:
-    """The material of a fitted model's card, per family: QLV (:func:`_qlv_material`), generalized Kelvin-Voigt
-    (:func:`_kelvin_voigt_material`), other linear viscoelastic and fractional models (:func:`_spectrum_material`);
-    any other model (hyperelastic, viscous, beyond-QLV) its elastic law (``None`` where there is none) without a
-    Prony series. ``ranges`` are the fit's data ranges (the time window of the NNLS)."""
+    """The material of a fitted model's card, per family: QLV (:func:`_qlv_material`), Pipkin-Rogers
+    (:func:`_pipkin_rogers_material`), generalized Kelvin-Voigt (:func:`_kelvin_voigt_material`), other linear
+    viscoelastic and fractional models (:func:`_spectrum_material`); any other model (hyperelastic, viscous, the
+    other beyond-QLV laws) its elastic law (``None`` where there is none) without a Prony series. ``ranges`` are
+    the fit's data ranges (the time window of the NNLS)."""
     if model.family == "qlv" and hasattr(model, "prony_weights"):
         return _qlv_material(model, p, ranges)
+    if is_pipkin_rogers(model):
+        return _pipkin_rogers_material(model, p, ranges)
     if model.family == "linear_viscoelastic" and hasattr(model, "relaxation_spectrum"):
         return _kelvin_voigt_material(model, p, ranges)
     if model.family in ("linear_viscoelastic", "fractional") and (model.supports("shear_history")
@@ -471,10 +525,55 @@ def family_material(model: ConstitutiveModel, p: Mapping[str, float], ranges: Ma
     return law, lp, None, []
 
 
+#: why a Pipkin-Rogers card has no Abaqus block (the card's ``abaqus_reason``)
+ABAQUS_PIPKIN_ROGERS_REASON = (
+    "Abaqus has no strain-dependent Prony weights: *VISCOELASTIC, TIME=PRONY holds constant relative moduli g_i, and "
+    "the nonlinear viscoelastic networks (*VISCOELASTIC, NONLINEAR: parallel rheological framework) scale the "
+    "equilibrium law by a constant stiffness ratio per network and make the flow, not the weight, nonlinear; the "
+    "Pipkin-Rogers weights g_i(gamma) need a user material (UMAT/VUMAT); the TLED solver runs the card as written")
+
+
+def _abaqus_fields(card: dict, law: ConstitutiveModel, lp: Mapping[str, float], strain_max: float | None,
+                   check_max: float, notes: list[str]) -> None:
+    """``abaqus_form``, ``abaqus_constants`` (and for MARLOW ``abaqus_marlow_table``) of a card with a solid law:
+    the first native form whose energy reproduces the fitted law in simple shear (1 %), else MARLOW with the
+    uniaxial table equivalent in simple shear when the fit gives a strain range."""
+    native = abaqus_hyperelastic_form(card["elastic_law"], card["elastic_parameters"])
+    options = []
+    if native is not None:
+        options.append(native)
+        if native[0].startswith("OGDEN"):
+            # a classical-form Ogden law W = sum mu_i/alpha_i (...) converts with mu_i alpha_i / 2
+            c = list(native[1])
+            options.append((native[0], [c[k] * c[k + 1] / 2.0 if k % 2 == 0 else c[k] for k in range(len(c))]))
+    card["abaqus_form"], card["abaqus_constants"] = ("MARLOW" if strain_max is not None else None), []
+    gamma = np.linspace(check_max / 20.0, check_max, 20)
+    target = np.asarray(law.elastic_shear_stress(lp, gamma), float)
+    for form, consts in options:
+        # self-check: the Abaqus energy with these constants must reproduce the fitted law (1 %)
+        trial = {**card, "abaqus_form": form, "abaqus_constants": consts}
+        err = np.max(np.abs(abaqus_simple_shear_stress(abaqus_block(trial), gamma) - target) / np.abs(target))
+        if err <= 0.01:
+            card["abaqus_form"], card["abaqus_constants"] = form, consts
+            card["abaqus_check_max_rel_error"] = float(err)
+            break
+        notes.append(f"native {form} constants do not reproduce the law ({100 * err:.2g} % off); not used")
+    if card["abaqus_form"] == "MARLOW":
+        strain, stress = marlow_uniaxial_table(law, lp, float(card["validity"]["marlow_strain_max"]),
+                                               spacing=card["validity"].get("marlow_spacing", "linear"))
+        card["abaqus_marlow_table"] = {"nominal_strain": strain.tolist(), "nominal_stress_pa": stress.tolist()}
+        notes.append("no native Abaqus form: MARLOW with uniaxial data equivalent in simple shear (I1-only)")
+    elif card["abaqus_form"] is None:
+        card["abaqus_reason"] = "no native Abaqus form, and no fitted strain range for a MARLOW table"
+        notes.append(f"{card['abaqus_reason']}: no Abaqus block")
+
+
 def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float,
               dataset: str = "", fit_file: str = "", strain_margin: float = 1.2) -> dict:
     """Canonical card of a fitted model (see the module docstring for the shape and conventions); ``poisson_ratio``
-    is the configuration's ``fem.poisson_ratio`` (no default)."""
+    is the configuration's ``fem.poisson_ratio`` (no default). The card holds plain JSON values only: every file
+    format is written from it alone (:func:`write_card_files`), also from a card read back from disk
+    (``records.MaterialCard``)."""
     p = result.params
     notes: list[str] = []
     card = {"model": result.model_key, "family": result.family, "parameters": dict(p), "units": dict(result.units),
@@ -483,7 +582,8 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float,
     check_max = strain_max if strain_max is not None else CONVERSION_CHECK_STRAIN_MAX
     law, lp, prony, family_notes = family_material(model, p, result.ranges)
     notes += family_notes
-    fields, law_notes, singular_origin = material_fields(law, lp, poisson_ratio, prony, strain_max)
+    pr = pipkin_rogers_block(model, p) if is_pipkin_rogers(model) else None
+    fields, law_notes, singular_origin = material_fields(law, lp, poisson_ratio, prony, strain_max, pr)
     card.update(fields)
     notes += law_notes
     prony = card["prony"]
@@ -504,37 +604,21 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float,
         if model.family == "viscous":
             notes.append("viscous flow law: no solid material card")
         elif model.family == "beyond_qlv":
-            notes.append("beyond-QLV law: no native Abaqus/FEBio form; needs a user material (UMAT/VUMAT or a "
-                         "FEBio plugin); the project's TLED solver implements it")
+            notes.append("beyond-QLV law: no native Abaqus/FEBio form and no TLED law; needs a user material "
+                         "(UMAT/VUMAT or a FEBio plugin)")
+        card["abaqus_reason"] = notes[-1] if notes else "no solid elastic law"
+    elif pr is not None:
+        card["abaqus_form"], card["abaqus_constants"], card["abaqus_reason"] = None, [], ABAQUS_PIPKIN_ROGERS_REASON
+        notes.append(f"no Abaqus block: {ABAQUS_PIPKIN_ROGERS_REASON}")
     else:
-        card["_law"] = law
-        native = abaqus_hyperelastic_form(card["elastic_law"], card["elastic_parameters"])
-        options = []
-        if native is not None:
-            options.append(native)
-            if native[0].startswith("OGDEN"):
-                # a classical-form Ogden law W = sum mu_i/alpha_i (...) converts with mu_i alpha_i / 2
-                c = list(native[1])
-                options.append((native[0], [c[k] * c[k + 1] / 2.0 if k % 2 == 0 else c[k] for k in range(len(c))]))
-        card["abaqus_form"], card["abaqus_constants"] = ("MARLOW" if strain_max is not None else None), []
-        gamma = np.linspace(check_max / 20.0, check_max, 20)
-        target = np.asarray(law.elastic_shear_stress(lp, gamma), float)
-        for form, consts in options:
-            # self-check: the Abaqus energy with these constants must reproduce the fitted law (1 %)
-            trial = {**card, "abaqus_form": form, "abaqus_constants": consts}
-            err = np.max(np.abs(abaqus_simple_shear_stress(abaqus_block(trial), gamma) - target) / np.abs(target))
-            if err <= 0.01:
-                card["abaqus_form"], card["abaqus_constants"] = form, consts
-                card["abaqus_check_max_rel_error"] = float(err)
-                break
-            notes.append(f"native {form} constants do not reproduce the law ({100 * err:.2g} % off); not used")
-        if card["abaqus_form"] == "MARLOW":
-            notes.append("no native Abaqus form: MARLOW with uniaxial data equivalent in simple shear (I1-only)")
-        elif card["abaqus_form"] is None:
-            notes.append("no native Abaqus form, and no fitted strain range for a MARLOW table: no Abaqus block")
+        _abaqus_fields(card, law, lp, strain_max, check_max, notes)
     if law is None:
         card.update(febio_form=None, febio_parameters=None, febio_check_max_rel_error=None,
                     febio_reason=notes[-1] if notes else "no solid elastic law")
+    elif pr is not None:
+        card.update(febio_form=None, febio_parameters=None, febio_check_max_rel_error=None,
+                    febio_reason=FEBIO_PIPKIN_ROGERS_REASON)
+        notes.append(f"no FEBio block: {FEBIO_PIPKIN_ROGERS_REASON}")
     else:
         ogden = card["abaqus_constants"] if str(card["abaqus_form"]).startswith("OGDEN") else None
         card.update(febio_card_material(card["elastic_law"], card["elastic_parameters"], card["bulk_modulus"],
@@ -546,35 +630,43 @@ def make_card(result: FitResult, model: ConstitutiveModel, poisson_ratio: float,
     card["uncertainty"] = parameter_uncertainty(result, law, lp)
     card["niftysim_reason"] = niftysim_reason(card)  # None: <model>.niftysim.xml is written (cards_niftysim)
     card["notes"] = notes
-    card["_law"] = law  # runtime only (not serialised)
     return card
 
 
-def card_json(card: Mapping) -> str:
-    """Canonical JSON text of a card (sorted keys, runtime objects dropped)."""
-    clean = {k: v for k, v in card.items() if not k.startswith("_")}
-    return json.dumps(to_jsonable(clean, nonfinite_as_null=False), indent=2, sort_keys=True, allow_nan=True)
+def card_json(card: Mapping | MaterialCard) -> str:
+    """Canonical JSON text of a card (``records.MaterialCard.json_text``: sorted keys, the schema version)."""
+    return _as_card(card).json_text()
+
+
+def _as_card(card: Mapping | MaterialCard) -> MaterialCard:
+    """The validated card of a card dict (or the card itself)."""
+    return card if isinstance(card, MaterialCard) else MaterialCard.from_dict(dict(card))
 
 
 # ------------------------------------------------------------------------------------------------
 # Abaqus
 # ------------------------------------------------------------------------------------------------
-def abaqus_block(card: Mapping, material_name: str | None = None) -> str | None:
-    """Abaqus ``*MATERIAL`` block (``None`` when the card has no solid law)."""
-    law = card.get("_law")
-    if card.get("abaqus_form") is None or law is None:
+def abaqus_block(card: Mapping | MaterialCard, material_name: str | None = None) -> str | None:
+    """Abaqus ``*MATERIAL`` block of a card (a card dict, or a ``records.MaterialCard`` read back from disk), written
+    from the card's content alone; ``None`` when the card has no Abaqus form (``abaqus_reason`` says why)."""
+    card = card.data if isinstance(card, MaterialCard) else card
+    if card.get("abaqus_form") is None:
         return None
     name = material_name or re.sub(r"[^A-Za-z0-9_]", "_", str(card["model"])).upper()
-    lines = [f"** tissuemech material card: model {card['model']} ({card['family']}), units N, m, s, Pa",
+    lines = [f"** tissuemech material card: model {card['model']} ({card.get('family', '')}), units N, m, s, Pa",
              f"** initial shear modulus {card['initial_shear_modulus']:.6g} Pa, nu = {card['poisson_ratio']}, "
              f"K = {card['bulk_modulus']:.6g} Pa",
              f"*MATERIAL, NAME={name}"]
     form = card["abaqus_form"]
     moduli = ", MODULI=INSTANTANEOUS" if card.get("prony") else ""
     if form == "MARLOW":
-        smax = float(card["validity"]["marlow_strain_max"])
-        strain, stress = marlow_uniaxial_table(law, card["elastic_parameters"], smax,
-                                               spacing=card["validity"].get("marlow_spacing", "linear"))
+        table = card.get("abaqus_marlow_table")
+        if table is not None:
+            strain, stress = table["nominal_strain"], table["nominal_stress_pa"]
+        else:  # a card of schema 0 (no table in the card): the table of its registered elastic law
+            strain, stress = marlow_uniaxial_table(get_model(card["elastic_law"]), card["elastic_parameters"],
+                                                   float(card["validity"]["marlow_strain_max"]),
+                                                   spacing=card["validity"].get("marlow_spacing", "linear"))
         # compressibility of the Marlow form through its POISSON parameter (no data line)
         lines.append(f"*HYPERELASTIC, MARLOW, POISSON={card['poisson_ratio']:g}{moduli}")
         lines.append("*UNIAXIAL TEST DATA")
@@ -665,9 +757,10 @@ def abaqus_simple_shear_stress(block: str, strain: np.ndarray) -> np.ndarray:
 # ------------------------------------------------------------------------------------------------
 # FEBio (forms and checks in :mod:`tissuemech.cards_febio`)
 # ------------------------------------------------------------------------------------------------
-def febio_block(card: Mapping, material_id: int = 1, material_name: str | None = None) -> str | None:
+def febio_block(card: Mapping | MaterialCard, material_id: int = 1, material_name: str | None = None) -> str | None:
     """FEBio ``<material>`` XML element (FEBio 4 spec) or ``None`` when the card has no verified FEBio form
     (``card["febio_reason"]`` says why)."""
+    card = card.data if isinstance(card, MaterialCard) else card
     if card.get("febio_form") is None:
         return None
     mat = febio_material_element(card["febio_form"], card["febio_parameters"], card.get("prony"),
@@ -676,15 +769,17 @@ def febio_block(card: Mapping, material_id: int = 1, material_name: str | None =
     return ET.tostring(mat, encoding="unicode") + "\n"
 
 
-def febio_file_text(card: Mapping, material_id: int = 1, material_name: str | None = None) -> str | None:
+def febio_file_text(card: Mapping | MaterialCard, material_id: int = 1,
+                    material_name: str | None = None) -> str | None:
     """A FEBio input document (``febio_spec`` 4.0, ``Material`` section) of the card, with its valid range and
     provenance as XML comments; ``None`` when the card has no FEBio form."""
+    card = card.data if isinstance(card, MaterialCard) else card
     if card.get("febio_form") is None:
         return None
     mat = febio_material_element(card["febio_form"], card["febio_parameters"], card.get("prony"),
                                  material_id=material_id, name=material_name or str(card["model"]))
     vr = card.get("valid_range") or {}
-    comments = [f"tissuemech material card: model {card['model']} ({card['family']}), units N, m, s, Pa",
+    comments = [f"tissuemech material card: model {card['model']} ({card.get('family', '')}), units N, m, s, Pa",
                 f"valid range (fitted data): {_range_text(vr)}",
                 f"Poisson ratio {card['poisson_ratio']} (configuration) -> k = {card['bulk_modulus']:.6g} Pa",
                 f"FEBio forms checked against febiosoftware/FEBio {FEBIO_SOURCE_COMMIT[:7]}"]
@@ -694,16 +789,18 @@ def febio_file_text(card: Mapping, material_id: int = 1, material_name: str | No
 # ------------------------------------------------------------------------------------------------
 # files
 # ------------------------------------------------------------------------------------------------
-def write_card_files(card: Mapping, folder, stem: str | None = None) -> dict[str, Path]:
+def write_card_files(card: Mapping | MaterialCard, folder, stem: str | None = None) -> dict[str, Path]:
     """Write ``<stem>.json``, ``<stem>.inp`` (Abaqus), ``<stem>.feb.xml`` (FEBio document) and
-    ``<stem>.niftysim.xml`` (NiftySim element-set fragment, :mod:`tissuemech.cards_niftysim`) where they exist.
+    ``<stem>.niftysim.xml`` (NiftySim element-set fragment, :mod:`tissuemech.cards_niftysim`) where they exist, each
+    from the card's content alone (a card dict of :func:`make_card`, or a ``records.MaterialCard`` read back).
 
     Returns the written paths by kind (``json``, ``abaqus``, ``febio``, ``niftysim``).
     """
-    MaterialCard.from_dict(dict(card))  # validated: a card that the reader would refuse is not written
+    typed = _as_card(card)  # validated: a card that the reader would refuse is not written
+    card = typed.data
     folder = Path(folder)
     stem = stem or str(card["model"])
-    out = {"json": write_text(card_json(card) + "\n", folder / f"{stem}.json")}
+    out = {"json": typed.write_json(folder / f"{stem}.json")}
     ab = abaqus_block(card)
     if ab is not None:
         out["abaqus"] = write_text(ab, folder / f"{stem}.inp")
@@ -716,8 +813,8 @@ def write_card_files(card: Mapping, folder, stem: str | None = None) -> dict[str
     return out
 
 
-__all__ = ["make_card", "family_material", "material_fields", "fitted_strain_max", "CONVERSION_CHECK_STRAIN_MAX", "card_json", "abaqus_block", "parse_abaqus_block",
-           "abaqus_simple_shear_stress",
-           "abaqus_hyperelastic_form", "marlow_uniaxial_table", "febio_block", "febio_file_text",
-           "febio_simple_shear_stress", "valid_range", "parameter_uncertainty",
-           "prony_from_step_response", "prony_from_complex_modulus", "write_card_files"]
+__all__ = ["make_card", "family_material", "material_fields", "pipkin_rogers_block", "is_pipkin_rogers",
+           "ABAQUS_PIPKIN_ROGERS_REASON", "fitted_strain_max", "CONVERSION_CHECK_STRAIN_MAX", "card_json",
+           "abaqus_block", "parse_abaqus_block", "abaqus_simple_shear_stress", "abaqus_hyperelastic_form",
+           "marlow_uniaxial_table", "febio_block", "febio_file_text", "febio_simple_shear_stress", "valid_range",
+           "parameter_uncertainty", "prony_from_step_response", "prony_from_complex_modulus", "write_card_files"]

@@ -43,7 +43,21 @@ Laws for which **no block is written** (the card's ``febio_reason`` says why):
   519/134750`` -- ``a_k`` is ``k`` times the series coefficient of Arruda-Boyce/Abaqus (``1/2, 1/20, 11/1050, ...``),
   so no ``(mu, N)`` reproduces the project's law.
 * Lopez-Pamies, Nunes, Amin, full polynomials with cubic or higher terms: no native FEBio material.
-* Beyond-QLV (Pipkin-Rogers) laws: strain-dependent relaxation has no native form (needs a plugin).
+* Pipkin-Rogers (the nonseparable extension, strain-dependent Prony weights): FEBio's nonlinear viscoelastic
+  material is reactive viscoelasticity (``"reactive viscoelastic"`` / ``"uncoupled reactive viscoelastic"``,
+  FEBio User Manual section "Reactive Viscoelastic Solid", ``FEUncoupledReactiveViscoelastic.cpp``), and it does not
+  hold the Pipkin-Rogers law (:data:`FEBIO_PIPKIN_ROGERS_REASON`): (1) its weak bonds of generation ``u`` reform
+  stress-free and carry the bond law of the *relative* deformation ``F(t) U(u)^-1`` (``DevStressWeakBonds``), not
+  the hereditary sum of increments of a strain-dependent branch stress ``R_i(gamma) = g_i(gamma) sigma_e(gamma)``;
+  (2) its strain-dependent weight, the optional recruitment ``F(Xi)`` of eq. ``rvs-reformed-with-recruitment``, is
+  stored per generation at the strain where that generation starts to break (``UpdateSpecializedMaterialPoints``:
+  ``m_wv``) and stays fixed while it relaxes, whereas the Pipkin-Rogers weights follow the current strain; (3) the
+  strong bonds are one elastic material, while the Pipkin-Rogers equilibrium stress ``sigma_e(gamma) / (1 + sum_j beta_j
+  m_j(gamma))`` is the instantaneous law times a strain-dependent factor no FEBio elastic material has. Its
+  strain-dependent relaxation functions (``relaxation-exp-distortion``, ``relaxation-exp-dist-user``, ...) make the
+  relaxation *time* depend on the distortion (a horizontal shift, the Schapery kind), not the weight. Only an ideal
+  step is reproduced (one generation: ``sigma_e + F(Xi) sigma_b g(t)``). A FEBio plugin would be needed.
+* Other beyond-QLV laws (Schapery, Maxwell branches): no native form (needs a plugin).
 * a Prony series on a coupled base (``polynomial``): FEBio's coupled ``viscoelastic`` wrapper relaxes the whole
   stress including the pressure; the rheometer data say nothing about bulk relaxation, so it is not written.
 * more than six Prony terms.
@@ -70,6 +84,17 @@ FEBIO_MAX_PRONY_TERMS = 6
 FEBIO_CHECK_RTOL = 0.01
 #: FEBio commit the type strings, parameter names and stress forms were read from
 FEBIO_SOURCE_COMMIT = "65622b536bab6aab02a6121f771b05743f9a1584"
+
+#: why a Pipkin-Rogers card has no FEBio block (module docstring)
+FEBIO_PIPKIN_ROGERS_REASON = (
+    "FEBio's nonlinear viscoelastic material, 'uncoupled reactive viscoelastic' (FEBio User Manual 'Reactive "
+    "Viscoelastic Solid'; FEUncoupledReactiveViscoelastic.cpp, commit 65622b5), does not hold Pipkin-Rogers: its weak "
+    "bonds reform stress-free and carry the bond law of the deformation relative to their generation, not the sum of "
+    "increments of the branch stresses g_i(gamma) sigma_e(gamma); its strain-dependent weight (the recruitment "
+    "F(Xi)) is fixed per bond generation at the strain where that generation starts to break, while the "
+    "Pipkin-Rogers weights follow the current strain; its equilibrium stress is one elastic material, not "
+    "sigma_e(gamma) / (1 + sum beta_j m_j(gamma)); its distortion-dependent relaxation functions change the "
+    "relaxation time, not the weight. Only an ideal step would match; a FEBio plugin would be needed")
 
 _REASON_YEOH = ("FEBio 'Yeoh' (FEYeoh.cpp, commit 65622b5) computes its stress with W1 = sum c_i (I1-3)^(i-1) but "
                 "documents and integrates W = sum c_i (I1-3)^i; energy and stress disagree for terms of order >= 2, "
@@ -266,4 +291,4 @@ def febio_card_material(law_key: str, lp: Mapping[str, float], bulk_modulus_pa: 
 
 __all__ = ["febio_elastic_parameters", "febio_material_element", "febio_document", "febio_simple_shear_stress",
            "febio_card_material", "FEBIO_SPEC_VERSION", "FEBIO_MAX_PRONY_TERMS", "FEBIO_CHECK_RTOL",
-           "FEBIO_SOURCE_COMMIT"]
+           "FEBIO_SOURCE_COMMIT", "FEBIO_PIPKIN_ROGERS_REASON"]

@@ -43,8 +43,9 @@ NIFTYSIM_LAWS = {"neo_hookean": "NH"}
 
 def niftysim_reason(card: Mapping) -> str | None:
     """None when the card has a NiftySim element, else why not (module docstring)."""
-    if card.get("branches") or card.get("family") == "beyond_qlv":
-        return "beyond-QLV (strain-dependent) relaxation has no NiftySim material (only NHV/TIV Prony terms)"
+    if card.get("pipkin_rogers") or card.get("family") == "beyond_qlv":
+        return ("beyond-QLV (strain-dependent) relaxation has no NiftySim material (only NHV/TIV Prony terms, whose "
+                "weights are constant)")
     law = card.get("elastic_law")
     if not law:
         return "no solid elastic law (e.g. a fluid-like Prony series without a long-term modulus)"
@@ -92,9 +93,9 @@ def niftysim_file_text(card: Mapping, material_name: str | None = None) -> str |
 
 
 def read_niftysim_material(text: str) -> dict:
-    """Card fields (``elastic_law``, ``elastic_parameters``, ``bulk_modulus``, ``prony``) of a NiftySim ``NH`` or
-    ``NHV`` material, from a fragment or a whole model XML (the first ``<Material>``); other types raise
-    ``ValueError``."""
+    """Card fields (``model`` -- the fragment names none: the law's key --, ``elastic_law``, ``elastic_parameters``,
+    ``bulk_modulus``, ``prony``) of a NiftySim ``NH`` or ``NHV`` material, from a fragment or a whole model XML (the
+    first ``<Material>``); other types raise ``ValueError``."""
     root = ET.fromstring(text)
     mat = root if root.tag == "Material" else root.find(".//Material")
     if mat is None:
@@ -105,8 +106,8 @@ def read_niftysim_material(text: str) -> dict:
     values = [float(v) for v in mat.findtext("ElasticParams", "").split()]
     if len(values) != 2:
         raise ValueError("NH/NHV ElasticParams must be 'mu K'")
-    card = {"elastic_law": "neo_hookean", "elastic_parameters": {"mu": values[0]}, "bulk_modulus": values[1],
-            "prony": None}
+    card = {"model": "neo_hookean", "elastic_law": "neo_hookean", "elastic_parameters": {"mu": values[0]},
+            "bulk_modulus": values[1], "prony": None}
     vp = mat.find("ViscoParams")
     if kind == "NHV" and vp is not None:
         n_iso, n_vol = int(vp.get("NumIsoTerms", "0")), int(vp.get("NumVolTerms", "0"))

@@ -18,6 +18,11 @@ On disk (the layout every existing record has): dims ``param``/``param_b`` (vari
 attributes (:data:`SCALAR_ATTRS`, ``success`` as 0/1, ``condition_number``) and JSON attributes (``flags``,
 ``selection``, ``ranges``, ``structure``, ``sloppy_direction``, ``start_chisqr`` with failed starts as null).
 
+Schema versions: every fit record (netCDF attribute ``schema_version``) and every card (JSON ``schema_version``)
+states the ``"major.minor"`` version of its layout (:data:`FIT_RECORD_SCHEMA_VERSION`, :data:`CARD_SCHEMA_VERSION`);
+a file without one is version 0 (written before versions existed) and reads with the field defaults, a file of a
+newer major version than this code knows is refused with :class:`SchemaVersionError` (:func:`schema_major`).
+
 This module sits just above ``canonical`` (it imports nothing else of the package), so every layer may use it.
 """
 from __future__ import annotations
@@ -30,7 +35,39 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from .canonical import read_netcdf, to_jsonable, write_netcdf
+from .canonical import read_netcdf, to_jsonable, write_netcdf, write_text
+
+#: layout version of the fit records this code writes ("major.minor"; a reader refuses a newer major version)
+FIT_RECORD_SCHEMA_VERSION = "1.0"
+#: layout version of the material cards this code writes ("major.minor"; a reader refuses a newer major version).
+#: 1.0: ``schema_version`` itself, the Pipkin-Rogers block ``pipkin_rogers``, ``abaqus_reason`` and the MARLOW table
+#: in the card (``abaqus_marlow_table``), so that every format is written from the card alone
+CARD_SCHEMA_VERSION = "1.0"
+
+
+class SchemaVersionError(ValueError):
+    """A record or card of a layout version this code cannot read (a newer major version, or not a version)."""
+
+
+def schema_major(value, kind: str, known: str, source: str = "") -> int:
+    """The major version of a file's ``schema_version`` (``value``; None or absent: 0, a file written before
+    versions existed), checked against the version this code writes (``known``).
+
+    Raises :class:`SchemaVersionError` naming the file (``source``), the kind of file and both versions when the
+    file's major version is newer than ``known``'s or the value is not a ``"major.minor"`` version."""
+    where = f" {source}" if source else ""
+    if value is None:
+        return 0
+    text = str(value).strip()
+    head = text.split(".", 1)[0]
+    if not head.isdigit():
+        raise SchemaVersionError(f"{kind}{where}: schema_version {value!r} is not a 'major.minor' version")
+    major, known_major = int(head), int(str(known).split(".", 1)[0])
+    if major > known_major:
+        raise SchemaVersionError(f"{kind}{where} has schema_version {text}, newer than {known} (the newest this "
+                                 f"tissuemech reads): update tissuemech to read it")
+    return major
+
 
 #: scalar attributes of a fit record, in the order they are written (``success`` and ``condition_number`` follow)
 SCALAR_ATTRS = ("model_key", "family", "scope", "target", "relaxation", "message", "chisqr", "redchi", "rmse",
@@ -97,6 +134,9 @@ class FitRecord:
     selection: list[dict] = field(default_factory=list)
     ranges: dict[str, float] = field(default_factory=dict)
     structure: dict = field(default_factory=dict)
+    #: layout version of the file the record was read from ("0": written before versions existed); the writer
+    #: always writes :data:`FIT_RECORD_SCHEMA_VERSION`
+    schema_version: str = FIT_RECORD_SCHEMA_VERSION
 
     # ------------------------------------------------------------------ derived views
     @property
@@ -192,6 +232,7 @@ class FitRecord:
         ds.attrs["condition_number"] = float(self.condition_number)
         ds.attrs["sloppy_direction"] = json.dumps(self.sloppy_direction)
         ds.attrs["start_chisqr"] = json.dumps([c if np.isfinite(c) else None for c in self.start_chisqr])
+        ds.attrs["schema_version"] = FIT_RECORD_SCHEMA_VERSION
         return ds
 
     def to_netcdf(self, path: str | os.PathLike) -> None:
@@ -200,11 +241,14 @@ class FitRecord:
 
     # ------------------------------------------------------------------ the one reader
     @classmethod
-    def from_dataset(cls, ds: xr.Dataset, default_key: str = "") -> FitRecord:
+    def from_dataset(cls, ds: xr.Dataset, default_key: str = "", source: str = "") -> FitRecord:
         """A record from its Dataset (:meth:`to_dataset`, or a file read back). Variables or attributes an
         older or partial record lacks take the field defaults (``varying``: every parameter; ``relaxation``:
-        ``"measured"``; ``success``: true)."""
+        ``"measured"``; ``success``: true); a record without ``schema_version`` is version 0, one of a newer major
+        version than :data:`FIT_RECORD_SCHEMA_VERSION` raises :class:`SchemaVersionError` (naming ``source``)."""
         a = ds.attrs
+        version = a.get("schema_version")
+        schema_major(version, "fit record", FIT_RECORD_SCHEMA_VERSION, source)
         names = [str(n) for n in ds["param"].values] if "param" in ds.coords else []
 
         def per_param(var, cast, default):
@@ -239,17 +283,30 @@ class FitRecord:
             observed=per_point("observed", float), predicted=per_point("predicted", float),
             weighted_residual=per_point("weighted_residual", float), curve_index=per_point("curve_index", int),
             observable=per_point("observable", str), selection=_json_attr(ds, "selection", []),
-            ranges=_json_attr(ds, "ranges", {}), structure=_json_attr(ds, "structure", {}))
+            ranges=_json_attr(ds, "ranges", {}), structure=_json_attr(ds, "structure", {}),
+            schema_version="0" if version is None else str(version))
 
     @classmethod
     def from_netcdf(cls, path: str | os.PathLike) -> FitRecord:
         """Read a fit record file (the model key falls back to the file's stem)."""
-        return cls.from_dataset(read_netcdf(path), default_key=os.path.splitext(os.path.basename(path))[0])
+        return cls.from_dataset(read_netcdf(path), default_key=os.path.splitext(os.path.basename(path))[0],
+                                source=str(path))
 
 
-#: elastic-law keys of a linear elastic shear law (``models.hyperelastic.LinearElasticShear``): a card names it
-#: only if it was written before ``cards.material_fields`` wrote such a law as the neo-Hookean law
+#: elastic-law keys of a linear elastic shear law (``models.hyperelastic.LinearElasticShear``): a card written
+#: before schema 1.0 may name one; :func:`finite_strain_law` is the one place it becomes the neo-Hookean law
 LINEAR_ELASTIC_LAWS = ("linear_elastic_shear", "linear_elastic")
+
+
+def finite_strain_law(law: str | None, params: dict, initial_shear_modulus: float | None) -> tuple[str | None, dict]:
+    """The elastic law a card states and the FEM runs: a linear elastic shear law (:data:`LINEAR_ELASTIC_LAWS`) as
+    the neo-Hookean law with mu = G0 (``initial_shear_modulus``, else the law's ``G0``/``G``) -- identical in simple
+    shear at any strain, and a finite-strain law every FE code knows; any other law unchanged. The one rename, used
+    by the card builder (``cards.material_fields``) and by :class:`MaterialCard` for cards written before it."""
+    if law not in LINEAR_ELASTIC_LAWS:
+        return law, params
+    g0 = initial_shear_modulus if initial_shear_modulus is not None else params.get("G0", params.get("G"))
+    return "neo_hookean", {"mu": float(g0)}
 
 
 class CardError(ValueError):
@@ -260,18 +317,52 @@ def _is_number(x) -> bool:
     return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
 
 
+def _numbers(x) -> bool:
+    return isinstance(x, (list, tuple)) and all(_is_number(v) for v in x)
+
+
+def _check_pipkin_rogers(model: str, block, prony) -> None:
+    """Validation of a card's ``pipkin_rogers`` block (:class:`MaterialCard`)."""
+    def bad(why):
+        raise CardError(f"card {model}: 'pipkin_rogers' {why}, not {block!r}")
+
+    if not isinstance(block, dict):
+        bad("must be an object with 'beta', 'kappa' and 'gamma_s'")
+    beta, kappa, gamma_s = block.get("beta"), block.get("kappa"), block.get("gamma_s")
+    if not _numbers(beta) or not _numbers(kappa) or len(beta) != len(kappa):
+        bad("needs as many numbers 'beta' as 'kappa'")
+    if any(b < 0 for b in beta) or any(k <= -1 for k in kappa):
+        bad("needs beta_i >= 0 and kappa_i > -1")
+    if not _is_number(gamma_s) or not gamma_s > 0:
+        bad("needs a positive number 'gamma_s'")
+    if not isinstance(prony, dict) or len(prony.get("tau") or ()) != len(beta):
+        bad(f"needs a 'prony' series with one time per term ({len(beta)})")
+
+
 @dataclass(frozen=True, eq=False)
 class MaterialCard:
-    """A material card ``results/<dataset>/cards/<scope>/<model>.json`` as read: the one card reader
-    (:meth:`from_json`, :meth:`from_dict`), used by the FEM stages (``stages.select_cards``, ``stages.card_for_fem``)
-    and the card table (``summary.card_table``). ``cards.make_card`` builds the card and ``cards.write_card_files``
-    validates it through :meth:`from_dict` before it writes it.
+    """A material card ``results/<dataset>/cards/<scope>/<model>.json``: the one card reader (:meth:`from_json`,
+    :meth:`from_dict`) and the one JSON writer (:meth:`json_text`, :meth:`write_json`), used by the FEM stages
+    (``stages.select_cards``, ``stages.card_for_fem``), the card table (``summary.card_table``), the uncertainty
+    stages and the solver (``fem.materials.material_from_card`` reads a card through it). ``cards.make_card``
+    builds the card's content (the fit -> card conversions need the model library, a layer above this module) and
+    ``cards.write_card_files`` validates it through :meth:`from_dict` before it writes the JSON and the Abaqus,
+    FEBio and NiftySim files, each from the card's content alone.
 
     The typed fields are what the readers use; ``data`` is the whole card as plain JSON values (no model objects).
     Validation (:class:`CardError`): ``model`` a non-empty string, ``elastic_law`` a string or absent,
     ``elastic_parameters`` numbers by name, ``prony`` absent or with as many ``g`` as ``tau`` (numbers, positive
-    times), ``poisson_ratio``/``bulk_modulus``/``initial_shear_modulus`` numbers or absent. NaN is a number (a
-    fluid-like model's card has NaN moduli). Compare cards by ``data`` (``eq=False``).
+    times), ``poisson_ratio``/``bulk_modulus``/``initial_shear_modulus`` numbers or absent, ``pipkin_rogers`` absent
+    or ``beta``/``kappa`` per Prony term with ``beta >= 0``, ``kappa > -1`` and a positive ``gamma_s``,
+    ``time_temperature_shift`` absent or an object; ``schema_version`` (:func:`schema_major`; absent: "0") not newer
+    than :data:`CARD_SCHEMA_VERSION`. NaN is a number (a fluid-like model's card has NaN moduli). Compare cards by
+    ``data`` (``eq=False``).
+
+    ``pipkin_rogers`` (the nonseparable extension, ``models.beyond_qlv.PipkinRogersModel``): the card's Prony series
+    holds the small-strain weights ``g_i = beta_i / (1 + sum beta)`` and the times; the block holds the fitted
+    ``beta_i``, ``kappa_i`` and ``gamma_s`` unchanged, the weights at a strain being ``g_i = beta_i m_i / (1 + sum_j
+    beta_j m_j)``, ``m_i = 1 + kappa_i s``, ``s = x / (x + gamma_s^2)`` with ``x = I1bar - 3`` of the isochoric
+    deformation (``gamma^2`` in simple shear).
     """
 
     model: str
@@ -281,6 +372,9 @@ class MaterialCard:
     poisson_ratio: float | None = None
     bulk_modulus: float | None = None
     prony: dict | None = None
+    pipkin_rogers: dict | None = None
+    time_temperature_shift: dict | None = None
+    schema_version: str = CARD_SCHEMA_VERSION
     data: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self):
@@ -298,43 +392,69 @@ class MaterialCard:
                 raise CardError(f"card {self.model}: {name!r} must be a number, not {value!r}")
         if self.prony is not None:
             g, tau = (self.prony.get("g"), self.prony.get("tau")) if isinstance(self.prony, dict) else (None, None)
-            if (not isinstance(g, (list, tuple)) or not isinstance(tau, (list, tuple)) or len(g) != len(tau)
-                    or not all(_is_number(x) for x in [*g, *tau]) or any(t <= 0 for t in tau)):
+            if (not _numbers(g) or not _numbers(tau) or len(g) != len(tau) or any(t <= 0 for t in tau)):
                 raise CardError(f"card {self.model}: 'prony' needs as many numbers 'g' as positive times 'tau', "
                                 f"not {self.prony!r}")
+        if self.pipkin_rogers is not None:
+            _check_pipkin_rogers(self.model, self.pipkin_rogers, self.prony)
+        if self.time_temperature_shift is not None and not isinstance(self.time_temperature_shift, dict):
+            raise CardError(f"card {self.model}: 'time_temperature_shift' must be an object, not "
+                            f"{self.time_temperature_shift!r}")
 
     @classmethod
-    def from_dict(cls, card: dict) -> MaterialCard:
-        """A card from its dict (as ``json.loads`` or ``cards.make_card`` gives it)."""
+    def from_dict(cls, card: dict, source: str = "") -> MaterialCard:
+        """A card from its dict (as ``json.loads`` or ``cards.make_card`` gives it); ``source`` names the file in
+        errors. A dict without ``schema_version`` is a card of version 0."""
         if not isinstance(card, dict):
             raise CardError(f"a card is a JSON object, not {type(card).__name__}")
+        version = card.get("schema_version")
+        schema_major(version, "material card", CARD_SCHEMA_VERSION, source)
         return cls(model=card.get("model"), elastic_law=card.get("elastic_law"),
                    elastic_parameters=card.get("elastic_parameters") or {},
                    initial_shear_modulus=card.get("initial_shear_modulus"), poisson_ratio=card.get("poisson_ratio"),
-                   bulk_modulus=card.get("bulk_modulus"), prony=card.get("prony"), data=card)
+                   bulk_modulus=card.get("bulk_modulus"), prony=card.get("prony"),
+                   pipkin_rogers=card.get("pipkin_rogers"), time_temperature_shift=card.get("time_temperature_shift"),
+                   schema_version="0" if version is None else str(version), data=card)
 
     @classmethod
     def from_json(cls, path: str | os.PathLike) -> MaterialCard:
         """Read a card file (``<model>.json``)."""
         with open(path, encoding="utf-8") as f:
-            return cls.from_dict(json.load(f))
+            return cls.from_dict(json.load(f), source=str(path))
 
+    # ------------------------------------------------------------------ the one JSON writer
+    def json_text(self) -> str:
+        """Canonical JSON text of the card (sorted keys, NaN kept as NaN, ``schema_version`` set to the version
+        this code writes)."""
+        clean = {**self.data, "schema_version": CARD_SCHEMA_VERSION}
+        return json.dumps(to_jsonable(clean, nonfinite_as_null=False), indent=2, sort_keys=True, allow_nan=True)
+
+    def write_json(self, path: str | os.PathLike):
+        """Atomically write the card's JSON (:meth:`json_text`) to ``path``; returns the path."""
+        return write_text(self.json_text() + "\n", path)
+
+    # ------------------------------------------------------------------ the solver's view
     @property
     def fem_law(self) -> str:
         """The law key the FEM runs: ``elastic_law`` (else ``model``), a linear elastic shear law as its
-        finite-strain extension ``neo_hookean``."""
+        finite-strain extension ``neo_hookean`` (:func:`finite_strain_law`)."""
         law = self.elastic_law or self.model
-        return "neo_hookean" if law in LINEAR_ELASTIC_LAWS else law
+        return finite_strain_law(law, {}, 0.0)[0]
+
+    @property
+    def fem_parameters(self) -> dict[str, float]:
+        """The parameters of :attr:`fem_law`: ``elastic_parameters`` (a linear law's as ``{"mu": G0}``), or for a
+        minimal card without ``elastic_law`` its ``parameters``."""
+        if not self.elastic_law:
+            return dict(self.data.get("parameters") or {})
+        return finite_strain_law(self.elastic_law, self.elastic_parameters, self.initial_shear_modulus)[1]
 
     def for_fem(self) -> dict:
         """The card as the FEM takes it (``fem.experiments.card_material``): unchanged, except that a linear
-        elastic shear law is written as the neo-Hookean law with mu = G0 (the initial shear modulus, else the
-        law's ``G0``/``G``) -- identical in simple shear."""
+        elastic shear law is written as the neo-Hookean law with mu = G0 (:func:`finite_strain_law`)."""
         card = dict(self.data)
         if self.elastic_law in LINEAR_ELASTIC_LAWS:
-            lp = self.elastic_parameters
-            g0 = self.initial_shear_modulus or lp.get("G0", lp.get("G"))
-            card["elastic_law"], card["elastic_parameters"] = "neo_hookean", {"mu": float(g0)}
+            card["elastic_law"], card["elastic_parameters"] = self.fem_law, self.fem_parameters
         return card
 
 
@@ -431,5 +551,6 @@ class Finding:
         return np.nan if gain is None else float(gain)
 
 
-__all__ = ["FitRecord", "SCALAR_ATTRS", "MaterialCard", "CardError", "LINEAR_ELASTIC_LAWS", "Finding", "FindingError",
-           "FINDING_NUMBERS", "FINDING_FLAGS"]
+__all__ = ["FitRecord", "SCALAR_ATTRS", "MaterialCard", "CardError", "LINEAR_ELASTIC_LAWS", "finite_strain_law",
+           "Finding", "FindingError", "FINDING_NUMBERS", "FINDING_FLAGS", "FIT_RECORD_SCHEMA_VERSION",
+           "CARD_SCHEMA_VERSION", "SchemaVersionError", "schema_major"]

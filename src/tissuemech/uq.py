@@ -65,7 +65,8 @@ import xarray as xr
 from . import fitting as F
 from . import posterior as P
 from . import ranking as R
-from .cards import fitted_strain_max, material_fields, prony_from_step_response
+from .cards import (family_material, fitted_strain_max, is_pipkin_rogers, material_fields, pipkin_rogers_block,
+                    prony_from_step_response)
 from .canonical import NETCDF_ENGINE, atomic_write, read_netcdf, write_json, write_netcdf, write_text
 from .curves import drop_flagged, select_average
 from .models.base import initial_shear_modulus
@@ -310,13 +311,10 @@ def run_posterior(averages_path, fits_dir, scope: str, model: str, tests, out_nc
 # specimen variability: per-piece levels and the mixed-effects model (tissuemech.stats.mixed_effects)
 # ------------------------------------------------------------------------------------------------------
 def reference_shear_modulus(model, params: Mapping[str, float]) -> float:
-    """Initial shear modulus of a fitted model (Pa): the elastic law's small-strain tangent, or for a Prony
-    series ``G_inf + sum G_i``; NaN where neither is defined. ``model``: the model or its registry key."""
-    model = get_model(model) if isinstance(model, str) else model
-    if model.supports("elastic_shear"):
-        return float(initial_shear_modulus(model, params))
-    prony = [v for k, v in params.items() if k == "G_inf" or (k.startswith("G_") and k[2:].isdigit())]
-    return float(sum(prony)) if prony else float("nan")
+    """Initial shear modulus of a fitted model (Pa): ``models.base.initial_shear_modulus``, the one rule (the
+    elastic law's small-strain tangent, or a linear viscoelastic model's relaxation modulus at t = 0); NaN where
+    neither is defined. ``model``: the model or its registry key."""
+    return float(initial_shear_modulus(get_model(model) if isinstance(model, str) else model, params))
 
 
 def piece_levels(runs, record: F.FitRecord, tests, exclude_flagged: bool = True) -> pd.DataFrame:
@@ -394,7 +392,9 @@ def run_population(ranking_csv, runs_dir, fits_dir, cards_dir, scope: str, tests
 def elastic_card(card: Mapping, record: F.FitRecord, params: Mapping[str, float]) -> dict | None:
     """A FEM card of the fit's elastic law at ``params``: the card's ``elastic_law`` or, without one, the
     instantaneous law of the record's structure; for QLV and beyond-QLV fits the Prony series of the small-strain
-    step response at ``params`` (exact for QLV; for a beyond-QLV law its small-strain linearisation). The material
+    step response at ``params`` (exact for QLV; for a beyond-QLV law its small-strain linearisation), for a
+    Pipkin-Rogers fit its card's own material at ``params`` (small-strain Prony series and the ``pipkin_rogers``
+    weight law, which the FEM runs: ``cards.pipkin_rogers_block``). The material
     fields (moduli, bulk modulus from the card's Poisson ratio, Prony normalisation) are assembled by
     :func:`tissuemech.cards.material_fields`, as in the fit's own card. None where the law has no parameters among
     ``params``."""
@@ -405,18 +405,21 @@ def elastic_card(card: Mapping, record: F.FitRecord, params: Mapping[str, float]
     names = [sp.name for sp in law.param_specs]
     if not all(n in params for n in names):
         return None
-    prony = None
+    prony, pr = None, None
     taus = (record.structure or {}).get("taus_s")
-    if record.family in ("qlv", "beyond_qlv") and taus:
-        # the small-strain Prony series of the draw (exact for QLV; the small-strain linearisation of a
-        # beyond-QLV law, whose strain-dependent weights the FEM does not have)
+    model = build_model(record.model_key, record.structure)
+    if is_pipkin_rogers(model) and all(n in params for n in model.param_names):
+        _, _, prony, _ = family_material(model, params, {})
+        pr = pipkin_rogers_block(model, params)
+    elif record.family in ("qlv", "beyond_qlv") and taus:
+        # the small-strain Prony series of the draw (exact for QLV; the small-strain linearisation of another
+        # beyond-QLV law, which the FEM does not have)
         taus = np.asarray(taus, float)
-        pr = prony_from_step_response(build_model(record.model_key, record.structure), params, taus, taus.min() / 10,
-                                      taus.max() * 10)
-        prony = {"g": pr["g"], "tau": pr["tau"], "g_inf": pr["g_inf"],
+        step = prony_from_step_response(model, params, taus, taus.min() / 10, taus.max() * 10)
+        prony = {"g": step["g"], "tau": step["tau"], "g_inf": step["g_inf"],
                  "source": "small-strain step response of the fit (tissuemech.uq)"}
     fields, _, _ = material_fields(law, {n: float(params[n]) for n in names}, float(card["poisson_ratio"]), prony,
-                                   fitted_strain_max(card.get("validity") or {}))
+                                   fitted_strain_max(card.get("validity") or {}), pr)
     out = {k: v for k, v in card.items() if k not in fields}
     out.update(fields)
     return out

@@ -40,9 +40,9 @@ SCRIPT = textwrap.dedent("""
         "saint_venant_kirchhoff-float64": ("saint_venant_kirchhoff", {"mu": 1000.0}, False, "float64", {}),
         "qlv2_lopez_pamies2-anp-float64": ("lopez_pamies2", {"mu1": 900.0, "alpha1": 1.2, "mu2": 100.0, "alpha2": 3.0},
                                            True, "float64", dict(prony_g=(0.3, 0.2), prony_tau_s=(3e-5, 1e-4))),
-        "beyond_qlv-mooney_rivlin-float64": ("mooney_rivlin", {"C10": 300.0, "C01": 100.0}, False, "float64", dict(
-            branch_law="reduced_polynomial2", prony_tau_s=(3e-5, 1e-4),
-            branch_parameters=[{"C10": 200.0, "C20": 50.0}, {"C10": 100.0, "C20": 10.0}])),
+        "qlv2_pipkin_rogers-mooney_rivlin-float64": ("mooney_rivlin", {"C10": 300.0, "C01": 100.0}, False, "float64",
+                                                     dict(prony_tau_s=(3e-5, 1e-4), pipkin_rogers={
+                                                         "beta": [0.8, 0.4], "kappa": [1.5, -0.5], "gamma_s": 0.1})),
     }
     for case, (key, params, anp, prec, extra) in explicit.items():
         mat = make_material(key, params, poisson_ratio=0.45, density_kg_m3=1000.0, **extra)

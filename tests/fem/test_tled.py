@@ -213,31 +213,3 @@ def test_rigid_sphere_contact_follows_hertz():
     assert -res.contact_force_n[0, 2] == pytest.approx(hertz, rel=0.15)
     # the contact force is what the base carries
     assert res.contact_force_n[0, 2] == pytest.approx(-res.reaction_force_n["base"][0, 2], rel=1e-6)
-
-
-def test_beyond_qlv_branch_energies_relax_with_strain_dependent_shape():
-    """Branch-specific RP2 energies: sigma(t) = sigma_inf(gamma) + sum R_i(gamma) f_i exp(-(t - t0)/tau_i),
-    R_i = 2 c_i1 gamma + 4 c_i2 gamma^3 -- exact for the recursion; the relaxed fraction grows with strain."""
-    from tissuemech.fem.materials import material_from_card
-
-    tau = [0.5, 5.0]
-    card = {"model": "neo_hookean", "parameters": {"mu": 600.0}, "poisson_ratio": 0.45,
-            "branches": {"law": "reduced_polynomial2", "tau": tau,
-                         "parameters": [{"C10": 200.0, "C20": 400.0}, {"C10": 100.0, "C20": 50.0}]}}
-    mat = material_from_card(card)
-    assert mat.shear_modulus_pa == pytest.approx(600.0 + 2 * (200.0 + 100.0))
-    t_step = 1e-4
-    times = np.concatenate([[t_step], t_step + np.array([0.3, 1.0, 3.0, 10.0])])
-    f = (1 - np.exp(-t_step / np.array(tau))) / (t_step / np.array(tau))
-    relaxed = []
-    for gamma in (0.1, 0.6):
-        mesh = block_mesh((L, L, L), (1, 1, 1))
-        y = mesh.nodes[:, 1]
-        groups = [translation_group("top", np.flatnonzero(np.isclose(y, L)), (1, 0, 0), [0, t_step], [0, gamma * L]),
-                  fixed_group("bottom", np.flatnonzero(np.isclose(y, 0)))]
-        sigma = solve_quasistatic(build_model(mesh, mat, groups), times).reaction_force_n["top"][:, 0] / L**2
-        R = np.array([2 * 200.0 * gamma + 4 * 400.0 * gamma**3, 2 * 100.0 * gamma + 4 * 50.0 * gamma**3])
-        expected = 600.0 * gamma + np.sum(R * f * np.exp(-(times[:, None] - t_step) / np.array(tau)), axis=1)
-        np.testing.assert_allclose(sigma, expected, rtol=1e-10)
-        relaxed.append(sigma[-1] / sigma[0])
-    assert relaxed[1] < relaxed[0] - 0.05  # not QLV-separable: more relaxation at the larger strain

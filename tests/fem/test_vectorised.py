@@ -21,12 +21,17 @@ MATERIALS = {
     "polynomial2": ("polynomial2", {"C10": 300.0, "C01": 100.0, "C20": 200.0, "C11": 50.0, "C02": 30.0}, (), ()),
     "qlv_lp2": ("lopez_pamies2", {"mu1": 900.0, "alpha1": 1.2, "mu2": 100.0, "alpha2": 3.0}, (0.3, 0.2, 0.1, 0.05),
                 (0.002, 0.02, 0.2, 2.0)),
+    # Pipkin-Rogers (strain-dependent weights): a constant-derivative law and a law evaluated per element
+    "pr_mr": ("mooney_rivlin", {"C10": 300.0, "C01": 200.0}, (), (0.002, 0.02),
+              {"beta": [0.8, 0.4], "kappa": [1.5, -0.5], "gamma_s": 0.05}),
+    "pr_rp3": ("reduced_polynomial3", {"C10": 400.0, "C20": 300.0, "C30": 100.0}, (), (0.002, 0.02, 0.2),
+               {"beta": [1.4, 0.5, 0.5], "kappa": [0.5, 0.5, 0.5], "gamma_s": 0.12}),
 }
 
 
 def _material(name, nu=0.45):
-    key, params, g, tau = MATERIALS[name]
-    return make_material(key, params, poisson_ratio=nu, prony_g=g, prony_tau_s=tau)
+    key, params, g, tau, *pr = MATERIALS[name]
+    return make_material(key, params, poisson_ratio=nu, prony_g=g, prony_tau_s=tau, pipkin_rogers=pr[0] if pr else None)
 
 
 def _sheared_block(material, anp=True, precision="float64", cells=4):
@@ -54,7 +59,7 @@ def test_explicit_run_equals_generic_kernel(name, anp):
         np.testing.assert_allclose(vec.energy_j[k], gen.energy_j[k], rtol=1e-10, atol=1e-16)
 
 
-@pytest.mark.parametrize("name", ["neo_hookean", "qlv_nh", "qlv_lp2"])
+@pytest.mark.parametrize("name", ["neo_hookean", "qlv_nh", "qlv_lp2", "pr_rp3"])
 def test_quasistatic_equals_generic_kernel_and_continues_from_state(name):
     model = _sheared_block(_material(name))
     gen = solve_quasistatic(model, [0.01, 0.02], kernel="generic")

@@ -18,10 +18,13 @@ import pandas as pd
 import pytest
 import yaml
 
+from febio_reference import documented_relaxation, documented_shear_stress
+
 from tissuemech import cards as C
 from tissuemech import fitting as F
 from tissuemech.cards_febio import febio_card_material
 from tissuemech.models.registry import get_model
+from tissuemech.records import MaterialCard
 
 ROOT = Path(__file__).resolve().parents[2]
 GAMMA = np.linspace(0.01, 0.5, 25)
@@ -158,10 +161,23 @@ def test_every_bundled_brain_card_has_a_valid_febio_document_or_a_reason(scope, 
         return
     text = paths["febio"].read_text()
     assert check_febio_structure(text) == []
-    # the document's material is the card's law: FEBio's own form reproduces the card's law in simple shear
-    g = np.linspace(0.01, card["valid_range"]["shear_strain"][1], 20)
-    expected = get_model(card["elastic_law"]).elastic_shear_stress(card["elastic_parameters"], g)
-    np.testing.assert_allclose(C.febio_simple_shear_stress(text, g), expected, rtol=0.01)
+    # the document's material is the fitted model: FEBio's documented energy (febio_reference, not the builder's
+    # evaluator) reproduces the fitted model's instantaneous shear stress, and FEBio's documented relaxation
+    # function the fitted model's response to an ideal step (small strain)
+    model, p = get_model(key), card["parameters"]
+    if card["prony"] is None:
+        g = np.linspace(0.01, card["valid_range"]["shear_strain"][1], 20)
+        np.testing.assert_allclose(documented_shear_stress(text, g), model.elastic_shear_stress(p, g), rtol=0.01)
+        return
+    # a linear viscoelastic or fractional model: G(t) of the document (small strain: sigma / gamma of the documented
+    # energy times the documented relaxation function) against the model's step response on the card's time window,
+    # as close as the card says its Prony series is (its fit_rel_error: exact for a Prony model)
+    t = np.r_[0.0, np.geomspace(*card["valid_range"]["time_s"], 200)]
+    modulus = np.asarray(model.shear_stress_history(p, t, np.full(t.size, 1e-3)), float)[1:] / 1e-3
+    documented = (documented_shear_stress(text, [1e-3])[0] / 1e-3 * documented_relaxation(text, t[1:])
+                  / documented_relaxation(text, [0.0])[0])
+    rms = np.sqrt(np.mean((documented / modulus - 1) ** 2))
+    assert rms <= 1.02 * card["prony"]["fit_rel_error"] + 1e-6, (rms, card["prony"]["fit_rel_error"])
 
 
 def test_bundled_brain_cards_name_their_reasons():
@@ -169,9 +185,55 @@ def test_bundled_brain_cards_name_their_reasons():
     by_key = {k: c for _, k, c in BRAIN_CARDS}
     assert "FEYeoh" in by_key["qlv_rp3_prony4"]["febio_reason"]          # instantaneous law RP3 = Yeoh
     assert "FEYeoh" in by_key["reduced_polynomial3"]["febio_reason"]
-    assert "beyond-QLV" in by_key["pr_rp3_prony4"]["febio_reason"]
+    pr = by_key["pr_rp3_prony4"]
+    assert "uncoupled reactive viscoelastic" in pr["febio_reason"] and "FEUncoupledReactiveViscoelastic" in \
+        pr["febio_reason"] and "recruitment" in pr["febio_reason"]
     assert by_key["prony3"]["febio_form"] == "Mooney-Rivlin" and by_key["prony3"]["prony"]
     assert by_key["neo_hookean"]["febio_form"] == "Mooney-Rivlin"
+
+
+def test_pipkin_rogers_card_states_its_solver_law_and_why_abaqus_and_febio_have_none(tmp_path):
+    """The nonseparable extension's card: the fitted Pipkin-Rogers parameters unchanged in its 'pipkin_rogers' block
+    (the TLED law), the small-strain Prony series, no FEBio, Abaqus or NiftySim file and the reason for each, and it
+    reads back from disk (Abaqus, FEBio writers on the card read back give the same: nothing)."""
+    model = get_model("pr_rp3_prony4")
+    params = {"C10": 147.5, "C20": -33.0, "C30": 240.5, "beta_1": 1.39, "beta_2": 0.47, "beta_3": 0.47,
+              "beta_4": 0.05, "kappa": 0.54, "gamma_s": 0.122}
+    card = C.make_card(_result(model, params), model, poisson_ratio=0.49)
+    paths = C.write_card_files(card, tmp_path, stem=model.name)
+    assert set(paths) == {"json"}
+    read = MaterialCard.from_json(paths["json"])
+    pr = read.pipkin_rogers
+    assert pr["beta"] == [1.39, 0.47, 0.47, 0.05] and pr["kappa"] == [0.54] * 4 and pr["gamma_s"] == 0.122
+    assert "I1bar - 3" in pr["strain_measure"]
+    np.testing.assert_allclose(read.prony["g"], np.array(pr["beta"]) / (1 + sum(pr["beta"])))
+    assert read.prony["tau"] == [0.1, 1.0, 10.0, 100.0] and read.elastic_law == "reduced_polynomial3"
+    assert "UMAT" in read.data["abaqus_reason"] and "TIME=PRONY" in read.data["abaqus_reason"]
+    assert "reactive viscoelastic" in read.data["febio_reason"] and "NiftySim" in read.data["niftysim_reason"]
+    assert C.abaqus_block(read) is None and C.febio_block(read) is None
+
+
+def test_the_documented_oracle_fails_on_a_wrong_block():
+    """The oracle can fail: a document with c1 doubled (Mooney-Rivlin) or a relaxation time changed is off the
+    fitted model by far more than the tolerance."""
+    card = next(c for _, k, c in BRAIN_CARDS if k == "prony3")
+    text = C.febio_file_text(card)
+    model, p = get_model("prony3"), card["parameters"]
+    g = np.linspace(0.01, 0.3, 10)
+    t = np.r_[0.0, np.geomspace(1e-3, 1e3, 40)]
+    step = np.asarray(model.shear_stress_history(p, t, np.full(t.size, 1e-3)), float)
+    assert documented_relaxation(text, t) == pytest.approx(step / step[0], rel=1e-9)  # the unbroken block
+    root = ET.fromstring(text)
+    c1 = root.find("Material/material/elastic/c1")
+    c1.text = str(2 * float(c1.text))
+    doubled = ET.tostring(root, encoding="unicode")
+    elastic = step[0] / 1e-3 * g
+    assert np.max(np.abs(documented_shear_stress(doubled, g) / elastic - 1)) > 0.5
+    root = ET.fromstring(text)
+    t1 = root.find("Material/material/t1")
+    t1.text = str(10 * float(t1.text))
+    slower = ET.tostring(root, encoding="unicode")
+    assert np.max(np.abs(documented_relaxation(slower, t) - step / step[0])) > 0.01
 
 
 def test_structure_check_catches_a_broken_document():

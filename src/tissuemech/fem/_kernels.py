@@ -5,7 +5,8 @@ relaxation), each one compiled function (no Python per step).
 A numba kernel file, kept whole: the passes call each other and inline :mod:`.materials`' stress routines.
 The method, the array layout and the Python API are described in :mod:`.tled`, which assembles the model and
 calls the loops. numba's cache does not see changes of inlined code in another file, so after editing
-``materials.py`` touch this module (or clear ``NUMBA_CACHE_DIR``).
+``materials.py`` or the Pipkin-Rogers weight law (``models/beyond_qlv.py``) touch this module and
+``vectorised.py`` (or clear ``NUMBA_CACHE_DIR``; the pipeline's source-keyed cache sees them).
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit, prange
 
+from ..models.beyond_qlv import pipkin_rogers_ratio, pipkin_rogers_strain_fraction
 from ..models.recursion import relaxation_factors
 from . import vectorised
 from .kinematics import cofactor, determinant, left_cauchy_green, pull_back, push_forward
@@ -28,10 +30,11 @@ STATUS_NOT_CONVERGED = 3
 #: the arrays the loops take, grouped (numba passes namedtuples of arrays as one typed argument)
 KernelMesh = namedtuple("KernelMesh", "X elements dndx vol0 chunk_lo vnode")
 KernelMesh.__doc__ = """Reference nodes, elements, dN/dX, element volumes, element chunks, nodal volumes."""
-KernelMaterial = namedtuple("KernelMaterial", "kind params kappa use_anp prony_g prony_tau branch_params")
-KernelMaterial.__doc__ = """Law kind, law parameters, bulk modulus, ANP on/off, Prony g_i and tau_i, branch parameters."""
-KernelLaws = namedtuple("KernelLaws", "w1fn w2fn wlfn bfn")
-KernelLaws.__doc__ = """The law's compiled functions dW/dI1, dW/dI2, dW/dlambda and the beyond-QLV branch dW/dI1."""
+KernelMaterial = namedtuple("KernelMaterial", "kind params kappa use_anp prony_g prony_tau pr_params")
+KernelMaterial.__doc__ = """Law kind, law parameters, bulk modulus, ANP on/off, Prony g_i and tau_i, Pipkin-Rogers rows
+``(beta_i, kappa_i, gamma_s^2)`` (none: QLV)."""
+KernelLaws = namedtuple("KernelLaws", "w1fn w2fn wlfn")
+KernelLaws.__doc__ = """The law's compiled functions dW/dI1, dW/dI2 and dW/dlambda."""
 KernelLoads = namedtuple("KernelLoads", "bc_nodes bc_group bc_mask bc_dir bc_rotate rot_center n_groups free "
                                         "hist_time hist_vals fext_ref contact_kind cparams contact_nodes")
 KernelLoads.__doc__ = """Boundary groups and their histories, free dofs, external load, rigid contact."""
@@ -102,30 +105,29 @@ def _anp_node_pass(pbuf, vnode, p_node):
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
-def branch_drive(c11, c12, c13, c21, c22, c23, c31, c32, c33, J, jm23, b11, b22, b33, b12, b23, b13):
-    """Beyond QLV: the isochoric invariants ``I1bar``, ``I2bar`` and ``Q = 2 F^-1 dev(bbar) F^-T`` (so that a branch
-    energy ``W_i(I1bar)`` drives ``S_i = W_i' Q``) from ``cof F``, ``J``, ``J^-2/3`` and ``b = F F^T``; shared by
-    :func:`_element_force_pass` and :mod:`.cuda`."""
-    bb11, bb22, bb33, bb12, bb23, bb13 = jm23 * b11, jm23 * b22, jm23 * b33, jm23 * b12, jm23 * b23, jm23 * b13
-    bi1 = bb11 + bb22 + bb33
-    bi2 = 0.5 * (bi1 * bi1 - (bb11 * bb11 + bb22 * bb22 + bb33 * bb33 + 2.0 * (bb12 * bb12 + bb23 * bb23 + bb13 * bb13)))
-    mb = bi1 / 3.0
-    q0, q1, q2, q3, q4, q5 = pull_back(c11, c12, c13, c21, c22, c23, c31, c32, c33, J, 2.0 * (bb11 - mb),
-                                       2.0 * (bb22 - mb), 2.0 * (bb33 - mb), 2.0 * bb12, 2.0 * bb23, 2.0 * bb13)
-    return bi1, bi2, q0, q1, q2, q3, q4, q5
+def pipkin_rogers_inverse_total(pr_params, nterm, x):
+    """``(s, 1 / (1 + sum_j beta_j m_j))`` of the Pipkin-Rogers weight law at the strain measure ``x = I1bar - 3``
+    (the fitting code's ``pipkin_rogers_strain_fraction`` and ``pipkin_rogers_ratio``); ``g_inf`` is the second
+    value and ``g_i = pipkin_rogers_ratio(beta_i, kappa_i, s)`` times it. Shared by :func:`_element_force_pass` and
+    :mod:`.cuda`."""
+    s = pipkin_rogers_strain_fraction(x, pr_params[0, 2])
+    total = 0.0
+    for i in range(nterm):
+        total += pipkin_rogers_ratio(pr_params[i, 0], pr_params[i, 1], s)
+    return s, 1.0 / (1.0 + total)
 
 
 @njit(parallel=True, cache=True, fastmath=FASTMATH)
 def _element_force_pass(u, elements, dndx, vol0, chunk_lo, fbuf, kind, w1fn, w2fn, wlfn, params, kappa,
-                        use_anp, p_node, prony_g, prony_e, prony_f, h_state, s_prev, bfn, branch_params, w_prev, commit, bad):
+                        use_anp, p_node, prony_g, prony_e, prony_f, h_state, s_prev, pr_params, w_prev, commit, bad):
     """Internal nodal forces of all elements into per-chunk buffers ``fbuf[chunk, node, dof]``.
 
     QLV (``prony_g.size > 0``): isochoric 2nd PK ``S = g_inf S_e + sum_i h_i``, ``h_i`` advanced with the
     exact factors ``prony_e = exp(-dt/tau)``, ``prony_f = (1 - exp(-dt/tau))/(dt/tau)``; the new states are
     written only when ``commit`` (dynamic relaxation evaluates trial states without committing).
-    Beyond QLV (``branch_params`` with one row per term): branch energies ``W_i(I1bar)`` through ``bfn``,
-    drive ``S_i = 2 W_i' dI1bar/dC``; ``s_prev`` then holds ``2 F^-1 dev(bbar) F^-T`` and ``w_prev`` the
-    previous ``W_i'``.
+    Pipkin-Rogers (``pr_params`` with one row ``(beta_i, kappa_i, gamma_s^2)`` per term): the weights depend on
+    ``x = I1bar - 3`` (:func:`pipkin_rogers_inverse_total`), ``S = g_inf(x) S_e + sum_i h_i`` with ``h_i`` driven
+    by the increments of ``g_i(x) S_e``; ``s_prev`` holds the previous ``S_e`` and ``w_prev`` the previous ``g_i``.
     """
     nchunk = chunk_lo.size - 1
     nterm = prony_g.size
@@ -145,25 +147,24 @@ def _element_force_pass(u, elements, dndx, vol0, chunk_lo, fbuf, kind, w1fn, w2f
             if nterm > 0:
                 se0, se1, se2, se3, se4, se5 = pull_back(c11, c12, c13, c21, c22, c23, c31, c32, c33, J,
                                                          t11, t22, t33, t12, t23, t13)
-                if branch_params.shape[0] > 0:
-                    # beyond QLV: branch energies W_i(I1bar), S_i = 2 W_i' dI1bar/dC = 2 W_i' F^-1 dev(bbar) F^-T;
-                    # the drive increments are S_i(C_n+1) - S_i(C_n) (science.md 1.1 "3D/TLED"), the
-                    # equilibrium stress S_e is the main law in full (g_inf = 1)
+                if pr_params.shape[0] > 0:
+                    # Pipkin-Rogers: weights at x = I1bar - 3 (gamma^2 in simple shear), drive g_i(x) S_e
                     b11, b22, b33, b12, b23, b13 = left_cauchy_green(f11, f12, f13, f21, f22, f23, f31, f32, f33)
-                    bi1, bi2, q0, q1, q2, q3, q4, q5 = branch_drive(c11, c12, c13, c21, c22, c23, c31, c32, c33, J,
-                                                                    j_minus_two_thirds(J), b11, b22, b33, b12, b23, b13)
-                    s0, s1, s2, s3, s4, s5 = se0, se1, se2, se3, se4, se5
+                    sfrac, winf = pipkin_rogers_inverse_total(pr_params, nterm,
+                                                              j_minus_two_thirds(J) * (b11 + b22 + b33) - 3.0)
+                    s0, s1, s2 = winf * se0, winf * se1, winf * se2
+                    s3, s4, s5 = winf * se3, winf * se4, winf * se5
                     for i in range(nterm):
                         ee = prony_e[i]
                         ff = prony_f[i]
-                        wb = bfn(branch_params[i], bi1, bi2)
+                        wb = pipkin_rogers_ratio(pr_params[i, 0], pr_params[i, 1], sfrac) * winf
                         wo = w_prev[e, i]
-                        h0 = ee * h_state[e, i, 0] + ff * (wb * q0 - wo * s_prev[e, 0])
-                        h1 = ee * h_state[e, i, 1] + ff * (wb * q1 - wo * s_prev[e, 1])
-                        h2 = ee * h_state[e, i, 2] + ff * (wb * q2 - wo * s_prev[e, 2])
-                        h3 = ee * h_state[e, i, 3] + ff * (wb * q3 - wo * s_prev[e, 3])
-                        h4 = ee * h_state[e, i, 4] + ff * (wb * q4 - wo * s_prev[e, 4])
-                        h5 = ee * h_state[e, i, 5] + ff * (wb * q5 - wo * s_prev[e, 5])
+                        h0 = ee * h_state[e, i, 0] + ff * (wb * se0 - wo * s_prev[e, 0])
+                        h1 = ee * h_state[e, i, 1] + ff * (wb * se1 - wo * s_prev[e, 1])
+                        h2 = ee * h_state[e, i, 2] + ff * (wb * se2 - wo * s_prev[e, 2])
+                        h3 = ee * h_state[e, i, 3] + ff * (wb * se3 - wo * s_prev[e, 3])
+                        h4 = ee * h_state[e, i, 4] + ff * (wb * se4 - wo * s_prev[e, 4])
+                        h5 = ee * h_state[e, i, 5] + ff * (wb * se5 - wo * s_prev[e, 5])
                         s0 += h0
                         s1 += h1
                         s2 += h2
@@ -178,13 +179,6 @@ def _element_force_pass(u, elements, dndx, vol0, chunk_lo, fbuf, kind, w1fn, w2f
                             h_state[e, i, 4] = h4
                             h_state[e, i, 5] = h5
                             w_prev[e, i] = wb
-                    if commit:
-                        s_prev[e, 0] = q0
-                        s_prev[e, 1] = q1
-                        s_prev[e, 2] = q2
-                        s_prev[e, 3] = q3
-                        s_prev[e, 4] = q4
-                        s_prev[e, 5] = q5
                 else:
                     d0 = se0 - s_prev[e, 0]
                     d1 = se1 - s_prev[e, 1]
@@ -194,8 +188,8 @@ def _element_force_pass(u, elements, dndx, vol0, chunk_lo, fbuf, kind, w1fn, w2f
                     d5 = se5 - s_prev[e, 5]
                     s0, s1, s2 = g_inf * se0, g_inf * se1, g_inf * se2
                     s3, s4, s5 = g_inf * se3, g_inf * se4, g_inf * se5
-                    # the same six-component recursion as the beyond-QLV branch above with its drive
-                    # g_i (S_e - S_prev) in place of w_b Q - w_prev S_prev; written out per component (registers)
+                    # the same six-component recursion as the Pipkin-Rogers branch above with constant weights: its
+                    # drive g_i (S_e - S_prev); written out per component (registers)
                     for i in range(nterm):
                         ee = prony_e[i]
                         gf = prony_g[i] * prony_f[i]
@@ -218,13 +212,13 @@ def _element_force_pass(u, elements, dndx, vol0, chunk_lo, fbuf, kind, w1fn, w2f
                             h_state[e, i, 3] = h3
                             h_state[e, i, 4] = h4
                             h_state[e, i, 5] = h5
-                    if commit:
-                        s_prev[e, 0] = se0
-                        s_prev[e, 1] = se1
-                        s_prev[e, 2] = se2
-                        s_prev[e, 3] = se3
-                        s_prev[e, 4] = se4
-                        s_prev[e, 5] = se5
+                if commit:  # both laws: the previous instantaneous stress S_e
+                    s_prev[e, 0] = se0
+                    s_prev[e, 1] = se1
+                    s_prev[e, 2] = se2
+                    s_prev[e, 3] = se3
+                    s_prev[e, 4] = se4
+                    s_prev[e, 5] = se5
                 t11, t22, t33, t12, t23, t13 = push_forward(f11, f12, f13, f21, f22, f23, f31, f32, f33,
                                                             s0, s1, s2, s3, s4, s5)
             if kind != KIND_SVK:
@@ -272,8 +266,8 @@ def _first_bad(bad):
 
 @njit(cache=True)
 def _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind, w1fn, w2fn,
-                     wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f, h_state, s_prev, bfn, branch_params, w_prev, commit, bad,
-                     vec, reduce):
+                     wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f, h_state, s_prev, pr_params, w_prev,
+                     commit, bad, vec, reduce):
     """One complete internal-force evaluation (optional ANP passes + element pass + optional reduction
     into ``fint``; without it the forces stay in ``fbuf`` for a fused node pass).
 
@@ -288,14 +282,14 @@ def _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_nod
     """
     if vec[0]:
         return vectorised.internal_forces(u, vec[1], vec[2], vec[3], vec[4], vec[5], w1fn, w2fn, params,
-                                          kind == KIND_INVARIANT, kappa, use_anp, prony_g, prony_e, prony_f, commit,
-                                          fint, reduce)
+                                          kind == KIND_INVARIANT, kappa, use_anp, prony_g, prony_e, prony_f,
+                                          pr_params, commit, fint, reduce)
     bad[:] = -1
     if use_anp:
         _anp_element_pass(u, elements, dndx, vol0, chunk_lo, pbuf, kappa, bad)
         _anp_node_pass(pbuf, vnode, p_node)
     _element_force_pass(u, elements, dndx, vol0, chunk_lo, fbuf, kind, w1fn, w2fn, wlfn, params, kappa,
-                        use_anp, p_node, prony_g, prony_e, prony_f, h_state, s_prev, bfn, branch_params, w_prev, commit, bad)
+                        use_anp, p_node, prony_g, prony_e, prony_f, h_state, s_prev, pr_params, w_prev, commit, bad)
     if reduce:
         _reduce_forces(fbuf, fint)
     return _first_bad(bad)
@@ -546,8 +540,8 @@ def explicit_loop(mesh, mat, laws, loads, mass, h_state, s_prev, w_prev, dt, n_s
     # the unpacking and workspace below repeat the other time loop's: each loop is one compiled function, and a
     # helper returning some twenty arrays would be no clearer
     X, elements, dndx, vol0, chunk_lo, vnode = mesh
-    kind, params, kappa, use_anp, prony_g, prony_tau, branch_params = mat
-    w1fn, w2fn, wlfn, bfn = laws
+    kind, params, kappa, use_anp, prony_g, prony_tau, pr_params = mat
+    w1fn, w2fn, wlfn = laws
     (bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, n_groups, free, hist_time, hist_vals, fext_ref,
      contact_kind, cparams, contact_nodes) = loads
     nn = X.shape[0]
@@ -579,7 +573,7 @@ def explicit_loop(mesh, mat, laws, loads, mass, h_state, s_prev, w_prev, dt, n_s
         t = step * dt
         bad_e = _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind,
                                  w1fn, w2fn, wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f, h_state,
-                                 s_prev, bfn, branch_params, w_prev, YES(), bad, vec, NO())
+                                 s_prev, pr_params, w_prev, YES(), bad, vec, NO())
         if bad_e >= 0:
             return STATUS_INVERTED, bad_e, step, u, u_old, out_t[:k_out], out_force[:k_out], \
                 out_torque[:k_out], out_contact[:k_out], out_ke[:k_out], out_energy[:k_out]
@@ -670,8 +664,8 @@ def dynamic_relaxation_loop(mesh, mat, laws, loads, dr_mass, h_state, s_prev, w_
     # the unpacking and workspace below repeat the other time loop's: each loop is one compiled function, and a
     # helper returning some twenty arrays would be no clearer
     X, elements, dndx, vol0, chunk_lo, vnode = mesh
-    kind, params, kappa, use_anp, prony_g, prony_tau, branch_params = mat
-    w1fn, w2fn, wlfn, bfn = laws
+    kind, params, kappa, use_anp, prony_g, prony_tau, pr_params = mat
+    w1fn, w2fn, wlfn = laws
     (bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, n_groups, free, hist_time, hist_vals, fext_ref,
      contact_kind, cparams, contact_nodes) = loads
     nn = X.shape[0]
@@ -737,7 +731,7 @@ def dynamic_relaxation_loop(mesh, mat, laws, loads, dr_mass, h_state, s_prev, w_
         while it < max_iter:
             bad_e = _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind,
                                      w1fn, w2fn, wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f,
-                                     h_state, s_prev, bfn, branch_params, w_prev, NO(), bad, vec, YES())
+                                     h_state, s_prev, pr_params, w_prev, NO(), bad, vec, YES())
             if bad_e >= 0:
                 return STATUS_INVERTED, bad_e, k, u, iters, out_force, out_torque, out_contact
             if it > 0:
@@ -782,8 +776,8 @@ def dynamic_relaxation_loop(mesh, mat, laws, loads, dr_mass, h_state, s_prev, w_
             return STATUS_NOT_CONVERGED, -1, k, u, iters, out_force, out_torque, out_contact
         # commit viscoelastic states at the converged configuration and record reactions
         _internal_forces(u, elements, dndx, vol0, chunk_lo, fbuf, pbuf, vnode, p_node, fint, kind, w1fn, w2fn,
-                         wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f, h_state, s_prev, bfn, branch_params, w_prev, YES(), bad,
-                         vec, YES())
+                         wlfn, params, kappa, use_anp, prony_g, prony_e, prony_f, h_state, s_prev, pr_params, w_prev,
+                         YES(), bad, vec, YES())
         group_reactions(fint, u, X, bc_nodes, bc_group, rot_center, force_g, torque_g)
         contact_force(fint, contact_nodes, in_contact, cforce)
         out_force[k] = force_g

@@ -1,7 +1,7 @@
 """Optional numba-cuda TLED solver: explicit central difference and dynamic relaxation on a GPU.
 
 Scope: Saint Venant-Kirchhoff and every invariant law ``W(I1bar, I2bar)`` of the fitting code, alone, as the
-instantaneous law of QLV with any number of Prony terms, or with beyond-QLV branch energies; optional average
+instantaneous law of QLV or of Pipkin-Rogers (strain-dependent weights) with any number of Prony terms; optional average
 nodal pressure (ANP); prescribed displacement / rotation groups, fixed nodes, external nodal loads and frictionless
 rigid contact (sphere, cylinder, flat punch); reaction forces and torques per group, contact force and kinetic energy
 at the outputs; element inversion reported as on the CPU. Not on the GPU (use :mod:`.tled`): stretch-based laws
@@ -39,9 +39,11 @@ from collections import namedtuple
 import numpy as np
 
 from ..models.recursion import relaxation_factors
-from ._kernels import (RELAXATION_CALM_ITERATIONS, branch_drive, central_difference_coefficients,
-                       central_difference_dof, dynamic_relaxation_dof, prescribed_displacement,
-                       relaxation_calm_iterations, relaxation_coefficients, relaxation_error_bound)
+from ..models.beyond_qlv import pipkin_rogers_ratio
+from ._kernels import (RELAXATION_CALM_ITERATIONS, central_difference_coefficients, central_difference_dof,
+                       dynamic_relaxation_dof, prescribed_displacement, relaxation_calm_iterations,
+                       relaxation_coefficients, relaxation_error_bound)
+from ._kernels import pipkin_rogers_inverse_total as _pipkin_rogers_inverse_total
 from ._kernels import rigid_contact_move as _rigid_contact_move
 from .kinematics import cofactor, determinant, left_cauchy_green, pull_back, push_forward
 from .materials import KIND_INVARIANT, KIND_INVARIANT_I1, KIND_SVK, j_minus_two_thirds, svk_kirchhoff
@@ -95,22 +97,22 @@ def unsupported_reason(model: TLEDModel) -> str | None:
 # kernels: one compiled set per law, variant and block size
 # --------------------------------------------------------------------------------------------------
 @functools.lru_cache(maxsize=None)
-def _kernels(w1, w2, branch_w1, kind: int, use_anp: bool, n_terms: int, beyond: bool, contact_kind: int,
+def _kernels(w1, w2, kind: int, use_anp: bool, n_terms: int, beyond: bool, contact_kind: int,
              threads: int, max_registers: int | None):
-    """Compile-time specialisation of the device code: law functions ``w1``, ``w2`` (and the beyond-QLV branch law's
-    ``dW/dI1``), law kind, ANP, number of relaxation terms, beyond-QLV, contact shape, block size (a power of 2:
-    the shared-memory reductions) and the register limit of the cooperative kernels (None: the compiler's choice).
-    Returns the kernels as a dict."""
+    """Compile-time specialisation of the device code: law functions ``w1``, ``w2``, law kind, ANP, number of
+    relaxation terms, Pipkin-Rogers weights (``beyond``), contact shape, block size (a power of 2: the shared-memory
+    reductions) and the register limit of the cooperative kernels (None: the compiler's choice). Returns the kernels
+    as a dict."""
     svk = kind == KIND_SVK
     i2_dependent = kind == KIND_INVARIANT
     # the simulator runs the kernels as Python, where a compiled CPU function cannot take a simulated device array:
     # there the functions that take arrays (and the laws, which take the parameter array) run as Python too
     python = _is_simulator()
-    w1, w2, branch_w1 = (f.py_func for f in (w1, w2, branch_w1)) if python else (w1, w2, branch_w1)
+    w1, w2 = (f.py_func for f in (w1, w2)) if python else (w1, w2)
     (gathered_deformation_gradient, law_derivatives, nodal_pressure, node_force, store_nodal_forces,
-     rigid_contact_move) = (f.py_func if python else f for f in (
+     rigid_contact_move, pipkin_rogers_inverse_total) = (f.py_func if python else f for f in (
          _gathered_deformation_gradient, _law_derivatives, _nodal_pressure, _node_force, _store_nodal_forces,
-         _rigid_contact_move))
+         _rigid_contact_move, _pipkin_rogers_inverse_total))
 
     @cuda.jit(device=True)
     def block_reduce(sm, value, take_max):
@@ -157,9 +159,9 @@ def _kernels(w1, w2, branch_w1, kind: int, use_anp: bool, n_terms: int, beyond: 
             p_node[n] = nodal_pressure(pe, node_ptr, inc_elem, inv_vnode, n)
 
     @cuda.jit(device=True)
-    def element_force_phase(tid, stride, key0, u, conn, d9, vol0, p_node, params, kappa, branch_params, g_inf, decay,
+    def element_force_phase(tid, stride, key0, u, conn, d9, vol0, p_node, params, kappa, pr_params, g_inf, decay,
                             gain, sprev, hstate, wprev, commit, fel, bad):
-        """Element nodal forces into ``fel`` (the CPU kernels' formulas); QLV / beyond-QLV states advance (written
+        """Element nodal forces into ``fel`` (the CPU kernels' formulas); QLV / Pipkin-Rogers states advance (written
         only when ``commit``); an inverted element sets ``bad`` to ``key0 + e`` (smallest wins) and gets no
         force."""
         ne = vol0.size
@@ -182,30 +184,32 @@ def _kernels(w1, w2, branch_w1, kind: int, use_anp: bool, n_terms: int, beyond: 
                 if n_terms > 0:
                     se0, se1, se2, se3, se4, se5 = pull_back(c11, c12, c13, c21, c22, c23, c31, c32, c33, J,
                                                              t11, t22, t33, t12, t23, t13)
-                    s0, s1, s2 = g_inf * se0, g_inf * se1, g_inf * se2
-                    s3, s4, s5 = g_inf * se3, g_inf * se4, g_inf * se5
                     if beyond:
-                        # beyond QLV (_kernels._element_force_pass): drive S_i = 2 W_i'(I1bar) F^-1 dev(bbar) F^-T,
-                        # increments W_i' Q - W_i,prev S_prev with Q = 2 F^-1 dev(bbar) F^-T
-                        bi1, bi2, q0, q1, q2, q3, q4, q5 = branch_drive(c11, c12, c13, c21, c22, c23, c31, c32, c33,
-                                                                        J, jm23, b11, b22, b33, b12, b23, b13)
+                        # Pipkin-Rogers (_kernels._element_force_pass): weights at x = I1bar - 3, drive increments
+                        # g_i(x) S_e - g_i,prev S_prev, S = g_inf(x) S_e + sum h_i
+                        sfrac, winf = pipkin_rogers_inverse_total(pr_params, n_terms,
+                                                                  jm23 * (b11 + b22 + b33) - 3.0)
+                        s0, s1, s2 = winf * se0, winf * se1, winf * se2
+                        s3, s4, s5 = winf * se3, winf * se4, winf * se5
                         for i in range(n_terms):
-                            wb = branch_w1(branch_params[i], bi1, bi2)
+                            wb = pipkin_rogers_ratio(pr_params[i, 0], pr_params[i, 1], sfrac) * winf
                             wo = wprev[i, e]
                             h0, h1, h2, h3, h4, h5 = prony_update(
                                 decay[i], gain[i], hstate[6 * i, e], hstate[6 * i + 1, e], hstate[6 * i + 2, e],
                                 hstate[6 * i + 3, e], hstate[6 * i + 4, e], hstate[6 * i + 5, e],
-                                wb * q0 - wo * sprev[0, e], wb * q1 - wo * sprev[1, e], wb * q2 - wo * sprev[2, e],
-                                wb * q3 - wo * sprev[3, e], wb * q4 - wo * sprev[4, e], wb * q5 - wo * sprev[5, e])
+                                wb * se0 - wo * sprev[0, e], wb * se1 - wo * sprev[1, e], wb * se2 - wo * sprev[2, e],
+                                wb * se3 - wo * sprev[3, e], wb * se4 - wo * sprev[4, e], wb * se5 - wo * sprev[5, e])
                             s0, s1, s2, s3, s4, s5 = s0 + h0, s1 + h1, s2 + h2, s3 + h3, s4 + h4, s5 + h5
                             if commit:
                                 hstate[6 * i, e], hstate[6 * i + 1, e], hstate[6 * i + 2, e] = h0, h1, h2
                                 hstate[6 * i + 3, e], hstate[6 * i + 4, e], hstate[6 * i + 5, e] = h3, h4, h5
                                 wprev[i, e] = wb
                         if commit:
-                            sprev[0, e], sprev[1, e], sprev[2, e] = q0, q1, q2
-                            sprev[3, e], sprev[4, e], sprev[5, e] = q3, q4, q5
+                            sprev[0, e], sprev[1, e], sprev[2, e] = se0, se1, se2
+                            sprev[3, e], sprev[4, e], sprev[5, e] = se3, se4, se5
                     else:
+                        s0, s1, s2 = g_inf * se0, g_inf * se1, g_inf * se2
+                        s3, s4, s5 = g_inf * se3, g_inf * se4, g_inf * se5
                         d0, d1, d2 = se0 - sprev[0, e], se1 - sprev[1, e], se2 - sprev[2, e]
                         d3, d4, d5 = se3 - sprev[3, e], se4 - sprev[4, e], se5 - sprev[5, e]
                         for i in range(n_terms):
@@ -243,7 +247,7 @@ def _kernels(w1, w2, branch_w1, kind: int, use_anp: bool, n_terms: int, beyond: 
             nodal_pressure_phase(tid, stride, g.pe, g.node_ptr, g.inc_elem, g.inv_vnode, g.p_node)
             cuda.cg.this_grid().sync()
         element_force_phase(tid, stride, key0, u, g.conn, g.d9, g.vol0, g.p_node, g.params, g.kappa[0],
-                            g.branch_params, g.g_inf[0], g.decay, g.gain, g.sprev, g.hstate, g.wprev, commit, g.fel,
+                            g.pr_params, g.g_inf[0], g.decay, g.gain, g.sprev, g.hstate, g.wprev, commit, g.fel,
                             g.bad)
 
     @cuda.jit(device=True)
@@ -472,7 +476,7 @@ def _kernels(w1, w2, branch_w1, kind: int, use_anp: bool, n_terms: int, beyond: 
 # --------------------------------------------------------------------------------------------------
 #: the device arrays of a problem, passed to the kernels as one argument (numba flattens a namedtuple of arrays)
 DeviceArrays = namedtuple("DeviceArrays", (
-    "conn d9 vol0 pe p_node node_ptr inc_elem inc_slot inv_vnode params kappa branch_params g_inf decay gain sprev hstate "
+    "conn d9 vol0 pe p_node node_ptr inc_elem inc_slot inv_vnode params kappa pr_params g_inf decay gain sprev hstate "
     "wprev fel fel_flat fint bad free fext coef_a coef_b coef_c bc_table node_group node_dir node_rotate rot_center X "
     "contact_slot contact_nodes in_contact cparams bc_nodes mass dr_mass inv_dr_mass hv"))
 
@@ -511,9 +515,9 @@ class DeviceProblem:
         nn, ne = mesh.n_nodes, mesh.n_elements
         self.model, self.dt, self.k, self.damping = model, float(dt_s), 0, float(damping_1_s)
         n_terms = int(m.prony_g.size)
-        beyond = m.branch_params.shape[0] > 0
+        beyond = m.pipkin_rogers
         law = m.law
-        self.kernels = _kernels(law.dw_di1, law.dw_di2, m.branch_law.dw_di1, int(m.kind), bool(model.use_anp), n_terms,
+        self.kernels = _kernels(law.dw_di1, law.dw_di2, int(m.kind), bool(model.use_anp), n_terms,
                                 bool(beyond), int(model.contact_kind), threads,
                                 None if max_registers is None else int(max_registers))
         self.threads = threads
@@ -544,7 +548,7 @@ class DeviceProblem:
             pe=cuda.device_array(ne, ft), p_node=to(np.zeros(nn)), node_ptr=to(node_ptr), inc_elem=to(inc_elem),
             inc_slot=to(inc_slot), inv_vnode=to(1.0 / model.vnode), params=to(np.ascontiguousarray(m.params, float)),
             kappa=to(np.array([m.bulk_modulus_pa])),
-            branch_params=to(np.ascontiguousarray(m.branch_params if beyond else np.zeros((1, 1)), float)),
+            pr_params=to(np.ascontiguousarray(m.pr_params if beyond else np.zeros((1, 3)), float)),
             g_inf=to(np.array([1.0 - m.prony_g.sum()])), decay=to(np.zeros(n_state)), gain=to(np.zeros(n_state)),
             sprev=to(np.ascontiguousarray(s_prev.T)), hstate=to(hstate), wprev=to(wprev),
             fel=fel_flat.reshape(12, ne), fel_flat=fel_flat, fint=to(np.zeros((nn, 3), ft)),
@@ -592,8 +596,8 @@ class DeviceProblem:
             else:
                 e, f = 1.0, 1.0
             decay[i] = e
-            # beyond QLV: the branch drive carries its own weight (gain = f); QLV: g_i f
-            gain[i] = f if m.branch_params.shape[0] > 0 else m.prony_g[i] * f
+            # Pipkin-Rogers: the branch drive carries its own weight (gain = f); QLV: g_i f
+            gain[i] = f if m.pipkin_rogers else m.prony_g[i] * f
         self.g.decay.copy_to_device(decay)
         self.g.gain.copy_to_device(gain)
 

@@ -392,8 +392,8 @@ def fused_explicit_loop(mesh, mat, laws, loads, mass, dt, n_steps, damping, out_
     (:func:`fused_step`); the boundary conditions, contact, reactions, outputs and energy balance are the same
     serial code. ``fz``: the workspace of :func:`fused_workspace`. Same returns as ``explicit_loop``."""
     X, elements, dndx, vol0_g, chunk_lo, vnode = mesh
-    kind, params, kappa, use_anp, prony_g, prony_tau, branch_params = mat
-    w1fn, w2fn, wlfn, bfn = laws
+    kind, params, kappa, use_anp, prony_g, prony_tau, pr_params = mat
+    w1fn, w2fn, wlfn = laws
     (bc_nodes, bc_group, bc_mask, bc_dir, bc_rotate, rot_center, n_groups, free, hist_time, hist_vals, fext_ref,
      contact_kind, cparams, contact_nodes) = loads
     (conn_g, d9_g, ebeg, emid, eend, onode, olo, pnode, pptr, pinc, plo, gptr, gel, conn, d9, vol0, grad, pe, jm23a,

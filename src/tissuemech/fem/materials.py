@@ -19,6 +19,22 @@ Viscoelasticity (QLV / Prony) acts on the isochoric 2nd Piola-Kirchhoff stress a
 ``tledMaterialNHV``: ``S_iso = g_inf S_e + sum_i h_i`` with the exact recursion of
 :mod:`tissuemech.models.recursion` (``relaxation_factors``) per element and term; the volumetric response
 stays elastic.
+
+The nonseparable extension is Pipkin-Rogers (``models.beyond_qlv.PipkinRogersModel``, the model the fits and the
+diagnosis use for ``nonseparable_relaxation``), with the fitted parameters unchanged: the Prony weights depend on the
+strain, ``g_i(x) = beta_i m_i / (1 + sum_j beta_j m_j)``, ``g_inf(x) = 1 / (1 + sum_j beta_j m_j)``, ``m_i = 1 +
+kappa_i s``, ``s = x / (x + gamma_s^2)``, with the 3-D strain measure ``x = I1bar - 3`` of the isochoric deformation
+(exactly ``gamma^2`` in simple shear; the weight law is the fitting code's own numba functions
+``pipkin_rogers_strain_fraction`` and ``pipkin_rogers_ratio``). Per element and term the recursion is driven by the
+branch stress ``g_i(x) S_e``: ``h_i <- exp(-dt/tau_i) h_i + f_i (g_i(x_n+1) S_e,n+1 - g_i(x_n) S_e,n)`` and ``S_iso
+= g_inf(x) S_e + sum_i h_i`` -- in 1-D the 1-D model's recursion (``_pipkin_rogers_stress_kernel``). Why
+Pipkin-Rogers and not the Holzapfel/Simo overstress with branch energies the solver had: the branch-energy law has no
+fitted model (no fit, card or diagnosis produces its parameters), so it could never run a measured material, while
+Pipkin-Rogers goes from the fit through the card into the solver unchanged (docs/architecture.md).
+
+Temperature enters through the card's time-temperature shift as a time scale: at a temperature ``T`` the relaxation
+times are ``a_T tau_i`` (``tts.wlf_log_aT``; the card's times are those at its reference temperature), see
+:func:`material_from_card`; :func:`make_material` takes the shift factor ``a_T`` itself.
 """
 from __future__ import annotations
 
@@ -30,10 +46,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from ..models.base import bulk_modulus
+from ..models.base import bulk_modulus, initial_shear_modulus
 from ..models.hyperelastic import (HYPERELASTIC_LAWS, INVARIANT_SIG, STRETCH_SIG, as_cfunc, lopez_pamies_dw_di1,
                                   mooney_rivlin_dw_di1, mooney_rivlin_dw_di2,
                                   neo_hookean_dw_di1, ogden_dw_dlambda, reduced_polynomial_dw_di1, zero_dw_di2)
+from ..records import MaterialCard
+from ..tts import wlf_log_aT
 from .kinematics import FASTMATH, left_cauchy_green, symmetric_eigen3, symmetric_square
 
 KIND_INVARIANT = 0
@@ -178,10 +196,13 @@ class Material:
     params : float64 parameter vector in the law's order (Pa, 1)
     bulk_modulus_pa : kappa of ``U = kappa/2 (J-1)^2`` (for SVK: lambda = kappa - 2 mu/3)
     density_kg_m3 : mass density
-    prony_g, prony_tau_s : QLV Prony weights (sum < 1) and relaxation times of the isochoric stress
+    prony_g : Prony weights (sum < 1) of the isochoric stress; with Pipkin-Rogers the small-strain weights
+        ``beta_i / (1 + sum beta)``
+    prony_tau_s : relaxation times at the simulation's temperature (the card's times times ``shift_factor``)
     shear_modulus_pa : instantaneous small-strain shear modulus (computed; sets the wave speed)
-    branch_law_key : beyond-QLV branch energy law (invariant law key) or None
-    branch_params : (n_terms, n_params) branch-law parameters, one row per relaxation time (empty: QLV)
+    pr_params : Pipkin-Rogers weight law, one row ``(beta_i, kappa_i, gamma_s^2)`` per Prony term (no rows: QLV)
+    shift_factor : time-temperature shift ``a_T`` the relaxation times were multiplied by (1: the card's reference
+        temperature)
     """
 
     law_key: str
@@ -192,8 +213,8 @@ class Material:
     prony_g: np.ndarray = field(default_factory=lambda: np.zeros(0))
     prony_tau_s: np.ndarray = field(default_factory=lambda: np.ones(0))
     shear_modulus_pa: float = float("nan")
-    branch_law_key: str | None = None
-    branch_params: np.ndarray = field(default_factory=lambda: np.zeros((0, 1)))
+    pr_params: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    shift_factor: float = 1.0
 
     @property
     def law(self) -> LawSpec:
@@ -206,13 +227,9 @@ class Material:
                 as_cfunc(law.dw_dlambda, STRETCH_SIG))
 
     @property
-    def branch_law(self) -> LawSpec:
-        """The beyond-QLV branch energy's law (a zero law when there are no branches)."""
-        return LawSpec("invariant", ()) if self.branch_law_key is None else available_laws()[self.branch_law_key]
-
-    def branch_function(self):
-        """C function pointer of the branch law's ``dW/dI1`` (a zero law when there are no branches)."""
-        return as_cfunc(self.branch_law.dw_di1, INVARIANT_SIG)
+    def pipkin_rogers(self) -> bool:
+        """True with strain-dependent (Pipkin-Rogers) Prony weights."""
+        return self.pr_params.shape[0] > 0
 
     @property
     def dilatational_modulus_pa(self) -> float:
@@ -235,11 +252,11 @@ def _invariant_independent_functions() -> set:
 def constant_invariant_derivatives(material: Material) -> tuple[float, float] | None:
     """``(dW/dI1, dW/dI2)`` (Pa) when the material's law is linear in the invariants (both derivatives
     constant: neo-Hookean, Mooney-Rivlin), evaluated once with the fitting code's law functions; None for
-    any other law, for stretch-based and SVK laws and with beyond-QLV branch energies.
+    any other law and for stretch-based and SVK laws.
 
     Such laws run on the vectorised kernels (:mod:`.vectorised`), which take the derivatives as constants.
     """
-    if material.kind not in (KIND_INVARIANT, KIND_INVARIANT_I1) or material.branch_params.shape[0] > 0:
+    if material.kind not in (KIND_INVARIANT, KIND_INVARIANT_I1):
         return None
     law = material.law
     constant = _invariant_independent_functions()
@@ -252,18 +269,18 @@ def constant_invariant_derivatives(material: Material) -> tuple[float, float] | 
 
 def make_material(law_key: str, parameters: Mapping[str, float] | np.ndarray, *,
                   bulk_modulus_pa: float | None = None, poisson_ratio: float | None = None,
-                  density_kg_m3: float = 1040.0, prony_g=(), prony_tau_s=(), branch_law: str | None = None,
-                  branch_parameters=None) -> Material:
+                  density_kg_m3: float = 1040.0, prony_g=(), prony_tau_s=(), pipkin_rogers: Mapping | None = None,
+                  shift_factor: float = 1.0) -> Material:
     """Build a :class:`Material`; give either ``bulk_modulus_pa`` or ``poisson_ratio``.
 
     ``kappa = models.base.bulk_modulus(mu, nu)`` = 2 mu (1 + nu) / (3 (1 - 2 nu)) with ``mu`` the instantaneous
     small-strain shear modulus (:func:`small_strain_shear_modulus`).
 
-    Beyond QLV (science.md 1.1 "3D/TLED", Holzapfel/Simo overstress with branch energies): give
-    ``branch_law`` (an invariant law whose ``dW/dI1`` is used, e.g. ``"reduced_polynomial2"`` for the
-    branch-specific RP2 ``R_i = 2 c_i1 gamma + 4 c_i2 gamma^3``) and ``branch_parameters``, one mapping per
-    relaxation time in ``prony_tau_s``; the main law is then the long-term (equilibrium) law and
-    ``prony_g`` must be empty.
+    Pipkin-Rogers (the nonseparable extension, module docstring): ``pipkin_rogers = {"beta": [...], "kappa": [...],
+    "gamma_s": ...}`` (a card's ``pipkin_rogers`` block, the fitted parameters unchanged), one ``beta_i``,
+    ``kappa_i`` per time in ``prony_tau_s``; ``prony_g`` is then the small-strain weights ``beta_i / (1 + sum beta)``
+    (computed when not given; given ones must agree). ``shift_factor``: the time-temperature shift ``a_T``
+    (the relaxation times run as ``a_T tau_i``; :func:`material_from_card` derives it from a temperature).
     """
     laws = available_laws()
     if law_key not in laws:
@@ -281,79 +298,119 @@ def make_material(law_key: str, parameters: Mapping[str, float] | np.ndarray, *,
         kind = KIND_INVARIANT_I1
     g = np.asarray(prony_g, float)
     tau = np.asarray(prony_tau_s, float)
-    if g.shape != tau.shape and not (branch_law is not None and g.size == 0):
+    if not (np.isfinite(shift_factor) and shift_factor > 0):
+        raise ValueError(f"the time-temperature shift factor must be positive, not {shift_factor}")
+    pr_params = np.zeros((0, 3))
+    if pipkin_rogers is not None:
+        beta = np.asarray(pipkin_rogers["beta"], float)
+        kappa = np.broadcast_to(np.asarray(pipkin_rogers["kappa"], float), beta.shape)
+        gamma_s = float(pipkin_rogers["gamma_s"])
+        if beta.shape != tau.shape or beta.size == 0:
+            raise ValueError(f"Pipkin-Rogers needs one beta and kappa per relaxation time: {beta.size} for {tau.size}")
+        if np.any(beta < 0) or np.any(kappa <= -1) or not gamma_s > 0:
+            raise ValueError("Pipkin-Rogers needs beta_i >= 0, kappa_i > -1 and gamma_s > 0")
+        small = beta / (1.0 + beta.sum())
+        if g.size and not np.allclose(g, small, rtol=1e-6, atol=1e-12):
+            raise ValueError(f"prony_g {g} are not the Pipkin-Rogers small-strain weights {small}")
+        g = small
+        pr_params = np.column_stack([beta, kappa, np.full(beta.size, gamma_s ** 2)])
+    if g.shape != tau.shape:
         raise ValueError("prony g and tau must have the same length")
     if g.size and (g.sum() >= 1.0 or np.any(g < 0) or np.any(tau <= 0)):
         raise ValueError("Prony weights must be >= 0 with sum < 1 and times > 0")
-    branch_params = np.zeros((0, 1))
-    if branch_law is not None:
-        if branch_law not in laws or laws[branch_law].kind != "invariant":
-            raise KeyError(f"branch law {branch_law!r} must be an invariant law; known: {', '.join(sorted(laws))}")
-        if g.size:
-            raise ValueError("with branch energies the Prony weights come from the branch laws: leave prony_g empty")
-        names = laws[branch_law].param_names
-        rows = list(branch_parameters or [])
-        if len(rows) != tau.size or tau.size == 0:
-            raise ValueError("give one branch parameter set per relaxation time in prony_tau_s")
-        branch_params = np.array([[float(r[n]) for n in names] for r in rows])
-        g = np.zeros(tau.size)
-    provisional = Material(law_key, kind, params, 1.0, density_kg_m3, g, tau, branch_law_key=branch_law,
-                           branch_params=branch_params)
+    provisional = Material(law_key, kind, params, 1.0, density_kg_m3, g, tau)
     mu = small_strain_shear_modulus(provisional)
-    if branch_law is not None:  # instantaneous modulus: equilibrium + every branch (2 W_i'(3))
-        dw = laws[branch_law].dw_di1
-        mu += sum(2.0 * dw(np.ascontiguousarray(row), 3.0, 3.0) for row in branch_params)
     if not mu > 0:
         raise ValueError(f"law {law_key!r} with parameters {params} has non-positive shear modulus {mu}")
     if (bulk_modulus_pa is None) == (poisson_ratio is None):
         raise ValueError("give exactly one of bulk_modulus_pa and poisson_ratio")
     if bulk_modulus_pa is None:
         bulk_modulus_pa = bulk_modulus(mu, poisson_ratio)
-    return Material(law_key, kind, params, float(bulk_modulus_pa), density_kg_m3, g, tau, float(mu), branch_law,
-                    branch_params)
+    return Material(law_key, kind, params, float(bulk_modulus_pa), density_kg_m3, g, tau * float(shift_factor),
+                    float(mu), pr_params, float(shift_factor))
 
 
-def material_from_card(card: Mapping) -> Material:
-    """Material from a card dict (SI units).
+def card_shift_factor(card: MaterialCard, temperature_c: float | None) -> float:
+    """The time-temperature shift ``a_T`` of a card at ``temperature_c`` (degC): 1 at None (the card's own state:
+    its relaxation times are those at its reference temperature), else from the card's ``time_temperature_shift``
+    (WLF, ``tts.wlf_log_aT``). Refused, with the reason: a temperature for a card without a shift function, outside
+    the temperatures the shift was fitted on, or with a vertical shift (the card gives no b_T(T))."""
+    if temperature_c is None:
+        return 1.0
+    shift = card.time_temperature_shift
+    if not shift or shift.get("shift_function") != "WLF" or not shift.get("wlf"):
+        raise ValueError(f"card {card.model}: a temperature ({temperature_c} degC) needs the card's "
+                         "time_temperature_shift with a WLF function; this card has none (not fitted to a mastercurve, "
+                         "or its WLF fit failed)")
+    if shift.get("vertical_shift"):
+        raise ValueError(f"card {card.model}: its shift has a vertical factor b_T the card does not give as a function "
+                         "of temperature; only the reference temperature can be run")
+    span = (shift.get("valid_range") or {}).get("temperature_c")
+    if span is None or not span[0] <= temperature_c <= span[1]:
+        raise ValueError(f"card {card.model}: {temperature_c} degC is outside the temperatures its shift was fitted on "
+                         f"({span} degC)")
+    wlf = shift["wlf"]
+    return float(10.0 ** wlf_log_aT(float(temperature_c), float(wlf["c1"]), float(wlf["c2_k"]),
+                                    float(shift["t_ref_c"])))
 
-    Accepted: the minimal shape ``{"model": law key, "parameters": {...}, "prony": {"g", "tau"} | None,
-    "bulk_modulus" | "poisson_ratio", "density"?}`` and the full ``tissuemech.cards`` card, whose
-    ``"elastic_law"``/``"elastic_parameters"`` (the instantaneous hyperelastic law of a QLV or linear
-    viscoelastic fit) take precedence over ``"model"``/``"parameters"``. A finite ``bulk_modulus`` wins over
-    ``poisson_ratio`` when both are given (the cards write both, consistently). Beyond-QLV branch energies:
-    ``"branches": {"law": invariant law key, "parameters": [{...} per term], "tau": [...]}`` (then the main
-    law is the equilibrium law and ``"prony"`` must be absent).
+
+def material_from_card(card: Mapping | MaterialCard, *, temperature_c: float | None = None,
+                       shift_factor: float | None = None) -> Material:
+    """The solver material of a card, read through ``records.MaterialCard`` (a dict is validated by it first).
+
+    Accepted: the ``tissuemech.cards`` card -- ``elastic_law``/``elastic_parameters`` (a linear shear law as
+    neo-Hookean, ``MaterialCard.fem_law``), ``prony``, ``pipkin_rogers`` (the nonseparable extension, the fitted
+    parameters unchanged), ``bulk_modulus`` and/or ``poisson_ratio`` (a finite ``bulk_modulus`` wins; the cards write
+    both, consistently), optional ``density`` -- and the minimal shape ``{"model": law key, "parameters": {...},
+    "prony": {"g", "tau"} | None, "bulk_modulus" | "poisson_ratio"}``.
+
+    Temperature: ``temperature_c`` (degC) runs the card at that temperature through its time-temperature shift
+    (:func:`card_shift_factor`: relaxation times ``a_T tau_i``), or ``shift_factor`` gives ``a_T`` directly; neither:
+    the card's reference temperature.
     """
-    if card.get("elastic_law"):
-        law_key, params = card["elastic_law"], card.get("elastic_parameters") or {}
-    else:
-        law_key, params = card["model"], card["parameters"]
-    prony = card.get("prony") or {}
-    bulk = card.get("bulk_modulus")
-    nu = card.get("poisson_ratio")
+    card = card if isinstance(card, MaterialCard) else MaterialCard.from_dict(dict(card))
+    if temperature_c is not None and shift_factor is not None:
+        raise ValueError("give a temperature or a shift factor, not both")
+    a_t = card_shift_factor(card, temperature_c) if shift_factor is None else float(shift_factor)
+    prony = card.prony or {}
+    bulk, nu = card.bulk_modulus, card.poisson_ratio
     if bulk is not None and np.isfinite(float(bulk)):
         nu = None
     else:
         bulk = None
-    branches = card.get("branches") or {}
-    if branches and prony:
-        raise ValueError("a card has either 'prony' (QLV) or 'branches' (beyond QLV), not both")
     return make_material(
-        law_key, params, bulk_modulus_pa=None if bulk is None else float(bulk),
-        poisson_ratio=None if nu is None else float(nu), density_kg_m3=float(card.get("density", 1040.0)),
-        prony_g=prony.get("g", ()), prony_tau_s=branches.get("tau", prony.get("tau", ())),
-        branch_law=branches.get("law"), branch_parameters=branches.get("parameters"))
+        card.fem_law, card.fem_parameters, bulk_modulus_pa=None if bulk is None else float(bulk),
+        poisson_ratio=None if nu is None else float(nu), density_kg_m3=float(card.data.get("density", 1040.0)),
+        prony_g=prony.get("g", ()), prony_tau_s=prony.get("tau", ()), pipkin_rogers=card.pipkin_rogers,
+        shift_factor=a_t)
+
+
+class _SimpleShearOfMaterial:
+    """A :class:`Material`'s simple-shear Cauchy stress as an elastic shear law, so that the one initial-modulus rule
+    (``models.base.initial_shear_modulus``) differentiates the FEM's own stress routine on its compiled law vector."""
+
+    def __init__(self, material: Material):
+        self.material = material
+
+    @staticmethod
+    def supports(response: str) -> bool:
+        return response == "elastic_shear"
+
+    def elastic_shear_stress(self, p, strain):
+        out = []
+        for gamma in np.atleast_1d(np.asarray(strain, float)):
+            F = np.eye(3)
+            F[0, 1] = gamma
+            out.append(cauchy_stress(self.material, F)[0, 1])
+        return np.array(out)
 
 
 def small_strain_shear_modulus(material: Material) -> float:
-    """Initial shear modulus (Pa) of a FEM :class:`Material`: the simple-shear Cauchy stress at gamma = 1e-6 divided
-    by gamma. The FEM's own stress routine on its compiled law vector, not ``models.base.initial_shear_modulus`` (which
-    differentiates a fitted model's ``elastic_shear_stress``): a material has no model object."""
-    gamma = 1e-6
-    F = np.eye(3)
-    F[0, 1] = gamma
-    sigma = cauchy_stress(material, F)
-    return float(sigma[0, 1] / gamma)
+    """Instantaneous small-strain shear modulus (Pa) of a FEM :class:`Material`: ``models.base.initial_shear_modulus``
+    (the one rule: central difference of the simple-shear stress) of the FEM's own stress routine on its compiled law
+    vector (:func:`cauchy_stress`; a material has no model object). With Prony terms (QLV or Pipkin-Rogers) this is
+    the instantaneous modulus: the weights sum to 1 at t = 0."""
+    return float(initial_shear_modulus(_SimpleShearOfMaterial(material), {}))
 
 
 # --------------------------------------------------------------------------------------------------

@@ -458,9 +458,11 @@ def vectorised_law(material: Material) -> tuple[bool, bool, float, float] | None
     """``(svk, constant, dW/dI1, dW/dI2)`` when the vectorised kernels (:mod:`.vectorised`) can run this
     material: Saint Venant-Kirchhoff, or any invariant law ``W(I1bar, I2bar)`` (``constant`` with its
     derivatives for laws linear in the invariants, else the law functions are evaluated per element), with
-    or without up to four QLV Prony terms. None for stretch-based laws (Ogden: spectral decomposition),
-    beyond-QLV branch energies and more Prony terms (the generic kernel runs those)."""
-    if material.branch_params.shape[0] > 0 or material.prony_g.size > vectorised.MAX_PRONY_TERMS:
+    or without up to four QLV or Pipkin-Rogers Prony terms. None for stretch-based laws (Ogden: spectral
+    decomposition) and more Prony terms (the generic kernel runs those)."""
+    if material.prony_g.size > vectorised.MAX_PRONY_TERMS:
+        return None
+    if material.pipkin_rogers and material.kind == KIND_SVK:
         return None
     if material.kind == KIND_SVK:
         return True, True, 0.0, 0.0
@@ -482,10 +484,11 @@ def _fused_law(model: TLEDModel, kernel: str) -> tuple[bool, bool, float, float]
     if kernel != "fused":
         return None
     law = vectorised_law(model.material)
-    if law is None or law[0]:
-        raise ValueError(f"the fused kernel needs an invariant law with at most {vectorised.MAX_PRONY_TERMS} Prony "
-                         f"terms and no branch energies; {model.material.law_key!r} "
-                         f"({model.material.prony_g.size} terms) runs on the vectorised or generic kernel")
+    if law is None or law[0] or model.material.pipkin_rogers:
+        raise ValueError(f"the fused kernel needs an invariant law with at most {vectorised.MAX_PRONY_TERMS} QLV Prony "
+                         f"terms; {model.material.law_key!r} ({model.material.prony_g.size} terms"
+                         f"{', Pipkin-Rogers' if model.material.pipkin_rogers else ''}) runs on the vectorised or "
+                         f"generic kernel")
     return law
 
 
@@ -496,13 +499,13 @@ def _fused_parts(threads: int | None) -> int:
         return numba.get_num_threads()
 
 
-def _vector_setup(model: TLEDModel, kernel: str, h_state, s_prev):
+def _vector_setup(model: TLEDModel, kernel: str, h_state, s_prev, w_prev):
     """The ``vec`` argument of the compiled loops and the force buffers of the generic kernel.
 
     ``kernel``: ``"auto"`` (vectorised when :func:`vectorised_law` allows it, except float64 meshes above
     :data:`AUTO_VECTORISED_MAX_FLOAT64_ELEMENTS`), ``"vectorised"`` (required) or ``"generic"``. The
-    vectorised workspace holds the QLV states in structure-of-arrays form (copied from ``h_state``/``s_prev``;
-    :func:`_vector_state_back` copies them back). A disabled workspace has the same
+    vectorised workspace holds the QLV / Pipkin-Rogers states in structure-of-arrays form (copied from
+    ``h_state``/``s_prev``/``w_prev``; :func:`_vector_state_back` copies them back). A disabled workspace has the same
     types with zero sizes, so one compiled loop serves both kernels.
     """
     if kernel not in KERNELS:
@@ -513,7 +516,7 @@ def _vector_setup(model: TLEDModel, kernel: str, h_state, s_prev):
         law = None
     if kernel == "vectorised" and law is None:
         raise ValueError(f"the vectorised kernel needs Saint Venant-Kirchhoff or an invariant law with at most "
-                         f"{vectorised.MAX_PRONY_TERMS} Prony terms and no branch energies; "
+                         f"{vectorised.MAX_PRONY_TERMS} Prony terms; "
                          f"{model.material.law_key!r} ({model.material.prony_g.size} terms) runs on the generic "
                          f"kernel")
     enabled = law is not None
@@ -532,18 +535,21 @@ def _vector_setup(model: TLEDModel, kernel: str, h_state, s_prev):
         sprev = np.ascontiguousarray(s_prev.T)
         hstate = np.zeros((nt, 6, ne), dt)
         hstate[:h_state.shape[1]] = h_state.transpose(1, 2, 0)
+        wprev = np.zeros((nt if model.material.pipkin_rogers else 0, ne), dt)
+        if wprev.shape[0]:
+            wprev[:w_prev.shape[1]] = w_prev.T
     else:
         node_ptr, inc_elem, inc_slot = np.zeros(1, np.uint32), np.zeros(0, np.uint32), np.zeros(0, np.uint32)
         conn, d9, inv_vnode = np.zeros((4, 0), np.uint32), np.zeros((9, 0), dt), np.zeros(0)
         elo, nlo = np.zeros(1, np.uint64), np.zeros(1, np.uint64)
-        sprev, hstate = np.zeros((6, 0), dt), np.zeros((0, 6, 0), dt)
+        sprev, hstate, wprev = np.zeros((6, 0), dt), np.zeros((0, 6, 0), dt), np.zeros((0, 0), dt)
     ws = (conn, d9, model.vol0 if enabled else np.zeros(0, dt), node_ptr, inc_elem, inc_slot, inv_vnode, elo, nlo,
           np.zeros((9, ne), dt), np.zeros(ne, dt), np.zeros(nn), np.zeros((12, ne), dt),
           np.zeros(nchunk, np.int64), np.zeros(nchunk, np.int64), sprev, hstate, np.zeros(ne),
           np.zeros((6, ne if nt else 0), dt))
     svk, constant, w1, w2 = law if enabled else (False, True, 0.0, 0.0)
     # per-element law derivatives: filled once for a constant-derivative law, else by the law pass
-    ws = ws + (np.full(ne, w1), np.full(ne, w2))
+    ws = ws + (np.full(ne, w1), np.full(ne, w2), wprev)
     vec = (enabled, ws, svk, constant, float(w1), float(w2))
     nbuf = 0 if enabled else nchunk
     fbuf = np.zeros((nbuf, model.kernel_mesh.n_nodes, 3), model.dtype)
@@ -551,12 +557,15 @@ def _vector_setup(model: TLEDModel, kernel: str, h_state, s_prev):
     return vec, fbuf, pbuf
 
 
-def _vector_state_back(vec, h_state, s_prev):
-    """Copy the QLV states of a vectorised run back into the generic ``(n_el, n_terms, 6)``/``(n_el, 6)`` arrays."""
+def _vector_state_back(vec, h_state, s_prev, w_prev):
+    """Copy the QLV / Pipkin-Rogers states of a vectorised run back into the generic ``(n_el, n_terms, 6)``,
+    ``(n_el, 6)`` and ``(n_el, n_terms)`` arrays."""
     if vec[0] and h_state.shape[1] > 0:
         ws = vec[1]
         s_prev[:] = ws[15].T
         h_state[:] = ws[16][:h_state.shape[1]].transpose(2, 0, 1)
+        if ws[21].shape[0]:
+            w_prev[:] = ws[21][:w_prev.shape[1]].T
 
 
 @contextmanager
@@ -638,8 +647,8 @@ def _kernel_arguments(model: TLEDModel) -> tuple[KernelMesh, KernelMaterial, Ker
     """The model's arrays grouped as the compiled loops take them."""
     m = model.material
     mesh = KernelMesh(model.kernel_mesh.nodes, model.kernel_mesh.elements, model.dndx, model.vol0, model.chunk_lo, model.vnode)
-    mat = KernelMaterial(m.kind, m.params, m.bulk_modulus_pa, model.use_anp, m.prony_g, m.prony_tau_s, m.branch_params)
-    laws = KernelLaws(*m.functions(), m.branch_function())
+    mat = KernelMaterial(m.kind, m.params, m.bulk_modulus_pa, model.use_anp, m.prony_g, m.prony_tau_s, m.pr_params)
+    laws = KernelLaws(*m.functions())
     loads = KernelLoads(model.bc_nodes, model.bc_group, model.bc_mask, model.bc_dir, model.bc_rotate, model.rot_center,
                         max(1, len(model.groups)), model.free, model.hist_time, model.hist_vals, model.fext_ref,
                         model.contact_kind, model.cparams, model.contact_nodes)
@@ -691,10 +700,10 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
             fused.fused_state_back(fz, layout, h_state, s_prev)
             ran = "fused"
         else:
-            vec, fbuf, pbuf = _vector_setup(model, kernel, h_state, s_prev)
+            vec, fbuf, pbuf = _vector_setup(model, kernel, h_state, s_prev, w_prev)
             res = explicit_loop(*_kernel_arguments(model), model.mass, h_state, s_prev, w_prev, dt, n_steps,
                                 damping_1_s, out_every, u, u_old, fbuf, pbuf, bool(track_energy), vec)
-            _vector_state_back(vec, h_state, s_prev)
+            _vector_state_back(vec, h_state, s_prev, w_prev)
             ran = "vectorised" if vec[0] else "generic"
     status, bad, step, u, u_old, t, force, torque, cforce, ke, energy = res
     _check_status(model, status, bad, f"step {step}", step * dt)
@@ -728,11 +737,11 @@ def solve_quasistatic(model: TLEDModel, times_s, *, tol_m: float | None = None, 
         np.array(model.to_kernel_nodes(u0_m), dtype=model.dtype)
     h_state, s_prev, w_prev = initial_states(model, state)
     # dynamic relaxation has no fused loop: "fused" runs the vectorised passes
-    vec, fbuf, pbuf = _vector_setup(model, "vectorised" if kernel == "fused" else kernel, h_state, s_prev)
+    vec, fbuf, pbuf = _vector_setup(model, "vectorised" if kernel == "fused" else kernel, h_state, s_prev, w_prev)
     with numba_threads(resolve_threads(model, n_threads)):
         res = dynamic_relaxation_loop(*_kernel_arguments(model), model.dr_mass, h_state, s_prev, w_prev, times, tol,
                                       min_iter, max_iter, u, fbuf, pbuf, vec)
-    _vector_state_back(vec, h_state, s_prev)
+    _vector_state_back(vec, h_state, s_prev, w_prev)
     status, bad, k, u, iters, force, torque, cforce = res
     if status == STATUS_NOT_CONVERGED:
         raise DynamicRelaxationError(f"dynamic relaxation did not converge in {max_iter} iterations at "

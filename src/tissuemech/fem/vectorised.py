@@ -1,8 +1,9 @@
 """Internal forces of linear tets in a structure-of-arrays layout that LLVM vectorises across elements.
 
 The CPU fast path of :mod:`.tled` for Saint Venant-Kirchhoff and every invariant law ``W(I1bar, I2bar)``,
-alone or as the instantaneous law of QLV with up to four Prony terms (stretch-based laws and beyond-QLV
-branch energies stay on the generic kernel). It computes what the generic per-element kernel computes (the
+alone or as the instantaneous law of QLV or of Pipkin-Rogers (strain-dependent weights) with up to four Prony terms
+(stretch-based laws and more terms stay on the generic kernel). It computes what the generic per-element kernel
+computes (the
 same formulas: ``F``, average nodal pressure, isochoric Kirchhoff stress, the recursive Prony update of the
 isochoric 2nd Piola-Kirchhoff stress, ``f_a = V0 tau (cof dN_a) / J``), in passes:
 
@@ -13,7 +14,8 @@ isochoric 2nd Piola-Kirchhoff stress, ``f_a = V0 tau (cof dN_a) / J``), in passe
    fitting code's ``dW/dI1``, ``dW/dI2`` at every element (function pointers: this loop is scalar);
 3. :func:`nodal_pressure_pass` (nodes): volume-weighted average of the element pressures (ANP);
 4. :func:`invariant_force_pass` (elements): stress and the 12 element nodal forces, or for QLV
-   :func:`qlv_stress_pass` (relaxed stress, advances the element states) and :func:`pk2_force_pass`;
+   :func:`qlv_stress_pass` (Pipkin-Rogers: :func:`pipkin_rogers_stress_pass`; relaxed stress, advances the element
+   states) and :func:`pk2_force_pass`;
 5. :func:`gather_nodal_forces` (nodes; or the caller's node pass through :func:`node_force`): every node
    sums its incident element forces through a CSR incidence list (no scatter, no atomics, no per-thread
    force buffers).
@@ -42,6 +44,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from ..models.beyond_qlv import pipkin_rogers_ratio, pipkin_rogers_strain_fraction
 from .kinematics import FASTMATH, cofactor, determinant, left_cauchy_green, pull_back, push_forward
 from .materials import isochoric_kirchhoff_invariant, j_minus_two_thirds, svk_kirchhoff
 
@@ -373,6 +376,86 @@ def qlv_stress_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a,
             s3a[e], s4a[e], s5a[e] = s3 + x3, s4 + x4, s5 + x5
 
 
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def pipkin_rogers_update(decay, fac, wnew, wold, h0, h1, h2, h3, h4, h5, se0, se1, se2, se3, se4, se5,
+                         sp0, sp1, sp2, sp3, sp4, sp5):
+    """One term of the Pipkin-Rogers update: :func:`prony_update` with gain ``(1 - decay)/(dt/tau)`` driven by the
+    increment ``g_i(x_n+1) S_e,n+1 - g_i(x_n) S_e,n`` of the branch stress (weights ``wnew``, ``wold``)."""
+    return prony_update(decay, fac, h0, h1, h2, h3, h4, h5, wnew * se0 - wold * sp0, wnew * se1 - wold * sp1,
+                        wnew * se2 - wold * sp2, wnew * se3 - wold * sp3, wnew * se4 - wold * sp4,
+                        wnew * se5 - wold * sp5)
+
+
+@njit(**_PASS)
+def pipkin_rogers_stress_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a, w1a, w2a, commit,
+                              sp0, sp1, sp2, sp3, sp4, sp5, decay, fac, beta, kappa, gamma_s2, wpa, wpb, wpc, wpd,
+                              ha0, ha1, ha2, ha3, ha4, ha5, hb0, hb1, hb2, hb3, hb4, hb5,
+                              hc0, hc1, hc2, hc3, hc4, hc5, hd0, hd1, hd2, hd3, hd4, hd5,
+                              s0a, s1a, s2a, s3a, s4a, s5a, lo):
+    """Pipkin-Rogers with up to four Prony terms (the generic kernel's formulas, ``_kernels._element_force_pass``):
+    the weights at ``x = I1bar - 3`` by the fitting code's weight law (``models.beyond_qlv``:
+    ``pipkin_rogers_strain_fraction``, ``pipkin_rogers_ratio``; rows ``beta``, ``kappa``, one ``gamma_s^2``),
+    ``S = g_inf(x) S_e + sum_i h_i`` with every term driven by the increment of ``g_i(x) S_e`` (previous weights in
+    ``wpa``...``wpd``, previous ``S_e`` in ``sp``; unused terms have ``beta = decay = fac = 0``). States written only
+    when ``commit``; the layout and vectorisation notes of :func:`qlv_stress_pass` apply."""
+    da, db, dc, dd = decay[0], decay[1], decay[2], decay[3]
+    fa, fb, fc, fd = fac[0], fac[1], fac[2], fac[3]
+    ba, bb, bc, bd = beta[0], beta[1], beta[2], beta[3]
+    ka, kb, kc, kd = kappa[0], kappa[1], kappa[2], kappa[3]
+    for c in prange(lo.size - 1):
+        for e in range(lo[c], lo[c + 1]):
+            f11, f12, f13 = 1.0 + f11a[e], f12a[e], f13a[e]
+            f21, f22, f23 = f21a[e], 1.0 + f22a[e], f23a[e]
+            f31, f32, f33 = f31a[e], f32a[e], 1.0 + f33a[e]
+            c11, c12, c13, c21, c22, c23, c31, c32, c33, J = cofactor(f11, f12, f13, f21, f22, f23, f31, f32, f33)
+            se0, se1, se2, se3, se4, se5 = isochoric_pk2(w1a[e], w2a[e], jm23a[e], f11, f12, f13, f21, f22, f23,
+                                                          f31, f32, f33, c11, c12, c13, c21, c22, c23, c31, c32,
+                                                          c33, J)
+            trb = (f11 * f11 + f12 * f12 + f13 * f13 + f21 * f21 + f22 * f22 + f23 * f23
+                   + f31 * f31 + f32 * f32 + f33 * f33)
+            sfrac = pipkin_rogers_strain_fraction(jm23a[e] * trb - 3.0, gamma_s2)
+            ra = pipkin_rogers_ratio(ba, ka, sfrac)
+            rb = pipkin_rogers_ratio(bb, kb, sfrac)
+            rc = pipkin_rogers_ratio(bc, kc, sfrac)
+            rd = pipkin_rogers_ratio(bd, kd, sfrac)
+            winf = 1.0 / (1.0 + ra + rb + rc + rd)
+            wa, wb, wc, wd = ra * winf, rb * winf, rc * winf, rd * winf
+            p0, p1, p2, p3, p4, p5 = sp0[e], sp1[e], sp2[e], sp3[e], sp4[e], sp5[e]
+            # selects, not branches, so that the loop stays vectorisable
+            sp0[e] = se0 if commit else p0
+            sp1[e] = se1 if commit else p1
+            sp2[e] = se2 if commit else p2
+            sp3[e] = se3 if commit else p3
+            sp4[e] = se4 if commit else p4
+            sp5[e] = se5 if commit else p5
+            s0, s1, s2, s3, s4, s5 = winf * se0, winf * se1, winf * se2, winf * se3, winf * se4, winf * se5
+            x0, x1, x2, x3, x4, x5 = pipkin_rogers_update(da, fa, wa, wpa[e], ha0[e], ha1[e], ha2[e], ha3[e], ha4[e],
+                                                          ha5[e], se0, se1, se2, se3, se4, se5, p0, p1, p2, p3, p4, p5)
+            ha0[e], ha1[e], ha2[e] = (x0 if commit else ha0[e]), (x1 if commit else ha1[e]), (x2 if commit else ha2[e])
+            ha3[e], ha4[e], ha5[e] = (x3 if commit else ha3[e]), (x4 if commit else ha4[e]), (x5 if commit else ha5[e])
+            wpa[e] = wa if commit else wpa[e]
+            s0, s1, s2, s3, s4, s5 = s0 + x0, s1 + x1, s2 + x2, s3 + x3, s4 + x4, s5 + x5
+            x0, x1, x2, x3, x4, x5 = pipkin_rogers_update(db, fb, wb, wpb[e], hb0[e], hb1[e], hb2[e], hb3[e], hb4[e],
+                                                          hb5[e], se0, se1, se2, se3, se4, se5, p0, p1, p2, p3, p4, p5)
+            hb0[e], hb1[e], hb2[e] = (x0 if commit else hb0[e]), (x1 if commit else hb1[e]), (x2 if commit else hb2[e])
+            hb3[e], hb4[e], hb5[e] = (x3 if commit else hb3[e]), (x4 if commit else hb4[e]), (x5 if commit else hb5[e])
+            wpb[e] = wb if commit else wpb[e]
+            s0, s1, s2, s3, s4, s5 = s0 + x0, s1 + x1, s2 + x2, s3 + x3, s4 + x4, s5 + x5
+            x0, x1, x2, x3, x4, x5 = pipkin_rogers_update(dc, fc, wc, wpc[e], hc0[e], hc1[e], hc2[e], hc3[e], hc4[e],
+                                                          hc5[e], se0, se1, se2, se3, se4, se5, p0, p1, p2, p3, p4, p5)
+            hc0[e], hc1[e], hc2[e] = (x0 if commit else hc0[e]), (x1 if commit else hc1[e]), (x2 if commit else hc2[e])
+            hc3[e], hc4[e], hc5[e] = (x3 if commit else hc3[e]), (x4 if commit else hc4[e]), (x5 if commit else hc5[e])
+            wpc[e] = wc if commit else wpc[e]
+            s0, s1, s2, s3, s4, s5 = s0 + x0, s1 + x1, s2 + x2, s3 + x3, s4 + x4, s5 + x5
+            x0, x1, x2, x3, x4, x5 = pipkin_rogers_update(dd, fd, wd, wpd[e], hd0[e], hd1[e], hd2[e], hd3[e], hd4[e],
+                                                          hd5[e], se0, se1, se2, se3, se4, se5, p0, p1, p2, p3, p4, p5)
+            hd0[e], hd1[e], hd2[e] = (x0 if commit else hd0[e]), (x1 if commit else hd1[e]), (x2 if commit else hd2[e])
+            hd3[e], hd4[e], hd5[e] = (x3 if commit else hd3[e]), (x4 if commit else hd4[e]), (x5 if commit else hd5[e])
+            wpd[e] = wd if commit else wpd[e]
+            s0a[e], s1a[e], s2a[e] = s0 + x0, s1 + x1, s2 + x2
+            s3a[e], s4a[e], s5a[e] = s3 + x3, s4 + x4, s5 + x5
+
+
 @njit(**_PASS)
 def pk2_force_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, s0a, s1a, s2a, s3a, s4a, s5a, conn, d9, vol0,
                    p_node, kappa, anp_weight, fe0, fe1, fe2, fe3, fe4, fe5, fe6, fe7, fe8, fe9, fe10, fe11, lo):
@@ -532,7 +615,7 @@ def first_inverted_element(grad_u, lo):
 
 @njit(cache=True)
 def internal_forces(u, ws, svk, constant, w1, w2, w1fn, w2fn, params, i2_dependent, kappa, use_anp, prony_g, prony_e,
-                    prony_f, commit, fint, gather):
+                    prony_f, pr_params, commit, fint, gather):
     """Internal nodal forces ``fint`` (N) of the displacement ``u`` (m) through the passes above.
 
     ``ws`` is the workspace tuple of ``tissuemech.fem.tled._vector_setup``. The law: Saint Venant-Kirchhoff
@@ -540,12 +623,13 @@ def internal_forces(u, ws, svk, constant, w1, w2, w1fn, w2fn, params, i2_depende
     Mooney-Rivlin; the workspace arrays hold them) or the law functions ``w1fn``, ``w2fn`` of ``params``
     evaluated per element by :func:`invariant_law_pass`. Without average nodal pressure and viscoelastic
     states a constant-derivative law (and SVK) runs in one fused element pass; otherwise kinematics, nodal
-    pressure and stress passes. QLV (``prony_g.size > 0``) advances the states in ``ws`` (committed only
-    when ``commit``). Without ``gather`` the element forces stay in ``ws`` (the caller's node pass gathers
-    them into ``fint``). Returns the first inverted element or -1.
+    pressure and stress passes. QLV (``prony_g.size > 0``) and Pipkin-Rogers (``pr_params`` rows ``(beta_i, kappa_i,
+    gamma_s^2)``, :func:`pipkin_rogers_stress_pass`) advance the states in ``ws`` (committed only when ``commit``).
+    Without ``gather`` the element forces stay in ``ws`` (the caller's node pass gathers them into ``fint``).
+    Returns the first inverted element or -1.
     """
     (conn, d9, vol0, node_ptr, inc_elem, inc_slot, inv_vnode, elo, nlo, grad_u, pe, p_node, fe, n_bad, n_far,
-     sprev, hstate, jm23a, s_relaxed, w1a, w2a) = ws
+     sprev, hstate, jm23a, s_relaxed, w1a, w2a, wprev) = ws
     mu = params[0]
     if svk or (constant and not use_anp and prony_g.size == 0):
         element_force_pass(u, conn, d9, vol0, svk, w1, w2, mu, kappa, n_bad, fe[0], fe[1], fe[2], fe[3], fe[4],
@@ -576,13 +660,28 @@ def internal_forces(u, ws, svk, constant, w1, w2, w1fn, w2fn, params, i2_depende
         decay = np.zeros(MAX_PRONY_TERMS)
         gain = np.zeros(MAX_PRONY_TERMS)
         decay[:nterm] = prony_e
-        gain[:nterm] = prony_g * prony_f
         ha, hb, hc, hd = hstate[0], hstate[1], hstate[2], hstate[3]
-        qlv_stress_pass(g0, g1, g2, g3, g4, g5, g6, g7, g8, jm23a, w1a, w2a, 1.0 - prony_g.sum(), commit,
-                        sprev[0], sprev[1], sprev[2], sprev[3], sprev[4], sprev[5], decay, gain,
-                        ha[0], ha[1], ha[2], ha[3], ha[4], ha[5], hb[0], hb[1], hb[2], hb[3], hb[4], hb[5],
-                        hc[0], hc[1], hc[2], hc[3], hc[4], hc[5], hd[0], hd[1], hd[2], hd[3], hd[4], hd[5],
-                        s_relaxed[0], s_relaxed[1], s_relaxed[2], s_relaxed[3], s_relaxed[4], s_relaxed[5], elo)
+        if pr_params.shape[0] > 0:
+            gain[:nterm] = prony_f
+            beta = np.zeros(MAX_PRONY_TERMS)
+            kap = np.zeros(MAX_PRONY_TERMS)
+            beta[:nterm] = pr_params[:, 0]
+            kap[:nterm] = pr_params[:, 1]
+            pipkin_rogers_stress_pass(g0, g1, g2, g3, g4, g5, g6, g7, g8, jm23a, w1a, w2a, commit,
+                                      sprev[0], sprev[1], sprev[2], sprev[3], sprev[4], sprev[5], decay, gain, beta,
+                                      kap, pr_params[0, 2], wprev[0], wprev[1], wprev[2], wprev[3],
+                                      ha[0], ha[1], ha[2], ha[3], ha[4], ha[5], hb[0], hb[1], hb[2], hb[3], hb[4],
+                                      hb[5], hc[0], hc[1], hc[2], hc[3], hc[4], hc[5], hd[0], hd[1], hd[2], hd[3],
+                                      hd[4], hd[5],
+                                      s_relaxed[0], s_relaxed[1], s_relaxed[2], s_relaxed[3], s_relaxed[4],
+                                      s_relaxed[5], elo)
+        else:
+            gain[:nterm] = prony_g * prony_f
+            qlv_stress_pass(g0, g1, g2, g3, g4, g5, g6, g7, g8, jm23a, w1a, w2a, 1.0 - prony_g.sum(), commit,
+                            sprev[0], sprev[1], sprev[2], sprev[3], sprev[4], sprev[5], decay, gain,
+                            ha[0], ha[1], ha[2], ha[3], ha[4], ha[5], hb[0], hb[1], hb[2], hb[3], hb[4], hb[5],
+                            hc[0], hc[1], hc[2], hc[3], hc[4], hc[5], hd[0], hd[1], hd[2], hd[3], hd[4], hd[5],
+                            s_relaxed[0], s_relaxed[1], s_relaxed[2], s_relaxed[3], s_relaxed[4], s_relaxed[5], elo)
         pk2_force_pass(g0, g1, g2, g3, g4, g5, g6, g7, g8, s_relaxed[0], s_relaxed[1], s_relaxed[2], s_relaxed[3],
                        s_relaxed[4], s_relaxed[5], conn, d9, vol0, p_node, kappa, anp_weight, fe[0], fe[1], fe[2],
                        fe[3], fe[4], fe[5], fe[6], fe[7], fe[8], fe[9], fe[10], fe[11], elo)

@@ -154,7 +154,11 @@ SLOPE_STEP = 1e-6
 
 
 def initial_shear_modulus(model: ConstitutiveModel, p: Params, step: float = SLOPE_STEP) -> float:
-    r"""Initial (small-strain) shear modulus of an elastic shear law, Pa.
+    r"""Initial (small-strain, instantaneous) shear modulus of a model, Pa: the one rule, used by the cards, the
+    uncertainty stages (``uq.reference_shear_modulus``), the model families and the FEM (``fem.materials``).
+
+    For a model with an elastic shear law (``elastic_shear`` response: hyperelastic laws, the instantaneous law of
+    QLV and beyond-QLV models, a FEM material's simple-shear stress):
 
     .. math:: \mu_0 = \left.\frac{d\sigma_e}{d\gamma}\right|_{\gamma=0}
               \approx \frac{\sigma_e(h) - \sigma_e(-h)}{2h}
@@ -162,17 +166,27 @@ def initial_shear_modulus(model: ConstitutiveModel, p: Params, step: float = SLO
     a central difference of :meth:`ConstitutiveModel.elastic_shear_stress` with step :math:`h` (``step``);
     for an isotropic law :math:`\sigma_e` is odd in :math:`\gamma`, so the error is :math:`O(h^2)`. A law whose
     tangent grows without bound as :math:`\gamma \to 0` gives a step-dependent value (``cards.make_card``
-    detects that by comparing two steps).
+    detects that by comparing two steps). A linear viscoelastic model without an elastic law: its relaxation
+    modulus at :math:`t = 0` (``relaxation_modulus``; :math:`G_\infty + \sum G_i` of a Prony series). NaN where
+    neither gives a finite value (a fluid, a springpot).
 
     Parameters
     ----------
-    model : an elastic shear law (``elastic_shear`` response)
+    model : a model (``elastic_shear`` response, or a ``relaxation_modulus(p, time_s)`` method)
     p : its parameters
     step : the shear-strain step :math:`h`
     """
-    strain = np.array([-step, step])
-    s = np.asarray(model.elastic_shear_stress(p, strain), float).reshape(strain.shape)
-    return float((s[1] - s[0]) / (2.0 * step))
+    if model.supports("elastic_shear"):
+        strain = np.array([-step, step])
+        s = np.asarray(model.elastic_shear_stress(p, strain), float).reshape(strain.shape)
+        return float((s[1] - s[0]) / (2.0 * step))
+    relaxation_modulus = getattr(model, "relaxation_modulus", None)
+    if relaxation_modulus is not None:
+        with np.errstate(all="ignore"):
+            g0 = float(np.asarray(relaxation_modulus(p, np.array([0.0])), float).ravel()[0])
+        if np.isfinite(g0):
+            return g0
+    return float("nan")
 
 
 def bulk_modulus(mu: float, nu: float) -> float:

@@ -32,7 +32,7 @@ from .qlv import (available_instantaneous_tags, check_param_names, default_taus,
 from .recursion import history_starts, prony_branch_sum_batch, relaxation_factors
 
 __all__ = ["PipkinRogersModel", "SchaperyModel", "MaxwellBranchModel", "StrainRelaxingBranchModel", "MODELS",
-           "ogden_shear_stress"]
+           "ogden_shear_stress", "pipkin_rogers_strain_fraction", "pipkin_rogers_ratio"]
 
 
 def _prony_params(model, p: Params) -> tuple[np.ndarray, np.ndarray]:
@@ -44,13 +44,32 @@ def _prony_params(model, p: Params) -> tuple[np.ndarray, np.ndarray]:
     return beta, taus
 
 
+@njit(cache=True, inline="always")
+def pipkin_rogers_strain_fraction(gamma2, gamma_s2):
+    """``s = gamma^2 / (gamma^2 + gamma_s^2)`` of the Pipkin-Rogers weight law (0 at small strain, 1 at large).
+
+    The one definition of the law's strain dependence, called by the 1-D model (:func:`_pipkin_rogers_weights_at`)
+    and by the TLED kernels (``fem._kernels``, ``fem.vectorised``, ``fem.cuda``), which pass the 3-D strain measure
+    ``I1bar - 3`` of the isochoric deformation as ``gamma2``: it equals ``gamma^2`` in simple shear, so the fitted
+    ``gamma_s`` goes to the solver unchanged."""
+    return gamma2 / (gamma2 + gamma_s2)
+
+
+@njit(cache=True, inline="always")
+def pipkin_rogers_ratio(beta, kappa, s):
+    """``beta_i m_i = beta_i (1 + kappa_i s)``: the strain-scaled branch-to-equilibrium modulus ratio of one Prony
+    term; the weights are ``g_i = beta_i m_i / (1 + sum_j beta_j m_j)``, ``g_inf = 1 / (1 + sum_j beta_j m_j)``
+    (:class:`PipkinRogersModel`; shared with the TLED kernels as :func:`pipkin_rogers_strain_fraction` is)."""
+    return beta * (1.0 + kappa * s)
+
+
 @njit(cache=True)
 def _pipkin_rogers_weights_at(gamma2, beta, kappa, gamma_s2, g_out):
     """The weight law of :class:`PipkinRogersModel` at one squared strain: ``g_i`` into ``g_out``, returns ``g_inf``."""
-    s = gamma2 / (gamma2 + gamma_s2)
+    s = pipkin_rogers_strain_fraction(gamma2, gamma_s2)
     total = 0.0
     for i in range(beta.size):
-        g_out[i] = beta[i] * (1.0 + kappa[i] * s)
+        g_out[i] = pipkin_rogers_ratio(beta[i], kappa[i], s)
         total += g_out[i]
     denom = 1.0 + total
     for i in range(beta.size):
@@ -192,6 +211,14 @@ class PipkinRogersModel(InstantaneousLawModel):
         beta, _ = _prony_params(self, p)
         kappa = np.broadcast_to(np.array([float(p[k]) for k in self._kappa_names]), beta.shape)
         return beta, np.ascontiguousarray(kappa, dtype=float), float(p["gamma_s"]) ** 2
+
+    def weight_law_parameters(self, p: Params) -> dict:
+        """The weight law's parameters as a material card and the TLED solver take them: ``beta`` and ``kappa``
+        per Prony term (a shared ``kappa`` repeated), ``gamma_s`` and the relaxation times ``tau_s``."""
+        beta, taus = _prony_params(self, p)
+        _, kappa, gamma_s2 = self._weight_params(p)
+        return {"beta": [float(b) for b in beta], "kappa": [float(k) for k in kappa],
+                "gamma_s": float(np.sqrt(gamma_s2)), "tau_s": [float(t) for t in taus]}
 
     def weights(self, p: Params, strain: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(g_inf(gamma), g(gamma))`` with shapes ``strain.shape`` and ``(n_prony, *strain.shape)``."""
