@@ -43,12 +43,13 @@ from .canonical import read_netcdf, write_json, write_netcdf, write_text
 from .curves import as_str, select_average
 from .fem.experiments import flat_punch_indentation, rheometer_torsion
 from .fem.materials import available_laws
-from .fem.replay import ReplayCard, ReplaySettings, replay
+from .diagnosis.simulation_cards import INDEX
+from .fem.replay import FIX_SIMULATION_METRIC, ReplayCard, ReplaySettings, fix_simulation, replay
 from .fem.tled import DynamicRelaxationError, ElementInversionError
 from .material import MaterialFit, baseline_model, cross_test, fit_material
 from .models.registry import get_model
 from .plots import new_figure, plot_cross_test, plot_force_depth, plot_torque, save_figure
-from .records import Finding, MaterialCard
+from .records import MaterialCard
 from .scopes import (ALL_MODES_SCOPE, MASTERCURVE_SCOPE, MATERIAL_LAWS, MATERIAL_SCOPE,  # noqa: F401 (re-exported)
                      MATERIAL_TESTS, dataset_scopes)
 from .stats import nrmse
@@ -497,19 +498,22 @@ REPLAY_SCOPES = (MATERIAL_SCOPE, "stress_relaxation", "creep_recovery", "frequen
                  "amplitude_sweep", "constant_shear_rate")
 
 
-def replay_cards(ranking_csv, cards_root, diagnosis_json=None, scopes: Sequence[str] = REPLAY_SCOPES) -> list[ReplayCard]:
-    """The cards the FEM replay runs: the baseline card first, then the card of each extension the diagnosis names.
+def replay_cards(ranking_csv, cards_root, diagnosis_json=None, extension_cards_dir=None,
+                 scopes: Sequence[str] = REPLAY_SCOPES) -> list[ReplayCard]:
+    """The cards the FEM replay runs: the baseline card first, then the cards of each extension the diagnosis names.
 
     Baseline: in the first of ``scopes`` that has one the FEM can run, the card of the diagnosis's baseline model
-    (``diagnosis.json`` ``model``: the model the named causes' fixes improve on), else the scope's baseline (the
-    material scope's ``baseline`` column) or recommended card (``ranking.csv``). Extensions: every named cause (``detected``) whose ``fix.model`` has a card in the baseline's
-    scope, with the cause as its role; an extension card the FEM cannot run is kept with the reason (its rows say
-    ``not replayed``). Without any runnable card the list is empty (logged).
+    (``diagnosis.json`` ``model``), else the scope's baseline (the material scope's ``baseline`` column) or
+    recommended card (``ranking.csv``). Extensions: the simulation cards of the diagnosis
+    (``extension_cards_dir``, :mod:`tissuemech.diagnosis.simulation_cards`): per named cause its extension fitted
+    to every run (role: the cause, replayed on every test) and, per fold, the baseline and the extension fitted
+    without the fold's held-out curves (roles ``<cause>:baseline`` and the cause, replayed on those curves only).
+    A card the FEM cannot run is kept with the reason (its rows say ``not replayed``). Without any runnable baseline
+    card the list is empty (logged).
     """
     recommended = R.recommended_models(ranking_csv)
     baselines = R.recommended_models(ranking_csv, column="baseline")
     diagnosis = json.loads(Path(diagnosis_json).read_text()) if diagnosis_json else {}
-    findings = [Finding.from_dict(f) for f in diagnosis.get("findings", [])]
     for scope in scopes:
         for model in dict.fromkeys(m for m in (diagnosis.get("model"), baselines.get(scope), recommended.get(scope))
                                    if m):
@@ -518,17 +522,58 @@ def replay_cards(ranking_csv, cards_root, diagnosis_json=None, scopes: Sequence[
             if problem:
                 logger.info("replay_cards: %s/%s: %s", scope, model, problem)
                 continue
-            chosen = [ReplayCard(f"{scope}/{model}", "baseline", MaterialCard.from_json(path))]
-            for f in findings:
-                ext = (f.fix or {}).get("model")
-                ext_path = Path(cards_root) / scope / f"{ext}.json"
-                if not f.detected or not isinstance(ext, str) or ext == model or not ext_path.is_file():
-                    continue
-                chosen.append(ReplayCard(f"{scope}/{ext}", f.effect, MaterialCard.from_json(ext_path),
-                                         fem_card_problem(ext_path)))
-            return chosen
+            return [ReplayCard(f"{scope}/{model}", "baseline", MaterialCard.from_json(path))] + \
+                extension_replay_cards(extension_cards_dir)
     logger.warning("replay_cards: no card the FEM can run in the scopes %s", list(scopes))
     return []
+
+
+def extension_replay_cards(extension_cards_dir) -> list[ReplayCard]:
+    """The replay cards of the diagnosis's simulation cards (``index.json`` of
+    :func:`tissuemech.diagnosis.simulation_cards.write_simulation_cards`); none without the folder or its index."""
+    index_path = Path(extension_cards_dir) / INDEX if extension_cards_dir else None
+    if index_path is None or not index_path.is_file():
+        return []
+    index = json.loads(index_path.read_text())
+    folder = index_path.parent
+    out = []
+    for cause, entry in (index.get("causes") or {}).items():
+        if entry.get("card"):
+            path = folder / entry["card"]
+            out.append(ReplayCard(f"extension/{path.stem}", cause, MaterialCard.from_json(path), fem_card_problem(path)))
+        for fold in entry.get("folds", []):
+            only = frozenset(fold.get("held_out", []))
+            for file, role in ((fold["baseline"], f"{cause}:baseline"), (fold["extension"], cause)):
+                path = folder / file
+                out.append(ReplayCard(f"extension/{path.name.removesuffix('.json')}", role,
+                                      MaterialCard.from_json(path), fem_card_problem(path), only=only))
+    return out
+
+
+def simulation_fixes(table: pd.DataFrame, extension_cards_dir) -> dict:
+    """``fix.simulation`` of every named cause with simulation cards: per fold the replay's held-out NRMSE of the
+    fold's baseline card and of its extension card (:func:`tissuemech.fem.replay.fix_simulation`), averaged over the
+    folds (``before``, ``after``, ``gain``, ``held_out_tests``, ``folds``)."""
+    index_path = Path(extension_cards_dir) / INDEX if extension_cards_dir else None
+    if index_path is None or not index_path.is_file():
+        return {}
+    out = {}
+    for cause, entry in (json.loads(index_path.read_text()).get("causes") or {}).items():
+        folds = []
+        for fold in entry.get("folds", []):
+            rec = fix_simulation(table, cause, f"extension/{fold['extension'].removesuffix('.json')}",
+                                 baseline_card=f"extension/{fold['baseline'].removesuffix('.json')}")
+            folds.append({"label": fold["label"], **rec})
+        scored = [f for f in folds if np.isfinite(f["before"]) and np.isfinite(f["after"])]
+        before = float(np.mean([f["before"] for f in scored])) if scored else float("nan")
+        after = float(np.mean([f["after"] for f in scored])) if scored else float("nan")
+        out[cause] = {"metric": FIX_SIMULATION_METRIC, "before": before, "after": after,
+                      "gain": (before - after) / before if before > 0 else float("nan"),
+                      "held_out_tests": sorted({t for f in scored for t in f["held_out_tests"]}),
+                      "extension_card": entry.get("card"), "folds": folds}
+        if not scored:
+            out[cause]["note"] = "no fold's held-out curve was replayed by both of its cards"
+    return out
 
 
 #: what the replay figure draws per test kind: (x label, y label, log x, log y)
@@ -584,10 +629,13 @@ def figure_replay(points: pd.DataFrame, table: pd.DataFrame):
 
 
 def run_fem_replay(cards: Sequence[ReplayCard], averages_path, out_csv, points_csv, figure_path,
-                   element_size_m: float, n_threads: int = 1) -> pd.DataFrame:
+                   element_size_m: float, n_threads: int = 1, extension_cards_dir=None,
+                   fix_json=None) -> pd.DataFrame:
     """The FEM replay of a dataset's measured tests (:func:`tissuemech.fem.replay.replay`) with ``cards``
     (:func:`replay_cards`): ``replay.csv`` (one row per test x condition x card), the measured and simulated points
-    (``points_csv``) and their figure. Without any card the table still lists every test, ``not replayed``."""
+    (``points_csv``) and their figure. Without any card the table still lists every test, ``not replayed``. With
+    ``fix_json``: the ``fix.simulation`` of every named cause whose simulation cards were replayed
+    (:func:`simulation_fixes`), for the final ``diagnosis.json``."""
     settings = ReplaySettings(element_size_m=float(element_size_m), n_threads=n_threads)
 
     def progress(row):
@@ -600,7 +648,11 @@ def run_fem_replay(cards: Sequence[ReplayCard], averages_path, out_csv, points_c
     table, points = replay(read_netcdf(averages_path), cards, settings, on_row=progress)
     write_text(table.to_csv(index=False), out_csv)
     write_text(points.to_csv(index=False), points_csv)
-    save_figure(figure_replay(points, table), figure_path)
+    # the figure: the baseline and the full-data extension cards over every test (fold cards are scores, not curves)
+    full = ~table["role"].str.endswith(":baseline") & ~table["card"].str.contains(r"\.extension$", regex=True)
+    save_figure(figure_replay(points[points["card"].isin(set(table.loc[full, "card"]))], table[full]), figure_path)
+    if fix_json is not None:
+        write_json(simulation_fixes(table, extension_cards_dir), fix_json)
     return table
 
 

@@ -186,6 +186,14 @@ def has_diagnosis(name):
     )
 
 
+def diagnosis_inputs(wildcards):
+    """Rule diagnosis: the findings, and the replay's fix.simulation where the dataset's tests are replayed."""
+    inputs = {"findings": f"results/{wildcards.dataset}/diagnosis/findings.json"}
+    if has_fem_replay(wildcards.dataset):
+        inputs["fix_simulation"] = f"results/{wildcards.dataset}/fem/fix_simulation.json"
+    return inputs
+
+
 def has_fem_replay(name):
     """Parallel-plate data with fitted scopes: the FEM replays its measured tests (rule fem_replay)."""
     return is_rheometer_dataset(name) and bool(dataset_scopes_of(name))

@@ -77,7 +77,8 @@ def fem_replay_inputs(wildcards):
         "averages": f"results/{wildcards.dataset}/averages.nc",
     }
     if has_diagnosis(wildcards.dataset):
-        inputs["diagnosis"] = f"results/{wildcards.dataset}/diagnosis.json"
+        inputs["diagnosis"] = f"results/{wildcards.dataset}/diagnosis/findings.json"
+        inputs["extension_cards"] = f"results/{wildcards.dataset}/diagnosis/simulation_cards"
     return inputs
 
 
@@ -93,6 +94,7 @@ rule fem_replay:
             labels={"experiment": "replay", "item": "error table"},
         ),
         points="results/{dataset}/fem/replay_points.csv",
+        fix_simulation="results/{dataset}/fem/fix_simulation.json",
         figure=report(
             "results/{dataset}/figures/fem_replay.png",
             caption="../report/fem_replay.rst",

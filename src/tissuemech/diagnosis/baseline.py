@@ -375,7 +375,8 @@ def fit_runs(model_key: str, runs: Sequence[xr.Dataset], target: str, relaxation
 
 def extension_gain(runs: Sequence[xr.Dataset], baseline_key: str, extension_key: str, target: str,
                    folds: Sequence[tuple[str, Callable[[xr.Dataset], bool]]], relaxation: str = "measured",
-                   n_points: int = 25, seed: int = 0, taus_s: Sequence[float] | None = None) -> dict:
+                   n_points: int = 25, seed: int = 0, taus_s: Sequence[float] | None = None,
+                   fits_out: list | None = None) -> dict:
     """Held-out gain of ``extension_key`` over ``baseline_key``.
 
     Parameters
@@ -383,6 +384,9 @@ def extension_gain(runs: Sequence[xr.Dataset], baseline_key: str, extension_key:
     runs : the runs both models are fitted to (only the test kinds both describe)
     folds : ``(label, is_held_out(run))`` pairs; each fold fits on the other runs and scores the held-out
         ones (fitting.evaluate NRMSE)
+    fits_out : when a list, receives one ``{"label", "train", "held_out", "baseline", "extension"}`` per fold and
+        one with label ``"all"`` (the training runs, the held-out runs and both :class:`~tissuemech.fitting.FitResult`),
+        for the cards the simulator replays (:mod:`tissuemech.diagnosis.simulation_cards`)
     taus_s : relaxation times [s] both models are rebuilt on (:func:`tissuemech.models.registry.model_on_times`), e.g.
         ``window_taus(resolved_window_s(runs))``; None keeps the registered models
     Returns
@@ -408,9 +412,13 @@ def extension_gain(runs: Sequence[xr.Dataset], baseline_key: str, extension_key:
         before.append(fitting.evaluate(base_model, fb.params, test_curves, target)["nrmse"])
         after.append(fitting.evaluate(ext_model, fe.params, test_curves, target)["nrmse"])
         labels.append(label)
+        if fits_out is not None:
+            fits_out.append({"label": label, "train": train, "held_out": test, "baseline": fb, "extension": fe})
         n_held.append(int(sum(min(np.size(v) for v in c.observed.values()) for c in test_curves if c.observed)))
     fb = fit_runs(baseline_key, runs, target, relaxation, n_points, seed=seed, taus_s=taus_s)
     fe = fit_runs(extension_key, runs, target, relaxation, n_points, seed=seed, taus_s=taus_s)
+    if fits_out is not None:
+        fits_out.append({"label": "all", "train": list(runs), "held_out": [], "baseline": fb, "extension": fe})
     b, a = float(np.mean(before)) if before else np.nan, float(np.mean(after)) if after else np.nan
     return {"model": extension_key, "metric": "held_out_nrmse", "before": b, "after": a,
             "gain": (b - a) / b if b > 0 else np.nan, "cv": "leave-one-condition-out (" + ", ".join(labels) + ")",

@@ -237,7 +237,8 @@ def write_diagnosis_json(result: dict, path: str | Path, dataset: str = "") -> P
     :class:`tissuemech.records.Finding` the report reads (:class:`~tissuemech.records.FindingError` names it)."""
     out = {k: v for k, v in result.items() if k != "structure_tests"}
     out["dataset"] = dataset
-    out["n_structure_tests"] = len(result.get("structure_tests", []))
+    out["n_structure_tests"] = (len(result["structure_tests"]) if "structure_tests" in result
+                                else int(result.get("n_structure_tests", 0)))  # a diagnosis.json written again
     out = to_jsonable(out)
     for finding in out.get("findings", []):
         Finding.from_dict(finding)  # the record the report reads: a malformed finding stops here, named

@@ -76,6 +76,7 @@ from .evidence import estimate_noise, nominal_strain, residual_table, residual_t
 from .generic import confounded_covariates, serial_structure, structure_tests
 from .time_domain import offset_intercept
 from .homogeneous import is_homogeneous, run_homogeneous_diagnosis
+from .simulation_cards import write_simulation_cards
 
 DECISION_RULE = (
     "A cause is named (detected) only when (1) its test is significant after Holm at the family-wise alpha, "
@@ -251,7 +252,8 @@ def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "mode
                  "evidence": " ".join(f"{a['model']}: " + "; ".join(a["reasons"]) + "." for a in rejected)
                  + (f" Diagnosed with the next adequate model, {model}." if usable else
                     " No fitted model is adequate: no cause is named.")}]
-    return {"model": model, "fit_info": {k: v for k, v in fit_info.items() if k != "fixes"}, "alpha": alpha,
+    return {"model": model, "fit_info": {k: v for k, v in fit_info.items() if k not in ("fixes", "simulation_fits")},
+            "alpha": alpha,
             "decision_rule": DECISION_RULE,
             "noise_model": {**noise, "relative_level": eps},
             "baseline": {"model": model, "adequate": usable, "tried": list(adequacy),
@@ -363,7 +365,8 @@ def _read_runs(runs_dir: str | Path) -> list[xr.Dataset]:
     return [r for r in runs if "test" in r.attrs]
 
 
-def _nonseparable_fix(runs, baseline_key: str, target: str, taus_s: Sequence[float] | None = None) -> dict | None:
+def _nonseparable_fix(runs, baseline_key: str, target: str, taus_s: Sequence[float] | None = None,
+                      fits_out: list | None = None) -> dict | None:
     """Pipkin-Rogers counterpart of a QLV baseline, scored on held-out extremes of the design: the lowest and
     the highest CSR rate when there are >= 3 rates, else the relaxations at the lowest and at the highest
     nominal strain when there are >= 2 (non-separability is a strain dependence of the relaxation, so a model
@@ -396,7 +399,8 @@ def _nonseparable_fix(runs, baseline_key: str, target: str, taus_s: Sequence[flo
     # both models on the relaxation times these tests resolve (never the registry's fixed 0.1-100 s)
     window = resolved_window_s(use)
     taus = np.asarray(taus_s, float) if taus_s is not None and len(taus_s) else window_taus(window)
-    fix = extension_gain(use, baseline_key, ext, target, folds, taus_s=taus if taus.size else None)
+    fix = extension_gain(use, baseline_key, ext, target, folds, taus_s=taus if taus.size else None,
+                         fits_out=fits_out)
     fix["parameters"]["window_t_min_s"] = window["t_min_s"]
     fix["parameters"]["window_t_max_s"] = window["t_max_s"]
     return fix
@@ -531,7 +535,9 @@ def _offset_fix(runs: Sequence[xr.Dataset], baseline_key: str, fit_info: dict, n
 #: model-level fixes (refits) scored by :func:`with_model_fixes`: cause -> scorer(runs, baseline, fit_info, noise)
 MODEL_FIXES = {
     "nonseparable_relaxation": lambda runs, key, info, noise: _nonseparable_fix(
-        runs, key, info.get("target", "apparent_stress"), info.get("taus_s")),
+        runs, key, info.get("target", "apparent_stress"), info.get("taus_s"),
+        fits_out=info.get("simulation_fits", {}).setdefault("nonseparable_relaxation", [])
+        if isinstance(info.get("simulation_fits"), dict) else None),
     "torque_offset": _offset_fix,
 }
 
@@ -574,7 +580,8 @@ def diagnose_runs(runs: Sequence[xr.Dataset], baseline: str | Sequence[str] = RU
                   target: str = "torque", relaxation: str = "measured",
                   fitted_tests: Sequence[str] = RUNS_BASELINE_TESTS, n_points: int = 16, alpha: float = st.ALPHA,
                   extensions: bool = True, return_table: bool = False,
-                  order_source: str | None = None) -> dict | tuple[dict, pd.DataFrame]:
+                  order_source: str | None = None,
+                  simulation_fits: dict | None = None) -> dict | tuple[dict, pd.DataFrame]:
     """Diagnose canonical runs on a baseline whose relaxation times come from the data: the one path from runs
     to a diagnosis (the pipeline's :func:`run_diagnosis` takes its candidate laws from the ranking and comes here).
 
@@ -588,7 +595,9 @@ def diagnose_runs(runs: Sequence[xr.Dataset], baseline: str | Sequence[str] = RU
     taken in the given order (e.g. the dataset's ranking, ``order_source`` saying so) and fitted only as far as
     needed. They are checked in that order with :func:`~tissuemech.diagnosis.baseline.baseline_adequacy`, and
     the first adequate one is diagnosed under the noise model estimated from the runs; model-level fixes are
-    scored when ``extensions``. Returns the :func:`diagnose` result with ``fit_info.taus_s``,
+    scored when ``extensions`` (``simulation_fits``: a dict that receives, per cause, the fits of its model-level
+    fix, :func:`tissuemech.diagnosis.baseline.extension_gain` ``fits_out``). Returns the :func:`diagnose` result with
+    ``fit_info.taus_s``,
     ``fit_info.window`` and ``fit_info.baseline_aicc`` ({key: AICc} of the candidates fitted) (and the
     diagnosed model's residual table with ``return_table``).
     """
@@ -657,6 +666,9 @@ def diagnose_runs(runs: Sequence[xr.Dataset], baseline: str | Sequence[str] = RU
                 "params": {k: float(v) for k, v in fit.params.items()},
                 "baseline_order": order_source or ("aicc" if len(keys) > 1 else "requested"),
                 "baseline_aicc": {k: float(f.aicc) for k, f in fits.items()}}
+    if simulation_fits is not None:
+        # the model-level fixes' fold and full-data fits, for the cards the simulator replays (not written to JSON)
+        fit_info["simulation_fits"] = simulation_fits
     result = diagnose(kept, table, key, fit_info, alpha=alpha, noise=noise, adequacy=adequacy)
     if extensions:
         result = with_model_fixes(result, kept, table, fit_info, alpha=alpha, noise=noise, adequacy=adequacy)
@@ -708,7 +720,8 @@ def _read_ranking(path: str | Path | None) -> pd.DataFrame | None:
 
 def run_diagnosis(runs_dir: str | Path, fits_dir: str | Path, out_json: str | Path, out_nc: str | Path,
                   fig_dir: str | Path, baseline: str | None = None, extensions: bool = True,
-                  dataset: str | None = None, alpha: float = st.ALPHA, ranking: str | Path | None = None) -> dict:
+                  dataset: str | None = None, alpha: float = st.ALPHA, ranking: str | Path | None = None,
+                  extension_cards_dir: str | Path | None = None, poisson_ratio: float | None = None) -> dict:
     """Diagnose a dataset from its canonical runs and fit records (module docstring); writes the outputs.
 
     ``alpha`` is the family-wise false-alarm level (Holm) of every test of the dataset (config ``diagnosis.alpha``).
@@ -716,6 +729,11 @@ def run_diagnosis(runs_dir: str | Path, fits_dir: str | Path, out_json: str | Pa
     (:func:`tissuemech.diagnosis.baseline.ranked_candidates`). Each candidate is checked with
     :func:`tissuemech.diagnosis.baseline.baseline_adequacy`; the first adequate one is diagnosed (an explicit
     ``baseline`` is checked too and reported inadequate if it is).
+
+    ``extension_cards_dir`` (with ``poisson_ratio``, the configuration's): the cards of every named cause's material
+    extension, fitted to all runs and to each fold's training runs, beside the baseline fitted to the same training
+    runs (:func:`tissuemech.diagnosis.simulation_cards.write_simulation_cards`): what the simulator replays to score
+    the extension on tests it was not fitted to. The folder is written (possibly empty) whenever it is given.
     """
     runs = _read_runs(runs_dir)
     if not runs:
@@ -724,6 +742,8 @@ def run_diagnosis(runs_dir: str | Path, fits_dir: str | Path, out_json: str | Pa
         # homogeneous specimens (simple shear + uniaxial): the multi-mode diagnosis refits its own I1/I2
         # laws per mode combination (closed forms, seconds), so the scope's fit records are not needed
         name = dataset or str(runs[0].attrs.get("dataset", ""))
+        if extension_cards_dir is not None:  # no material extension of a homogeneous law is replayed
+            write_simulation_cards({}, {}, extension_cards_dir, poisson_ratio, name)
         return run_homogeneous_diagnosis(runs, out_json, out_nc, fig_dir, dataset=name, alpha=alpha)
     records = [read_fit_record(p) for p in sorted(Path(fits_dir).glob("*.nc"))]
     if not records:
@@ -741,11 +761,15 @@ def run_diagnosis(runs_dir: str | Path, fits_dir: str | Path, out_json: str | Pa
         # the ranking chooses the instantaneous law; the relaxation times come from the data (diagnose_runs),
         # never from the registry's grid the fit stage used
         lead = fixed_time[0]
+        simulation_fits: dict = {}
         result, base_table = diagnose_runs(
             runs, [str(r["model_key"]) for r in fixed_time], target=lead["target"] or "apparent_stress",
             relaxation=lead.get("relaxation", "measured"), fitted_tests=lead["tests"], alpha=alpha,
             extensions=extensions, return_table=True,
-            order_source=order_source + "; relaxation times of each candidate from the data (NNLS)")
+            order_source=order_source + "; relaxation times of each candidate from the data (NNLS)",
+            simulation_fits=simulation_fits)
+        if extension_cards_dir is not None:
+            write_simulation_cards(result, simulation_fits, extension_cards_dir, poisson_ratio, name)
         return _write_outputs(result, base_table, out_json, out_nc, fig_dir, name)
     noise = estimate_noise(runs)
     tables = {}
@@ -776,6 +800,8 @@ def run_diagnosis(runs_dir: str | Path, fits_dir: str | Path, out_json: str | Pa
     result = diagnose(runs, base_table, chosen["model_key"], fit_info, alpha=alpha, noise=noise, adequacy=adequacy)
     if extensions:
         result = with_model_fixes(result, runs, base_table, fit_info, alpha=alpha, noise=noise, adequacy=adequacy)
+    if extension_cards_dir is not None:
+        write_simulation_cards(result, {}, extension_cards_dir, poisson_ratio, name)
     return _write_outputs(result, base_table, out_json, out_nc, fig_dir, name)
 
 

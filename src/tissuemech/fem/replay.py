@@ -348,12 +348,15 @@ class ReplayCard:
     role : ``"baseline"`` or the named cause whose extension this card is
     card : the card as read (None when it could not be read)
     reason : why the FEM cannot run it (empty when it can); its rows say ``not replayed: <reason>``
+    only : the curves (``test|condition``) this card replays, None for every test
     """
 
     name: str
     role: str
     card: MaterialCard | None
     reason: str = ""
+    #: replay only these curves (``test|condition``; None: every test), e.g. a fold card on its held-out curves
+    only: frozenset[str] | None = None
 
 
 def fitted_selection(card: MaterialCard) -> tuple[frozenset[str], frozenset[str]] | None:
@@ -400,6 +403,8 @@ def replay(averages: xr.Dataset, cards: Sequence[ReplayCard], settings: ReplaySe
     for rc in cards:
         fem_card = rc.card.for_fem() if rc.card is not None and not rc.reason else None
         for pt in tests:
+            if rc.only is not None and f"{pt.test}|{pt.condition}" not in rc.only:
+                continue
             row = {"test": pt.test, "condition": pt.condition, "card": rc.name, "role": rc.role,
                    "held_out": held_out(rc.card, pt.test, pt.condition) if rc.card is not None else None,
                    "nrmse": float("nan"), "n_points": 0, "n_elements": 0, "wall_s": float("nan"),
@@ -433,7 +438,8 @@ def replay(averages: xr.Dataset, cards: Sequence[ReplayCard], settings: ReplaySe
 # ------------------------------------------------------------------------------------------------
 # what the diagnosis reads
 # ------------------------------------------------------------------------------------------------
-def fix_simulation(replay_table: pd.DataFrame, cause: str, extension_card: str) -> dict:
+def fix_simulation(replay_table: pd.DataFrame, cause: str, extension_card: str,
+                   baseline_card: str | None = None) -> dict:
     """The simulation's error on the tests an extension was not fitted to, baseline card vs extension card: the
     ``fix.simulation`` record of a diagnosis finding.
 
@@ -447,6 +453,8 @@ def fix_simulation(replay_table: pd.DataFrame, cause: str, extension_card: str) 
     replay_table : the replay table (``replay.csv``, :func:`replay`)
     cause : the named cause (the extension card's ``role``)
     extension_card : the extension card's name (``card`` column, ``<scope>/<model>``)
+    baseline_card : the baseline card's name; None: the rows of role ``baseline`` (a fold's baseline, fitted to the
+        same training runs as its extension, is named here)
 
     Returns
     -------
@@ -457,7 +465,7 @@ def fix_simulation(replay_table: pd.DataFrame, cause: str, extension_card: str) 
     t["held_out"] = t["held_out"].astype("boolean")
     usable = (t["status"] == "ok") & np.isfinite(t["nrmse"].astype(float)) & t["held_out"].fillna(False).astype(bool)
     ext = t[usable & (t["card"] == extension_card) & (t["role"] == cause)]
-    base = t[usable & (t["role"] == "baseline")]
+    base = t[usable & ((t["card"] == baseline_card) if baseline_card is not None else (t["role"] == "baseline"))]
     pairs = ext.merge(base, on=["test", "condition"], suffixes=("_ext", "_base"))
     record = {"metric": FIX_SIMULATION_METRIC, "before": float("nan"), "after": float("nan"), "gain": float("nan"),
               "held_out_tests": sorted(f"{a}|{b}" for a, b in zip(pairs["test"], pairs["condition"]))}
