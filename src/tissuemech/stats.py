@@ -282,7 +282,8 @@ MIXED_OPTIMIZERS = ("lbfgs", "powell")
 
 
 def mixed_effects(table: pd.DataFrame, value: str, specimen: str = "specimen", sample: str | None = "sample",
-                  method: Sequence[str] | None = MIXED_OPTIMIZERS) -> dict:
+                  method: Sequence[str] | None = MIXED_OPTIMIZERS, covariates: Sequence[str] = (),
+                  factors: Sequence[str] = ()) -> dict:
     """The package's one linear mixed-effects model: ``value = mu + b_specimen [+ c_sample] + e`` (statsmodels
     ``MixedLM``, REML).
 
@@ -302,6 +303,11 @@ def mixed_effects(table: pd.DataFrame, value: str, specimen: str = "specimen", s
     table : one row per observation with columns ``value`` (already on the scale modelled, e.g. a log), ``specimen``
         and, unless None, ``sample``; rows with a non-finite ``value`` are dropped
     method : optimizers tried in turn by ``MixedLM.fit`` (None: statsmodels' default list)
+    covariates, factors : numeric columns and categorical columns (``C(...)``) of the fixed part, ``value ~ 1 +
+        covariates + factors`` (default: the mean only); their estimates are returned in ``coefficients``
+        (``{column: {"estimate", "std_error"}}``) and ``factor_wald`` (``{column: {"chi2", "df"}}``, the joint Wald
+        statistic of the factor's levels), the fixed-effect covariance in ``fe_cov``; rows missing any of them are
+        dropped
 
     Returns
     -------
@@ -312,10 +318,20 @@ def mixed_effects(table: pd.DataFrame, value: str, specimen: str = "specimen", s
     """
     import statsmodels.formula.api as smf  # a slow import (module note), only here
 
-    d = table[np.isfinite(table[value].to_numpy(float))]
+    keep = np.isfinite(table[value].to_numpy(float))
+    for c in covariates:
+        keep &= np.isfinite(table[c].to_numpy(float))
+    for c in factors:
+        keep &= table[c].notna().to_numpy()
+    d = table[keep]
     spec = d[specimen].astype(str).to_numpy()
     piece = spec + "/" + (d[sample].astype(str).to_numpy() if sample is not None else np.arange(len(d)).astype(str))
-    d = pd.DataFrame({"y": d[value].to_numpy(float), "specimen": spec, "piece": piece})
+    # safe names for the formula (sample-sheet columns may hold any characters)
+    xs = {f"x{i}": c for i, c in enumerate(covariates)}
+    fs = {f"f{i}": c for i, c in enumerate(factors)}
+    fixed = {k: d[c].to_numpy(float) for k, c in xs.items()} | {k: d[c].astype(str).to_numpy() for k, c in fs.items()}
+    d = pd.DataFrame({"y": d[value].to_numpy(float), "specimen": spec, "piece": piece, **fixed})
+    formula = "y ~ 1" + "".join(f" + {k}" for k in xs) + "".join(f" + C({k})" for k in fs)
     n, n_spec, n_piece = len(d), d["specimen"].nunique(), d["piece"].nunique()
     repeated = n_piece < n
     out = {"value": value, "n_runs": n, "n_specimens": int(n_spec), "n_pieces": int(n_piece)}
@@ -326,7 +342,7 @@ def mixed_effects(table: pd.DataFrame, value: str, specimen: str = "specimen", s
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # boundary / convergence warnings: reported through `converged` and the SDs
         vc = {"sample": "0 + C(piece)"} if repeated else None
-        model = smf.mixedlm("y ~ 1", d, groups=d["specimen"], re_formula="1", vc_formula=vc)
+        model = smf.mixedlm(formula, d, groups=d["specimen"], re_formula="1", vc_formula=vc)
         fit = model.fit(reml=True, method=fit_method)
     # statsmodels parameterises the variances relative to the residual scale; cov_params holds the covariance of
     # those relative parameters, so SE(variance) = scale x SE(relative) (the scale's own uncertainty left out)
@@ -340,9 +356,9 @@ def mixed_effects(table: pd.DataFrame, value: str, specimen: str = "specimen", s
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             if repeated:
-                fit = smf.mixedlm("y ~ 1", d, groups=d["piece"]).fit(reml=True, method=fit_method)
+                fit = smf.mixedlm(formula, d, groups=d["piece"]).fit(reml=True, method=fit_method)
             else:
-                fit = smf.ols("y ~ 1", d).fit()
+                fit = smf.ols(formula, d).fit()
     scale = float(fit.scale)
     if boundary and not repeated:
         mean, mean_se = float(fit.params.iloc[0]), float(fit.bse.iloc[0])
@@ -376,12 +392,147 @@ def mixed_effects(table: pd.DataFrame, value: str, specimen: str = "specimen", s
         out["blup_z"] = {str(g): 0.0 for g in model.group_labels}
     else:
         out["blup_z"] = {str(g): float(v.iloc[0]) / sd_b for g, v in fit.random_effects.items()}
+    if covariates or factors:
+        fe = fit.params if boundary and not repeated else fit.fe_params
+        cov = np.asarray(fit.cov_params(), float)[:len(fe), :len(fe)]
+        names = list(fe.index)
+        out["coefficients"] = {c: {"estimate": float(fe[k]), "std_error": float(np.sqrt(max(cov[names.index(k)][names.index(k)], 0.0)))}
+                               for k, c in xs.items()}
+        out["factor_wald"] = {}
+        for k, c in fs.items():
+            idx = [i for i, n in enumerate(names) if n.startswith(f"C({k})[")]
+            b = np.asarray(fe.iloc[idx], float)
+            v = cov[np.ix_(idx, idx)]
+            try:
+                chi2 = float(b @ np.linalg.solve(v, b)) if idx else float("nan")
+            except np.linalg.LinAlgError:
+                chi2 = float("nan")
+            out["factor_wald"][c] = {"chi2": chi2, "df": len(idx)}
+        out["fe_cov"] = cov.tolist()
+        out["fe_names"] = [xs.get(n, n) for n in names]
     out["converged"] = bool(getattr(fit, "converged", True))
-    out["method"] = ("statsmodels MixedLM (REML): value ~ 1 + specimen random intercept"
+    out["method"] = ("statsmodels MixedLM (REML): value ~ " + ("1" if not (covariates or factors) else
+                                                               "fixed covariates") + " + specimen random intercept"
                      + (" (estimated at 0, its boundary: refitted without it)" if boundary else "")
                      + (" + sample variance component nested in specimen" if repeated else
                         "; one run per piece, so the residual SD is the sample-to-sample SD (it includes the "
                         "within-run misfit)")
                      + "; SEs: MixedLM covariance of the variance parameters x scale, sqrt(2/df) for the residual "
                        "variance, delta method for SDs")
+    return out
+
+
+def variation_level(table: pd.DataFrame, column: str, specimen: str = "specimen", sample: str | None = "sample") -> str:
+    """Where a column varies in a nested specimen/sample design: ``"within"`` (between rows of one piece, a
+    ``specimen``/``sample`` pair), ``"piece"`` (between the pieces of one specimen, constant within each) or
+    ``"specimen"`` (constant within every specimen)."""
+    keys = [specimen] + ([sample] if sample is not None else [])
+    col = table[column].astype(str) if table[column].dtype == object else table[column]
+    if sample is not None and (col.groupby([table[k] for k in keys]).nunique() > 1).any():
+        return "within"
+    if (col.groupby(table[specimen]).nunique() > 1).any():
+        return "piece" if sample is not None else "within"
+    return "specimen"
+
+
+def mixed_coefficient_test(table: pd.DataFrame, value: str, covariate: str, factors: Sequence[str] = (),
+                           specimen: str = "specimen", sample: str | None = "sample", categorical: bool = False) -> dict | None:
+    """Test of one fixed covariate of ``value`` with specimen and sample as random effects (:func:`mixed_effects`:
+    ``value ~ 1 + covariate + C(factors) + (1 | specimen) + (1 | sample in specimen)``).
+
+    Degrees of freedom by the between-within rule: a covariate that varies within pieces is referred to
+    n - n_pieces - p_within, one that varies only between the pieces of a specimen to n_pieces - n_specimens -
+    p_piece, one constant within specimens to n_specimens - p_specimen (p: the fixed parameters estimated at that
+    level, the intercept at the specimen level), so that a covariate that follows the specimens is judged on the
+    specimens, not on the curves. A numeric covariate gives a t-test of its slope; ``categorical`` a joint Wald F
+    over its levels. Where the mixed model cannot be fitted (fewer than 2 specimens, a failed or degenerate fit)
+    the fixed part is fitted by OLS with standard errors clustered by specimen (else by sample; t with G - 1 df,
+    :func:`cluster_regression`), and ``method`` says so. Returns ``statistic``, ``p_value``, ``log10_p``,
+    ``estimate``/``std_error`` (numeric), ``df`` (``df1``/``df2`` for a factor), ``level`` (:func:`variation_level`),
+    ``method``; None when the covariate does not vary or is collinear with the factors.
+    """
+    import statsmodels.api as sm
+
+    cols = [value, covariate, specimen] + ([sample] if sample is not None else []) + list(factors)
+    d = table[cols].copy()
+    ok = np.isfinite(d[value].to_numpy(float)) & d[covariate].notna().to_numpy()
+    if not categorical:
+        ok &= np.isfinite(pd.to_numeric(d[covariate], errors="coerce").to_numpy(float))
+    d = d[ok]
+    if categorical:
+        d[covariate] = d[covariate].astype(str)
+    else:
+        d[covariate] = d[covariate].astype(float)
+    if d[covariate].nunique() < 2 or len(d) < 4:
+        return None
+    # the fixed-effect design: a covariate collinear with the factors (e.g. a gap set per condition) is not testable
+    dummies = [pd.get_dummies(d[f].astype(str), drop_first=True, dtype=float) for f in factors]
+    xcov = pd.get_dummies(d[covariate], drop_first=True, dtype=float) if categorical else d[[covariate]]
+    X = pd.concat([pd.Series(1.0, index=d.index, name="const"), xcov] + dummies, axis=1).to_numpy(float)
+    base = pd.concat([pd.Series(1.0, index=d.index, name="const")] + dummies, axis=1).to_numpy(float)
+    if np.linalg.matrix_rank(X) - np.linalg.matrix_rank(base) < xcov.shape[1] or len(d) <= X.shape[1]:
+        return None
+    level = variation_level(d, covariate, specimen, sample)
+    n = len(d)
+    n_spec = d[specimen].nunique()
+    piece = d[specimen].astype(str) + "/" + (d[sample].astype(str) if sample is not None else pd.Series(
+        np.arange(n).astype(str), index=d.index))
+    n_piece = piece.nunique()
+    repeated = n_piece < n
+    q = xcov.shape[1]
+    lev = {f: variation_level(d, f, specimen, sample) for f in factors}
+    p_at = {"specimen": 1, "piece": 0, "within": 0}
+    for f, lv in lev.items():
+        p_at[lv] += int(d[f].nunique()) - 1
+    p_at[level] += q
+    if not repeated and level == "within":
+        level = "piece"
+    units = {"specimen": n_spec, "piece": n_piece - n_spec, "within": n - n_piece}
+    if not repeated:
+        units["piece"] = n - n_spec
+        p_at["piece"] += p_at.pop("within", 0)
+    df = float(max(units[level] - p_at[level], 1))
+    method = None
+    if n_spec >= 2:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                me = mixed_effects(d, value, specimen=specimen, sample=sample,
+                                   covariates=() if categorical else (covariate,),
+                                   factors=tuple(factors) + ((covariate,) if categorical else ()))
+            if categorical:
+                w = me["factor_wald"][covariate]
+                f_stat = w["chi2"] / max(w["df"], 1)
+                if np.isfinite(f_stat):
+                    return statistic_result(f_stat, log10_p_from_f(f_stat, float(w["df"]), df), df1=float(w["df"]),
+                                            df2=df, level=level, n=float(n), n_specimens=float(n_spec),
+                                            n_pieces=float(n_piece), method=me["method"] + f"; Wald F, between-within df")
+            else:
+                c = me["coefficients"][covariate]
+                if np.isfinite(c["std_error"]) and c["std_error"] > 0:
+                    t = c["estimate"] / c["std_error"]
+                    return statistic_result(t, log10_p_from_t(t, df), estimate=c["estimate"], std_error=c["std_error"],
+                                            df=df, level=level, n=float(n), n_specimens=float(n_spec),
+                                            n_pieces=float(n_piece), method=me["method"] + "; t, between-within df")
+            method = "MixedLM gave no finite standard error"
+        except (ValueError, np.linalg.LinAlgError, KeyError, IndexError) as exc:
+            method = f"MixedLM failed ({type(exc).__name__})"
+    else:
+        method = "fewer than 2 specimens: no specimen random effect"
+    groups = d[specimen].to_numpy() if n_spec >= 2 else (piece.to_numpy() if n_piece >= 2 else None)
+    Xf = pd.concat([xcov.add_prefix("cov_") if categorical else xcov] + dummies, axis=1).astype(float)
+    res = cluster_regression(d[value].to_numpy(float), Xf, groups=groups)
+    how = ("OLS with standard errors clustered by " + ("specimen" if n_spec >= 2 else "sample")
+           if groups is not None else "OLS with HC3 standard errors (one sample)")
+    if categorical:
+        names = [c for c in Xf.columns if c.startswith("cov_")]
+        w = res.wald_test(np.eye(len(res.params))[[list(res.params.index).index(c) for c in names]], scalar=True)
+        f_stat = float(np.squeeze(w.statistic))
+        df2 = float(w.df_denom)
+        return statistic_result(f_stat, log10_p_from_f(f_stat, float(len(names)), df2), df1=float(len(names)), df2=df2,
+                                level=level, n=float(n), n_specimens=float(n_spec), n_pieces=float(n_piece),
+                                method=f"{how} ({method}); Wald F")
+    out = coefficient_test(res, covariate)
+    out.update(level=level, n=float(n), n_specimens=float(n_spec), n_pieces=float(n_piece),
+               method=f"{how} ({method})")
     return out

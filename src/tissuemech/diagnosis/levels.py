@@ -1,7 +1,7 @@
 """Causes read from curve levels (one level per curve from the baseline's residuals): elapsed-time drift,
 preconditioning (first load) and an outlier specimen, the level regressions they share
-(:func:`level_regression`, :func:`between_sample_test`) and the confounded-covariate bookkeeping. Part of
-:mod:`.catalogue`."""
+(:func:`level_regression`, :func:`between_sample_test`) and the confounded-covariate bookkeeping. Detectors
+of the registry :mod:`.causes`."""
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -16,7 +16,7 @@ from .. import stats as st
 from ..tts import run_temperature_c
 from .evidence import condition_label, run_id
 from .findings import (DiagnosisContext, curve_levels, demean_by, fix_record, fixed_effect_design, make_finding,
-                       primary_rows, rms, untested_finding)
+                       primary_rows, rms, separating_design, untested_finding)
 
 # ------------------------------------------------------------------------------------------------
 # curve-level scale: elapsed-time drift, preconditioning, outlier specimen
@@ -101,22 +101,6 @@ def between_sample_test(levels: pd.DataFrame, y: str, column: str) -> dict | Non
 
 #: within-sample |correlation| above which two curve-level covariates are reported as confounded
 CONFOUND_CORRELATION = 0.9
-
-#: the design that would separate a curve-level covariate from each confounder (``condition``: the test
-#: condition when the covariate is collinear with it within samples, i.e. a fixed test order)
-SEPARATING_DESIGN = {
-    "position": "vary the pauses between tests, or start the samples of one session at different times, so "
-                "that elapsed time varies at a fixed position in the sequence (a drift of the instrument or "
-                "specimen follows the clock, an effect of the loading history follows the position)",
-    "first_load": "repeat the first test of each sample later in its sequence, or vary which test comes first",
-    "temperature_c": "hold the temperature constant over the session, or change it in steps that are not "
-                     "monotone in time (e.g. a randomised or up-and-down temperature sequence)",
-    "elapsed_h": "record started_at or total_time and run at least three tests per sample, so that a time "
-                 "trend can be read from the tests after the first load",
-    "condition": "randomise the test order across samples, or repeat a reference test (same kind and "
-                 "condition as an early one) at the end of each sample's sequence",
-}
-
 
 def _within_corr(levels: pd.DataFrame, a: str, b: str) -> float:
     """Correlation of two curve-level covariates after removing sample means (NaN when undefined)."""
@@ -208,7 +192,7 @@ def _level_tests(levels: pd.DataFrame, column: str):
     if _condition_share(levels, column) >= CONFOUND_CORRELATION ** 2:
         confounded.append("condition")
     return dict(t, log10_p=lp, p_value=10 ** lp, confounded_with=confounded,
-                separating_design=[SEPARATING_DESIGN[c] for c in confounded]), design
+                separating_design=[separating_design(c) for c in confounded]), design
 
 
 def _run_sequences(runs: Sequence[xr.Dataset]) -> list[list[xr.Dataset]]:
@@ -465,13 +449,13 @@ def detect_elapsed_time_drift(ctx: DiagnosisContext) -> dict:
     if confound:
         return untested_finding(eff, confound) | {
             "confounded_with": ["temperature_c"],
-            "separating_design": ["repeat a reference temperature at the start and the end of the session"]}
+            "separating_design": [separating_design("temperature_c")]}
     t, design = _level_tests(levels, "elapsed_h")
     if t is None:
         return untested_finding(eff, "elapsed time (total_time/started_at) and the test order do not vary across "
                               "curves in a way that is not confounded with the test conditions; a design that "
-                              f"would: {SEPARATING_DESIGN['condition']}"
-                              + ("" if _usable(levels, "elapsed_h") else f"; {SEPARATING_DESIGN['elapsed_h']}"))
+                              f"would: {separating_design('condition')}"
+                              + ("" if _usable(levels, "elapsed_h") else f"; {separating_design('elapsed_h')}"))
     kappa = float(np.expm1(t["estimate"]))
     use_time = _usable(levels, "elapsed_h")
     unit = "1/h" if use_time else "1/test"
@@ -523,7 +507,7 @@ def detect_preconditioning(ctx: DiagnosisContext) -> dict:
         return untested_finding(eff, "no sample has a first load comparable with a later repeat of the same kind of "
                               "measurement and the first-load indicator is confounded with the test conditions "
                               "(one test per sample, or the first test is always the same kind); a design that "
-                              f"would: {SEPARATING_DESIGN['first_load']}")
+                              f"would: {separating_design('first_load')}")
     t, design = min(found, key=lambda f: f[0]["log10_p"])
     lp = min(0.0, t["log10_p"] + np.log10(len(found)))
     t = dict(t, log10_p=lp, p_value=10 ** lp)

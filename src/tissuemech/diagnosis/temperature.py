@@ -41,8 +41,8 @@ import xarray as xr
 
 from .. import tts
 from .. import stats as st
-from .catalogue import (DiagnosisContext, between_sample_test, curve_levels, make_finding, fix_record,
-                        level_regression, untested_finding)
+from .findings import DiagnosisContext, curve_levels, fix_record, make_finding, untested_finding
+from .levels import between_sample_test, level_regression
 from .evidence import run_id
 from .generic import CONFOUNDED_R2, MIN_EFFECT
 

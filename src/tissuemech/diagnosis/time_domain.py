@@ -10,7 +10,8 @@ from statsmodels.regression.linear_model import OLS
 
 from .. import stats as st
 from ..spectra import decade_aligned_taus, prony_complex_modulus
-from .evidence import estimate_noise, fit_prony_relaxation, noise_sd, nominal_strain, run_id
+from .evidence import fit_prony_relaxation, nominal_strain, run_id
+from .noise import estimate_noise, noise_sd
 from .findings import (DiagnosisContext, TIME_DOMAIN, cv_group_column, demean_by, fix_record, group_cv,
                        make_finding, rms, untested_finding)
 
