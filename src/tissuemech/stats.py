@@ -435,44 +435,60 @@ def variation_level(table: pd.DataFrame, column: str, specimen: str = "specimen"
     return "specimen"
 
 
-def mixed_coefficient_test(table: pd.DataFrame, value: str, covariate: str, factors: Sequence[str] = (),
-                           specimen: str = "specimen", sample: str | None = "sample", categorical: bool = False) -> dict | None:
-    """Test of one fixed covariate of ``value`` with specimen and sample as random effects (:func:`mixed_effects`:
-    ``value ~ 1 + covariate + C(factors) + (1 | specimen) + (1 | sample in specimen)``).
+#: fewest residual degrees of freedom of a coefficient test in :func:`mixed_coefficient_test`
+MIN_TEST_DF = 2
 
-    Degrees of freedom by the between-within rule: a covariate that varies within pieces is referred to
-    n - n_pieces - p_within, one that varies only between the pieces of a specimen to n_pieces - n_specimens -
-    p_piece, one constant within specimens to n_specimens - p_specimen (p: the fixed parameters estimated at that
-    level, the intercept at the specimen level), so that a covariate that follows the specimens is judged on the
-    specimens, not on the curves. A numeric covariate gives a t-test of its slope; ``categorical`` a joint Wald F
-    over its levels. Where the mixed model cannot be fitted (fewer than 2 specimens, a failed or degenerate fit)
-    the fixed part is fitted by OLS with standard errors clustered by specimen (else by sample; t with G - 1 df,
-    :func:`cluster_regression`), and ``method`` says so. Returns ``statistic``, ``p_value``, ``log10_p``,
-    ``estimate``/``std_error`` (numeric), ``df`` (``df1``/``df2`` for a factor), ``level`` (:func:`variation_level`),
-    ``method``; None when the covariate does not vary or is collinear with the factors.
+
+def mixed_coefficient_test(table: pd.DataFrame, value: str, covariate: str | Sequence[str],
+                           factors: Sequence[str] = (), specimen: str = "specimen", sample: str | None = "sample",
+                           categorical: bool = False, controls: Sequence[str] = ()) -> dict | None:
+    """Test of fixed covariates of ``value`` with specimen and sample as random effects (:func:`mixed_effects`:
+    ``value ~ 1 + covariate(s) + controls + C(factors) + (1 | specimen) + (1 | sample in specimen)``).
+
+    Degrees of freedom by the between-within rule: a covariate that varies within pieces (a ``specimen``/``sample``
+    pair) is referred to n - n_pieces - p_within, one that varies only between the pieces of a specimen to
+    n_pieces - n_specimens - p_piece, one constant within specimens to n_specimens - p_specimen (p: the fixed
+    parameters estimated at that level, the intercept at the specimen level), so that a covariate that follows the
+    specimens is judged on the specimens, not on the curves. One numeric ``covariate`` gives a t-test of its slope;
+    several (a sequence) a joint Wald F; ``categorical`` a joint Wald F over its levels. ``controls``: numeric
+    columns held fixed (not tested). Where the mixed model cannot be fitted (fewer than 2 specimens, a failed or
+    degenerate fit) the fixed part is fitted by OLS with standard errors clustered by specimen (else by sample; t
+    with G - 1 df, :func:`cluster_regression`; HC3 with one sample), and ``method`` says so. Returns ``statistic``,
+    ``p_value``, ``log10_p``, ``estimate``/``std_error`` (one numeric covariate), ``df`` (``df1``/``df2`` for an F),
+    ``level`` (:func:`variation_level`), ``n``, ``method``; None when the covariate does not vary, is collinear with
+    the factors and controls, or leaves fewer than :data:`MIN_TEST_DF` degrees of freedom.
     """
-    import statsmodels.api as sm
+    import statsmodels.api as sm  # noqa: F401  (a slow import, only here; cluster_regression needs it too)
 
-    cols = [value, covariate, specimen] + ([sample] if sample is not None else []) + list(factors)
-    d = table[cols].copy()
-    ok = np.isfinite(d[value].to_numpy(float)) & d[covariate].notna().to_numpy()
-    if not categorical:
-        ok &= np.isfinite(pd.to_numeric(d[covariate], errors="coerce").to_numpy(float))
+    tested = [covariate] if isinstance(covariate, str) else list(covariate)
+    cols = [value] + tested + list(controls) + [specimen] + ([sample] if sample is not None else []) + list(factors)
+    d = table[list(dict.fromkeys(cols))].copy()
+    ok = np.isfinite(d[value].to_numpy(float))
+    for c in tested:
+        ok &= d[c].notna().to_numpy()
+        if not categorical:
+            ok &= np.isfinite(pd.to_numeric(d[c], errors="coerce").to_numpy(float))
+    for c in controls:
+        ok &= np.isfinite(pd.to_numeric(d[c], errors="coerce").to_numpy(float))
     d = d[ok]
-    if categorical:
-        d[covariate] = d[covariate].astype(str)
-    else:
-        d[covariate] = d[covariate].astype(float)
-    if d[covariate].nunique() < 2 or len(d) < 4:
+    for c in tested:
+        d[c] = d[c].astype(str) if categorical else d[c].astype(float)
+    for c in controls:
+        d[c] = d[c].astype(float)
+    if any(d[c].nunique() < 2 for c in tested) or len(d) < 4:
         return None
     # the fixed-effect design: a covariate collinear with the factors (e.g. a gap set per condition) is not testable
     dummies = [pd.get_dummies(d[f].astype(str), drop_first=True, dtype=float) for f in factors]
-    xcov = pd.get_dummies(d[covariate], drop_first=True, dtype=float) if categorical else d[[covariate]]
-    X = pd.concat([pd.Series(1.0, index=d.index, name="const"), xcov] + dummies, axis=1).to_numpy(float)
-    base = pd.concat([pd.Series(1.0, index=d.index, name="const")] + dummies, axis=1).to_numpy(float)
-    if np.linalg.matrix_rank(X) - np.linalg.matrix_rank(base) < xcov.shape[1] or len(d) <= X.shape[1]:
+    xcov = (pd.get_dummies(d[tested[0]], drop_first=True, dtype=float).add_prefix("cov_") if categorical
+            else d[tested])
+    const = pd.Series(1.0, index=d.index, name="const")
+    X = pd.concat([const, xcov, d[list(controls)]] + dummies, axis=1).to_numpy(float)
+    base = pd.concat([const, d[list(controls)]] + dummies, axis=1).to_numpy(float)
+    rank = np.linalg.matrix_rank(X)
+    if rank - np.linalg.matrix_rank(base) < xcov.shape[1] or len(d) - rank < MIN_TEST_DF:
         return None
-    level = variation_level(d, covariate, specimen, sample)
+    level = max((variation_level(d, c, specimen, sample) for c in tested),
+                key=("specimen", "piece", "within").index)
     n = len(d)
     n_spec = d[specimen].nunique()
     piece = d[specimen].astype(str) + "/" + (d[sample].astype(str) if sample is not None else pd.Series(
@@ -480,59 +496,76 @@ def mixed_coefficient_test(table: pd.DataFrame, value: str, covariate: str, fact
     n_piece = piece.nunique()
     repeated = n_piece < n
     q = xcov.shape[1]
-    lev = {f: variation_level(d, f, specimen, sample) for f in factors}
     p_at = {"specimen": 1, "piece": 0, "within": 0}
-    for f, lv in lev.items():
-        p_at[lv] += int(d[f].nunique()) - 1
+    for f in factors:
+        p_at[variation_level(d, f, specimen, sample)] += int(d[f].nunique()) - 1
+    for c in controls:
+        p_at[variation_level(d, c, specimen, sample)] += 1
     p_at[level] += q
-    if not repeated and level == "within":
-        level = "piece"
     units = {"specimen": n_spec, "piece": n_piece - n_spec, "within": n - n_piece}
-    if not repeated:
+    if not repeated:  # one row per piece: the piece is the residual level
         units["piece"] = n - n_spec
-        p_at["piece"] += p_at.pop("within", 0)
-    df = float(max(units[level] - p_at[level], 1))
+        p_at["piece"] += p_at.pop("within")
+        level = "piece" if level == "within" else level
+    df = float(units[level] - p_at[level])
+    joint = categorical or q > 1
     method = None
-    if n_spec >= 2:
+    if df < MIN_TEST_DF:
+        method = f"{df:.0f} between-within degrees of freedom at the {level} level"
+    elif n_spec >= 2:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 me = mixed_effects(d, value, specimen=specimen, sample=sample,
-                                   covariates=() if categorical else (covariate,),
-                                   factors=tuple(factors) + ((covariate,) if categorical else ()))
-            if categorical:
-                w = me["factor_wald"][covariate]
-                f_stat = w["chi2"] / max(w["df"], 1)
+                                   covariates=tuple(controls) + (() if categorical else tuple(tested)),
+                                   factors=tuple(factors) + ((tested[0],) if categorical else ()))
+            extra = dict(level=level, n=float(n), n_specimens=float(n_spec), n_pieces=float(n_piece))
+            if joint:
+                if categorical:
+                    w = me["factor_wald"][tested[0]]
+                    chi2, k = w["chi2"], w["df"]
+                else:
+                    names = me["fe_names"]
+                    idx = [names.index(c) for c in tested]
+                    fe = np.asarray([me["coefficients"][c]["estimate"] for c in tested])
+                    cov = np.asarray(me["fe_cov"])[np.ix_(idx, idx)]
+                    chi2, k = float(fe @ np.linalg.solve(cov, fe)), len(tested)
+                f_stat = chi2 / max(k, 1)
                 if np.isfinite(f_stat):
-                    return statistic_result(f_stat, log10_p_from_f(f_stat, float(w["df"]), df), df1=float(w["df"]),
-                                            df2=df, level=level, n=float(n), n_specimens=float(n_spec),
-                                            n_pieces=float(n_piece), method=me["method"] + f"; Wald F, between-within df")
+                    return statistic_result(f_stat, log10_p_from_f(f_stat, float(k), df), df1=float(k), df2=df,
+                                            method=me["method"] + "; Wald F, between-within df", **extra)
             else:
-                c = me["coefficients"][covariate]
+                c = me["coefficients"][tested[0]]
                 if np.isfinite(c["std_error"]) and c["std_error"] > 0:
                     t = c["estimate"] / c["std_error"]
                     return statistic_result(t, log10_p_from_t(t, df), estimate=c["estimate"], std_error=c["std_error"],
-                                            df=df, level=level, n=float(n), n_specimens=float(n_spec),
-                                            n_pieces=float(n_piece), method=me["method"] + "; t, between-within df")
+                                            df=df, method=me["method"] + "; t, between-within df", **extra)
             method = "MixedLM gave no finite standard error"
         except (ValueError, np.linalg.LinAlgError, KeyError, IndexError) as exc:
             method = f"MixedLM failed ({type(exc).__name__})"
     else:
         method = "fewer than 2 specimens: no specimen random effect"
     groups = d[specimen].to_numpy() if n_spec >= 2 else (piece.to_numpy() if n_piece >= 2 else None)
-    Xf = pd.concat([xcov.add_prefix("cov_") if categorical else xcov] + dummies, axis=1).astype(float)
+    Xf = pd.concat([xcov, d[list(controls)]] + dummies, axis=1).astype(float)
     res = cluster_regression(d[value].to_numpy(float), Xf, groups=groups)
     how = ("OLS with standard errors clustered by " + ("specimen" if n_spec >= 2 else "sample")
            if groups is not None else "OLS with HC3 standard errors (one sample)")
-    if categorical:
-        names = [c for c in Xf.columns if c.startswith("cov_")]
-        w = res.wald_test(np.eye(len(res.params))[[list(res.params.index).index(c) for c in names]], scalar=True)
-        f_stat = float(np.squeeze(w.statistic))
-        df2 = float(w.df_denom)
-        return statistic_result(f_stat, log10_p_from_f(f_stat, float(len(names)), df2), df1=float(len(names)), df2=df2,
-                                level=level, n=float(n), n_specimens=float(n_spec), n_pieces=float(n_piece),
-                                method=f"{how} ({method}); Wald F")
-    out = coefficient_test(res, covariate)
-    out.update(level=level, n=float(n), n_specimens=float(n_spec), n_pieces=float(n_piece),
-               method=f"{how} ({method})")
+    extra = dict(level=level, n=float(n), n_specimens=float(n_spec), n_pieces=float(n_piece),
+                 method=f"{how} ({method})")
+    df_fb = float(_n_clusters(res) - 1) if getattr(res, "cov_type", "") == "cluster" else float(res.df_resid)
+    if df_fb < MIN_TEST_DF:
+        return None
+    if joint:
+        names = list(xcov.columns)
+        R = np.eye(len(res.params))[[list(res.params.index).index(c) for c in names]]
+        b = R @ np.asarray(res.params, float)
+        V = R @ np.asarray(res.cov_params(), float) @ R.T
+        try:
+            f_stat = float(b @ np.linalg.solve(V, b)) / len(names)
+        except np.linalg.LinAlgError:
+            return None
+        return statistic_result(f_stat, log10_p_from_f(f_stat, float(len(names)), df_fb), df1=float(len(names)),
+                                df2=df_fb, **extra)
+    out = coefficient_test(res, tested[0])
+    out.update(extra)
     return out

@@ -30,9 +30,9 @@ name it either. The decision adds ``p_holm``, ``significant``, ``detected``, ``d
 The signature matrix of ``science.md`` 4.4 is built into the detectors: the within-ramp residual
 regressions of non-separability (strain^2 x log-rate) and wall slip (stress threshold / gap) share one design
 with the rim-error (strain^2, strain^3) and offset (1/stress) signatures as controls and each other's
-covariate as a control; drift is read from curve levels within samples (sample + condition fixed effects)
-and within specimens across samples (:func:`~tissuemech.diagnosis.levels.between_sample_test`), never from a
-fixed test order or from the specimens' differences alone; preconditioning by the model-free paired comparison of
+covariate as a control; drift is read from curve levels within samples, else within specimens, with specimen and
+sample as random effects (:func:`~tissuemech.diagnosis.levels.within_test`), never from a fixed test order or
+from the specimens' differences; preconditioning by the model-free paired comparison of
 whatever test came first on each sample with later repeats of a comparable measurement and by the first-load
 indicator within samples; amplitude softening and large-strain yield or slip from the amplitude sweeps themselves
 (the raw phase tells a sample that yields at low frequency from inertia at high frequency); inertial ringing in
@@ -57,17 +57,17 @@ from __future__ import annotations
 from .causes import CATALOGUE_IDS, CAUSE_IDS, DETECTORS, explains
 from .findings import DiagnosisContext, curve_levels
 from .inertia import detect_inertia_dominated_points, detect_inertial_ringing, detect_yield_or_slip
-from .levels import (between_sample_test, detect_elapsed_time_drift, detect_outlier_specimen, detect_preconditioning,
-                     level_regression, paired_first_load_test)
+from .levels import (detect_elapsed_time_drift, detect_outlier_specimen, detect_preconditioning, paired_first_load_test,
+                     within_test)
 from .oscillation import detect_amplitude_softening, detect_instrument_inertia, raw_phase_inertia
 from .temperature import detect_temperature_dependence
 from .time_domain import (detect_finite_rise_time, detect_nonseparable_relaxation, detect_rim_stress_nonlinearity,
                           detect_torque_offset, detect_unidentified_i2_dependence, detect_wall_slip)
 
-__all__ = ["CATALOGUE_IDS", "CAUSE_IDS", "DETECTORS", "DiagnosisContext", "between_sample_test", "curve_levels",
+__all__ = ["CATALOGUE_IDS", "CAUSE_IDS", "DETECTORS", "DiagnosisContext", "curve_levels",
            "detect_amplitude_softening", "detect_elapsed_time_drift", "detect_finite_rise_time",
            "detect_inertia_dominated_points", "detect_inertial_ringing", "detect_instrument_inertia",
            "detect_nonseparable_relaxation", "detect_outlier_specimen", "detect_preconditioning",
            "detect_rim_stress_nonlinearity", "detect_temperature_dependence", "detect_torque_offset",
            "detect_unidentified_i2_dependence", "detect_wall_slip", "detect_yield_or_slip", "explains",
-           "level_regression", "paired_first_load_test", "raw_phase_inertia"]
+           "paired_first_load_test", "raw_phase_inertia", "within_test"]

@@ -13,7 +13,8 @@ covariate that follows them.
   (``test_order``) -- is tested *within* samples (the covariate centred on its sample mean; within specimens, on
   the specimen mean, where every sample has one curve): a drift follows the clock inside a sample, the specimens'
   differences do not;
-* the logged channels (``channel_temperature``, ``channel_gap``, ``channel_normal_force``: the curve's mean), the
+* the logged channels (``channel_temperature``, ``channel_gap``: the curve's mean; ``channel_normal_force``: the
+  force at the curve's smallest strains, the preload, since the thrust during a test is a response), the
   run temperature (``temperature_c``, from the channel or the sample sheet), the gap and plate radius of the sample
   sheet (``gap_mm``, ``radius_mm``) and every extra sample-sheet column (``covariate_<name>``; text columns are
   factors, tested by a joint Wald F over their levels) are tested on all the variation they have;
@@ -32,7 +33,8 @@ catalogue cause): every specimen's level relative to the median of the others (`
 studentised deletion t against the other specimens (``deletion_t``, t_{n-2}, Bonferroni over the n specimens:
 :func:`tissuemech.stats.deletion_outlier_test`), and the ratio this design would need to name it
 (``ratio_needed``: the deletion t at the first Holm step of the catalogue family, from the null distribution of
-the largest deletion t of n specimens, :data:`DELETION_T_CALIBRATION`); samples likewise within their specimen.
+the largest deletion t of n specimens, :data:`DELETION_T_CALIBRATION`); for samples, the most extreme sample of each
+specimen, its deviation from its specimen's mean tested against every sample's deviation (deletion t).
 """
 from __future__ import annotations
 
@@ -46,9 +48,9 @@ import scipy
 from .. import stats as st
 from ..tts import run_temperature_c
 from .evidence import run_id
-from .findings import DiagnosisContext, curve_levels, describe_log_change
+from .findings import DiagnosisContext, curve_levels, describe_log_change, separating_design
 from .generic import MIN_EFFECT, RESPONSE_CHANNELS
-from .levels import specimen_levels
+from .levels import specimen_levels, within_test
 
 #: channels of the residual table tested as covariates (their curve mean); response channels are not
 CHANNELS = ("channel_temperature", "channel_gap", "channel_normal_force")
@@ -77,6 +79,12 @@ def curve_frame(ctx: DiagnosisContext) -> pd.DataFrame:
     for ch in CHANNELS:
         if ch in t and ch not in RESPONSE_CHANNELS:
             lv[ch] = lv["curve"].map(g[ch].mean())
+    if "channel_normal_force" in t and "strain" in t:
+        # the normal force of a torsion test is also a response (the Poynting thrust grows with the strain and the
+        # stiffness): the covariate is the force the sample is held at, read at the curve's smallest strains
+        small = t[np.isfinite(t["channel_normal_force"]) & np.isfinite(t["strain"])]
+        small = small[small["strain"] <= small.groupby("curve")["strain"].transform(lambda s: s.quantile(0.2))]
+        lv["channel_normal_force"] = lv["curve"].map(small.groupby("curve")["channel_normal_force"].median())
     for c in t.columns:
         if c.startswith("covariate_"):
             lv[c] = lv["curve"].map(g[c].first())
@@ -107,8 +115,9 @@ def _candidates(lv: pd.DataFrame) -> list[tuple[str, str, str, bool]]:
     out = [("elapsed_time", "session clock", "started_at / total_time (hours), within samples", False),
            ("test_order", "session clock", "position in each sample's sequence, within samples", False),
            ("first_load", "session clock", "first test of each sample, within samples", False)]
-    out += [(c, "logged channel", f"logged {c[len('channel_'):].replace('_', ' ')} channel (curve mean)", False)
-            for c in CHANNELS if c in lv]
+    out += [(c, "logged channel", f"logged {c[len('channel_'):].replace('_', ' ')} channel ("
+             + ("at the curve's smallest strains: the preload" if c == "channel_normal_force" else "curve mean") + ")",
+             False) for c in CHANNELS if c in lv]
     if "channel_temperature" not in lv:   # the run temperature is the channel's median where there is one
         out.append(("temperature_c", "sample sheet", "run temperature (sample sheet or export)", False))
     out += [("gap_mm", "sample sheet", "gap (sample sheet, dataset.yaml or export)", False),
@@ -118,17 +127,6 @@ def _candidates(lv: pd.DataFrame) -> list[tuple[str, str, str, bool]]:
         out.append((c, "factor" if cat else "sample sheet", f"sample-sheet column {c[len('covariate_'):]!r}"
                     + (" (text: a factor)" if cat else ""), cat))
     return [o for o in out if o[0] in lv]
-
-
-def _centred(lv: pd.DataFrame, column: str) -> tuple[pd.Series, str] | None:
-    """The session-clock covariate within samples (centred on the sample mean), else within specimens; None when
-    it varies in neither."""
-    x = lv[column].astype(float)
-    for unit in ("sample", "specimen"):
-        within = x - x.groupby(lv[unit]).transform("mean")
-        if np.nanstd(within) > 1e-12 * max(np.nanstd(x), 1e-300):
-            return within, unit
-    return None
 
 
 def _effect_size(lv: pd.DataFrame, column: str, test: dict, categorical: bool) -> float:
@@ -158,32 +156,28 @@ def covariate_tests(lv: pd.DataFrame) -> list[dict]:
                               evidence=f"{column} does not vary over these curves ({n_levels} value)"
                               if n_levels else f"{column} is not recorded for these curves"))
             continue
-        frame = lv
-        within_unit = None
-        if kind == "session clock":
-            got = _centred(lv.assign(**{column: vals.astype(float)}), column)
-            if got is None:
-                out.append(_entry(column, kind, source, n_levels, int(vals.notna().sum()), tested=False,
-                                  evidence=f"{column} varies only between specimens: a trend of the session clock "
-                                           f"cannot be told from the specimens' differences (a design that would: "
-                                           f"several tests per sample, or samples of one specimen at different "
-                                           f"times)"))
-                continue
-            frame = lv.assign(**{column: got[0]})
-            within_unit = got[1]
+        variation = ""
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            t = st.mixed_coefficient_test(frame, "log_scale", column, factors, categorical=categorical)
+            if kind == "session clock":
+                got = within_test(lv[lv[column].notna()], column)
+                t = got[0] if got else None
+                variation = got[1].split(" (")[0] if got else ""
+            else:
+                t = st.mixed_coefficient_test(lv, "log_scale", column, factors, categorical=categorical)
         if t is None:
-            out.append(_entry(column, kind, source, n_levels, int(vals.notna().sum()), tested=False,
-                              evidence=f"{column} is collinear with the test conditions in this design (not "
-                                       f"separable from a misfit that differs by condition)"))
+            why = (f"{column} cannot be read within samples or within specimens apart from the test conditions "
+                   f"(a trend of the session clock is never read from the specimens' differences); a design that "
+                   f"would: {separating_design(column)}" if kind == "session clock" else
+                   f"{column} is collinear with the test conditions in this design, or leaves too few degrees of "
+                   f"freedom (not separable from a misfit that differs by condition)")
+            out.append(_entry(column, kind, source, n_levels, int(vals.notna().sum()), tested=False, evidence=why))
             continue
-        size = _effect_size(frame if not categorical else lv, column, t, categorical)
+        size = _effect_size(lv, column, t, categorical)
         out.append(_entry(column, kind, source, n_levels, int(t["n"]), tested=True, statistic=t["statistic"],
                           statistic_name="F" if categorical else "t", p_value=t["p_value"], log10_p=t["log10_p"],
                           effect_size=size, slope=t.get("estimate", np.nan), df=t.get("df", t.get("df2", np.nan)),
-                          variation=t["level"] + (f" (centred within {within_unit}s)" if within_unit else ""),
+                          variation=variation or f"varies at the {t['level']} level",
                           method=t["method"], practical=bool(abs(size) >= MIN_EFFECT),
                           evidence=(f"curve levels {describe_log_change(size)} over the range of {column} "
                                     f"({'F' if categorical else 't'} = {t['statistic']:.2f}, p = {t['p_value']:.2g}; "
@@ -219,7 +213,14 @@ def outlier_rows(ctx: DiagnosisContext, findings: Sequence[dict], alpha: float =
         within = per_sample - per_sample.groupby(spec_of).transform("mean")
         within = within[spec_of.map(spec_of.value_counts()) >= 2]
         if within.size >= 3:
-            out += _deletion_rows(within, "outlier sample", _critical_t(within.size, alpha / 2), {})
+            rows = _deletion_rows(within, "outlier sample", _critical_t(within.size, alpha / 2), {})
+            # the most extreme sample of each specimen (all of them would be one row per sample)
+            by_spec: dict[str, dict] = {}
+            for r in rows:
+                s = str(spec_of[r["covariate"]])
+                if s not in by_spec or abs(r["deletion_t"]) > abs(by_spec[s]["deletion_t"]):
+                    by_spec[s] = r
+            out += list(by_spec.values())
     return out
 
 

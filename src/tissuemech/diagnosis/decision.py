@@ -16,7 +16,7 @@ import scipy
 
 from .. import stats as st
 from .causes import CAUSE_IDS, explains, what_to_do
-from .findings import describe_log_change, separating_design
+from .findings import describe_fix, describe_log_change, separating_design
 
 DECISION_RULE = (
     "A cause is named (detected) only when (1) its test is significant after Holm at the family-wise alpha (alpha/2 "
@@ -78,6 +78,8 @@ def apply_rule(findings: Sequence[dict], structure: Sequence[dict], alpha: float
     for f, r, a in zip(tested, reject_c, adjusted_c):
         fix = f.get("fix") or {}
         scored = bool(fix) and _finite(fix.get("before")) and _finite(fix.get("after"))
+        if fix:
+            fix.setdefault("summary", describe_fix(fix.get("before"), fix.get("after")))
         if scored:
             margin = fix_margin(fix, eps, alpha, n_default)
             fix["margin"] = margin

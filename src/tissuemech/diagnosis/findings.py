@@ -94,10 +94,27 @@ def make_finding(effect: str, test: dict, statistic_name: str, effect_size: floa
     return out
 
 
+def describe_fix(before: float, after: float) -> str:
+    """A held-out score in bounded plain words: "held-out error 0.12 -> 0.08 (33 % lower)", "... (2.5x higher)",
+    "... (more than 100x higher)"."""
+    try:
+        b, a = float(before), float(after)
+    except (TypeError, ValueError):
+        return "not scored"
+    if not (np.isfinite(b) and np.isfinite(a)) or b < 0 or a < 0:
+        return "not scored"
+    head = f"held-out error {b:.3g} -> {a:.3g}"
+    if a <= b:
+        return head + (f" ({100 * (b - a) / b:.0f} % lower)" if b > 0 else " (unchanged)")
+    if b == 0 or a / b > 100:
+        return head + " (more than 100x higher: the fix makes the held-out predictions worse)"
+    return head + (f" ({100 * (a - b) / b:.0f} % higher)" if a < 2 * b else f" ({a / b:.2g}x higher)")
+
+
 def fix_record(model: str, metric: str, before: float, after: float, cv: str, **parameters) -> dict:
     gain = (before - after) / before if before > 0 and np.isfinite(after) else np.nan
     return {"model": model, "metric": metric, "before": float(before), "after": float(after),
-            "gain": float(gain), "cv": cv,
+            "gain": float(gain), "cv": cv, "summary": describe_fix(before, after),
             "parameters": {k: (float(v) if isinstance(v, (int, float, np.floating)) else v)
                            for k, v in parameters.items()}}
 
@@ -173,14 +190,6 @@ def curve_levels(table: pd.DataFrame) -> pd.DataFrame:
     out["order_source"] = source
     out["first_load"] = np.where(position.notna(), (position == 1).astype(float), np.nan)
     return out
-
-
-def fixed_effect_design(frame: pd.DataFrame, columns: Sequence[str], fixed_effects: Sequence[str]) -> pd.DataFrame:
-    X = frame[list(columns)].astype(float).copy()
-    for fe in fixed_effects:
-        if frame[fe].nunique() > 1:
-            X = X.join(pd.get_dummies(frame[fe], prefix=fe, drop_first=True, dtype=float))
-    return X
 
 
 def demean_by(frame: pd.DataFrame, value: str, by: str) -> np.ndarray:

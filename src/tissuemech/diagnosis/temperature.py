@@ -7,13 +7,12 @@ its ``temperature_c`` attribute (sample sheet / export); never a default
 (:func:`tissuemech.tts.run_temperature_c`). When fewer than :data:`MIN_TEMPERATURES` distinct temperatures
 (rounded to :data:`TEMPERATURE_RESOLUTION_C`) are present the cause is not testable.
 
-The per-curve level of the baseline's residual (:func:`tissuemech.diagnosis.catalogue.curve_levels`: median
-ln(observed/predicted) on the lower half of each curve) is regressed on the run temperature
-(:func:`tissuemech.diagnosis.catalogue.level_regression`, sample/condition fixed effects where the design
-allows, cluster-robust by sample; elapsed time as a control when it varies and is not collinear with
-temperature; with >= 5 distinct temperatures the p-value is the joint F-test of T and
-T^2, because shift factors are curved in T; and the two-stage between-sample test when >= 5 samples); the
-stronger with a Bonferroni factor 2. ``effect_size`` is the change of the curve level (ln) over the 5-95 % range of
+The per-curve level of the baseline's residual (:func:`tissuemech.diagnosis.findings.curve_levels`: median
+ln(observed/predicted) on the lower half of each curve) is regressed on the run temperature with the condition
+as fixed effects and specimen and sample as random effects (:func:`tissuemech.stats.mixed_coefficient_test`,
+between-within degrees of freedom: a temperature that changes only between specimens is judged on the
+specimens); elapsed time is a control when it varies and is not collinear with temperature; with >= 5 distinct
+temperatures the p-value is the joint F-test of T and T^2, because shift factors are curved in T. ``effect_size`` is the change of the curve level (ln) over the 5-95 % range of
 temperatures, practical when >= :data:`tissuemech.diagnosis.generic.MIN_EFFECT`.
 
 Fix and held-out gain (leave-one-temperature-out)
@@ -26,7 +25,8 @@ predicted from the training mastercurve (:func:`tissuemech.tts.predict_from_mast
 temperature-blind prediction from the same training sweeps (their unshifted pooled curve at the held-out
 frequencies: what a model without temperature predicts). Metric: RMS of log10 G' and log10 G'' errors
 (decades) over the held-out points both predictions cover; ``gain = (before - after) / before``. Without
-sweeps at several temperatures the fix is not evaluated (``fix`` None).
+sweeps at several temperatures the fix is a level trend exp(a + b T) of the curve levels, scored leaving each
+temperature out (:func:`level_fix`; metric: RMS ln error of the held-out curves' points).
 
 The finding carries ``shift_factors`` (:meth:`tissuemech.tts.TTSResult.to_dict` of all sweeps), ``wlf`` and
 ``arrhenius`` (parameters with standard errors) and ``temperatures_c``.
@@ -41,8 +41,8 @@ import xarray as xr
 
 from .. import tts
 from .. import stats as st
-from .findings import DiagnosisContext, curve_levels, fix_record, make_finding, untested_finding
-from .levels import between_sample_test, level_regression
+from .findings import (DiagnosisContext, curve_levels, describe_fix, fix_record, make_finding, primary_rows,
+                       untested_finding)
 from .evidence import run_id
 from .generic import CONFOUNDED_R2, MIN_EFFECT
 
@@ -137,25 +137,48 @@ def _time_control(levels: pd.DataFrame) -> list[str]:
     return ["elapsed_h"] if r2 < CONFOUNDED_R2 else []
 
 
+def _factors(levels: pd.DataFrame) -> tuple[str, ...]:
+    return ("condition",) if levels["condition"].nunique() > 1 else ()
+
+
 def _curved_test(levels: pd.DataFrame, controls: Sequence[str] = ()) -> dict | None:
-    """Joint Wald F-test of temperature and (centred) temperature^2 in the curve-level regression (same
-    fixed effects and robust covariance as :func:`level_regression`); None with < 5 distinct temperatures."""
+    """Joint Wald F-test of temperature and (centred) temperature^2 in the curve-level mixed model (condition
+    fixed effects, specimen and sample random effects, :func:`tissuemech.stats.mixed_coefficient_test`); None with
+    < 5 distinct temperatures."""
     if levels["temperature_c"].nunique() < 5:
         return None
     t = levels["temperature_c"]
     lv = levels.assign(temperature_sq=((t - t.mean()) / max(float(t.std()), 1e-12)) ** 2)
-    res = level_regression(lv, "log_scale", ["temperature_c", "temperature_sq"] + list(controls))
-    if res is None:
-        return None
-    names = list(res.params.index)
-    R = np.zeros((2, len(names)))
-    R[0, names.index("temperature_c")] = 1.0
-    R[1, names.index("temperature_sq")] = 1.0
-    w = res.f_test(R)
-    f = float(np.squeeze(w.fvalue))
-    df2 = float(w.df_denom)
-    return {"statistic": f, "df1": 2.0, "df2": df2, "log10_p": st.log10_p_from_f(f, 2.0, df2),
-            "p_value": 10 ** st.log10_p_from_f(f, 2.0, df2)}
+    return st.mixed_coefficient_test(lv, "log_scale", ["temperature_c", "temperature_sq"], _factors(levels),
+                                     controls=tuple(controls))
+
+
+def level_fix(ctx: DiagnosisContext, levels: pd.DataFrame) -> tuple[float, float, int, int]:
+    """Held-out score of a level trend in temperature, exp(a + b T), where no sweeps allow the TTS fix: every
+    distinct temperature is held out in turn, the line is fitted to the other temperatures' curve levels
+    (condition means removed) and predicts the held-out curves' points; before: the other temperatures' mean
+    level. Returns (RMS ln error before, after, folds, held-out points)."""
+    rows = primary_rows(ctx.table)
+    errs = {c: g.to_numpy(float) for c, g in rows.groupby("curve")["log_ratio"]}
+    lv = levels.assign(r=levels["log_scale"] - levels.groupby("condition")["log_scale"].transform("mean"),
+                       group=np.round(levels["temperature_c"] / TEMPERATURE_RESOLUTION_C))
+    before, after = [], []
+    for g in pd.unique(lv["group"]):
+        train, test = lv[lv["group"] != g], lv[lv["group"] == g]
+        if train["temperature_c"].nunique() < 2:
+            continue
+        slope, icpt = np.polyfit(train["temperature_c"], train["r"], 1)
+        for _, row in test.iterrows():
+            e = errs.get(row["curve"])
+            if e is None:
+                continue
+            shift = row["log_scale"] - row["r"]          # the condition mean of this curve's level
+            before.append(e - shift - train["r"].mean())
+            after.append(e - shift - (icpt + slope * row["temperature_c"]))
+    if not before:
+        return np.nan, np.nan, 0, 0
+    b, a = np.concatenate(before), np.concatenate(after)
+    return float(np.sqrt(np.mean(b ** 2))), float(np.sqrt(np.mean(a ** 2))), int(lv["group"].nunique()), int(b.size)
 
 
 def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
@@ -172,35 +195,30 @@ def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
     levels = levels.assign(temperature_c=levels["curve"].map(temps)).dropna(subset=["temperature_c"])
     if len(levels) < 4 or levels["temperature_c"].nunique() < MIN_TEMPERATURES:
         return untested_finding(EFFECT, "not testable here: fewer than 4 residual curves with a temperature")
-    found = []
     controls = _time_control(levels)
-    res = level_regression(levels, "log_scale", ["temperature_c"] + controls)
-    if res is not None:
-        lin = st.coefficient_test(res, "temperature_c")
-        design = (f"curve levels, fixed effects {res.fixed_effects or 'none'}"
-                  + (", elapsed-time control" if controls else ""))
-        joint = _curved_test(levels, controls)
-        if joint is not None:
-            # the slope gives the size; the p-value is the joint test of (T, T^2): shift factors are curved
-            # in T (WLF), so a straight line understates a temperature dependence
-            lin = dict(lin, statistic=joint["statistic"], p_value=joint["p_value"], log10_p=joint["log10_p"])
-            design += f", joint F of T and T^2 (df {joint['df1']:.0f}, {joint['df2']:.0f})"
-        found.append((lin, design))
-    b = between_sample_test(levels, "log_scale", "temperature_c")
-    if b is not None:
-        found.append((b, f"between samples ({b['design']})"))
-    if not found:
-        return untested_finding(EFFECT, "not testable here: temperature is collinear with the sample/condition "
-                                        "fixed effects of this design")
-    t, design = min(found, key=lambda f: f[0]["log10_p"])
-    lp = min(0.0, t["log10_p"] + np.log10(len(found)))
-    t = dict(t, log10_p=lp, p_value=10 ** lp)
+    t = st.mixed_coefficient_test(levels, "log_scale", "temperature_c", _factors(levels), controls=tuple(controls))
+    if t is None:
+        return untested_finding(EFFECT, "not testable here: temperature is collinear with the test conditions of this "
+                                        "design")
+    design = (f"curve levels, condition fixed effects, specimen and sample random effects"
+              + (", elapsed-time control" if controls else "") + f"; {t['method']}")
+    joint = _curved_test(levels, controls)
+    if joint is not None:
+        # the slope gives the size; the p-value is the joint test of (T, T^2): shift factors are curved
+        # in T (WLF), so a straight line understates a temperature dependence
+        t = dict(t, statistic=joint["statistic"], p_value=joint["p_value"], log10_p=joint["log10_p"])
+        design += f", joint F of T and T^2 (df {joint['df1']:.0f}, {joint['df2']:.0f})"
     lo, hi = np.nanquantile(levels["temperature_c"], [0.05, 0.95])
     size = float(t["estimate"] * (hi - lo))
     sweeps = tts.sweeps_from_runs(ctx.runs)
     extra: dict = {"temperatures_c": [float(x) for x in distinct]}
-    fix = None
-    fix_txt = " No frequency sweeps at several temperatures: the TTS fix is not evaluated."
+    b_, a_, n_folds, n_pts = level_fix(ctx, levels)
+    fix = (fix_record("temperature level trend: prediction x exp(a + b T), b from the other temperatures",
+                      "rms_log_residual", b_, a_, "leave-one-temperature-out", per_degc=float(np.expm1(t["estimate"]))
+                      if "estimate" in t else np.nan, n_held_out_points=n_pts) if n_folds >= MIN_TEMPERATURES else None)
+    fix_txt = (f" No frequency sweeps at several temperatures for the TTS fix; a level trend in temperature, fitted "
+               f"leaving each temperature out, predicts the held-out curves with {describe_fix(b_, a_)}."
+               if fix is not None else " No frequency sweeps at several temperatures: the TTS fix is not evaluated.")
     if len(distinct_temperatures(s.temperature_c for s in sweeps)) >= MIN_TEMPERATURES:
         full = tts.shift_factors(sweeps)
         ok = np.isfinite(full.log_aT)

@@ -116,19 +116,28 @@ def detect_torque_offset(ctx: DiagnosisContext) -> dict:
 
     group = "condition" if small["condition"].nunique() >= 3 else cv_group_column(small)
     before, after = group_cv(small, group, fit, error)
+    share = abs(offset_pa) / late_level if late_level > 0 else np.inf
     where = (f"torque offset M0 = {offset_unm:+.3g} uN m at R = {1e3 * radius:.1f} mm" if np.isfinite(radius)
              else "no plate radius in the data: not convertible to a torque")
-    size = (f"{100 * abs(offset_pa) / late_level:.3g} % of the lowest curve level (median observed stress of "
-            f"that curve, {late_level:.3g} Pa)"
+    if not share <= 1.0:
+        offset_txt = "an intercept"
+    else:
+        offset_txt = f"a common additive intercept of {offset_pa:+.3g} Pa ({where}; t = {tval:.2f} across curves)"
+    size = (f"{100 * share:.3g} % of the lowest curve level (median observed stress of that curve, "
+            f"{late_level:.3g} Pa)" if share <= 1.0 else
+            f"more than the lowest curve level itself ({late_level:.3g} Pa, median observed stress of that curve): an "
+            f"intercept an offset of the transducer cannot make, so the baseline's misfit, not an offset"
             if late_level > 0 else "the observed stresses of these curves have no positive median level")
     evidence = (f"Stress residuals of {ctx.model} on {len(curves)} relaxation holds and ramp starts (<= 20 %) "
-                f"have a common additive intercept of {offset_pa:+.3g} Pa ({where}; t = {tval:.2f} across curves), "
-                f"i.e. {size}: G(t, gamma0) = sigma/gamma0 diverges as 1/gamma0.")
+                f"have {offset_txt}, i.e. {size}"
+                + (": G(t, gamma0) = sigma/gamma0 diverges as 1/gamma0." if share <= 1.0 else
+                   f" (t = {tval:.2f} across curves)."))
     fix = ctx.fit_info.get("fixes", {}).get(eff) or fix_record(
         "torque offset M0 as a nuisance parameter (stress + 2 M0/(pi R^3))", "rms_rel_residual_small_strain",
         before, after, f"leave-one-{group}-out", offset_pa=offset_pa, offset_uNm=offset_unm,
         n_held_out_points=len(small))
-    practical = bool(late_level > 0 and abs(offset_pa) >= 0.02 * late_level)
+    # an offset of the transducer is part of every observed stress, so it cannot exceed the lowest curve's level
+    practical = bool(late_level > 0 and 0.02 <= share <= 1.0)
     return make_finding(eff, t, "t", offset_unm, "uN m", practical, evidence, fix)
 
 
