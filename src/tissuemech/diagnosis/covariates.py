@@ -70,12 +70,18 @@ DELETION_T_CALIBRATION = {
 
 
 def curve_frame(ctx: DiagnosisContext) -> pd.DataFrame:
-    """One row per curve: the curve level and every covariate of the table (module docstring)."""
-    lv = curve_levels(ctx.table)
-    if lv.empty:
-        return lv
+    """One row per curve of the residual table: the curve level (NaN for a curve with no point above the noise
+    floor) and every covariate of the table (module docstring)."""
     t = ctx.table
+    if t.empty or "curve" not in t:
+        return pd.DataFrame()
     g = t.groupby("curve", sort=False)
+    lv = pd.DataFrame({"curve": list(g.groups), "specimen": g["specimen"].first().to_numpy(),
+                       "sample": g["sample"].first().to_numpy(), "test": g["test"].first().to_numpy(),
+                       "condition": g["condition"].first().to_numpy()})
+    levels = curve_levels(t).set_index("curve")
+    for c in ("log_scale", "elapsed_h", "position", "first_load"):
+        lv[c] = lv["curve"].map(levels[c]) if c in levels else np.nan
     for ch in CHANNELS:
         if ch in t and ch not in RESPONSE_CHANNELS:
             lv[ch] = lv["curve"].map(g[ch].mean())
@@ -146,9 +152,17 @@ def _entry(column, kind, source, n_levels, n_curves, **kw) -> dict:
 def covariate_tests(lv: pd.DataFrame) -> list[dict]:
     """The tested (or untestable) covariate entries of a :func:`curve_frame` (module docstring)."""
     out = []
-    lv = lv[np.isfinite(lv["log_scale"])]
+    if lv.empty:
+        return out
+    n_all = len(lv)
+    lv = lv[np.isfinite(lv["log_scale"].astype(float))]
     factors = ("condition",) if lv["condition"].nunique() > 1 else ()
     for column, kind, source, categorical in _candidates(lv):
+        if len(lv) < 4:
+            out.append(_entry(column, kind, source, 0, len(lv), tested=False,
+                              evidence=f"{len(lv)} of the {n_all} curves have a level above the noise floor; a "
+                                       f"covariate test needs 4"))
+            continue
         vals = lv[column]
         n_levels = int(vals.nunique(dropna=True))
         if n_levels < 2:

@@ -133,7 +133,7 @@ def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "mode
     shapes: list[dict] = []
     generic = structure_tests(table, predicted_tests, shapes) if len(table) else []
     frame = curve_frame(ctx) if len(table) else pd.DataFrame()
-    covariates = covariate_tests(frame) if len(frame) >= 4 else []
+    covariates = covariate_tests(frame)
     scanned = [c for c in covariates if c.get("tested")]
     not_evaluated = apply_rule(findings, generic + scanned, alpha, eps, n_curves, usable)
     for c in covariates:

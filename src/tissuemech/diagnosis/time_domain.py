@@ -73,7 +73,10 @@ def detect_torque_offset(ctx: DiagnosisContext) -> dict:
 
     An additive torque offset gives residual = c + (s - 1) * predicted with c the same on every curve,
     while specimen variability only changes the slope s; the per-curve intercepts are t-tested across curves
-    (:func:`offset_intercept`). The fix is the baseline refitted with the offset removed, scored on held-out
+    (:func:`offset_intercept`). Practical only when the intercept is at least 2 % of the lowest curve's level and
+    no larger than that level (an offset is part of every observed stress), and, where both kinds are measured,
+    when the ramp starts and the relaxation holds give the same intercept (:func:`offset_consistency`; a misfit of
+    the baseline's shape, e.g. a strain-dependent relaxation, gives them different ones). The fix is the baseline refitted with the offset removed, scored on held-out
     conditions (``fit_info["fixes"]["torque_offset"]``, :func:`tissuemech.diagnosis.report.with_model_fixes`)
     when it was scored, else the held-out curves' residuals less the offset estimated on the other curves.
     """
@@ -138,7 +141,32 @@ def detect_torque_offset(ctx: DiagnosisContext) -> dict:
         n_held_out_points=len(small))
     # an offset of the transducer is part of every observed stress, so it cannot exceed the lowest curve's level
     practical = bool(late_level > 0 and 0.02 <= share <= 1.0)
-    return make_finding(eff, t, "t", offset_unm, "uN m", practical, evidence, fix)
+    # and it is one torque, the same in the ramps and the relaxation holds: a misfit of the baseline's shape (a
+    # strain-dependent relaxation changes the holds, not the start of a ramp) gives them different intercepts
+    consistency = offset_consistency(ctx.table)
+    if consistency is not None:
+        evidence += (f" Ramp starts alone give {consistency['ramps']:+.3g} Pa, relaxation holds alone "
+                     f"{consistency['holds']:+.3g} Pa (z = {consistency['z']:.2f} for their difference)")
+        if consistency["p_value"] < st.ALPHA:
+            practical = False
+            evidence += (": one transducer offset gives the same intercept in both, so this is a misfit of the "
+                         "baseline's shape (e.g. a strain-dependent relaxation), not an offset.")
+        else:
+            evidence += ": consistent with one offset."
+    return make_finding(eff, t, "t", offset_unm, "uN m", practical, evidence, fix, consistency=consistency)
+
+
+def offset_consistency(table: pd.DataFrame) -> dict | None:
+    """Intercepts of :func:`offset_intercept` read from the ramp starts alone and from the relaxation holds alone, and
+    the z-test of their difference (two-sided, normal); None unless both have their 4 curves."""
+    r = offset_intercept(table[table["test"] == "constant_shear_rate"])
+    h = offset_intercept(table[table["test"] == "stress_relaxation"])
+    if r is None or h is None:
+        return None
+    se = float(np.hypot(r["std_error"], h["std_error"]))
+    z = (r["estimate"] - h["estimate"]) / se if se > 0 else 0.0
+    return {"ramps": float(r["estimate"]), "holds": float(h["estimate"]), "z": float(z),
+            "p_value": float(10 ** st.log10_p_from_z(z))}
 
 
 # ------------------------------------------------------------------------------------------------
