@@ -425,12 +425,25 @@ def mixed_effects(table: pd.DataFrame, value: str, specimen: str = "specimen", s
 def variation_level(table: pd.DataFrame, column: str, specimen: str = "specimen", sample: str | None = "sample") -> str:
     """Where a column varies in a nested specimen/sample design: ``"within"`` (between rows of one piece, a
     ``specimen``/``sample`` pair), ``"piece"`` (between the pieces of one specimen, constant within each) or
-    ``"specimen"`` (constant within every specimen)."""
+    ``"specimen"`` (constant within every specimen). A numeric column counts as varying within a group when its
+    standard deviation there exceeds a tenth of its overall one."""
     keys = [specimen] + ([sample] if sample is not None else [])
-    col = table[column].astype(str) if table[column].dtype == object else table[column]
-    if sample is not None and (col.groupby([table[k] for k in keys]).nunique() > 1).any():
+    if not pd.api.types.is_numeric_dtype(table[column]) or pd.api.types.is_bool_dtype(table[column]):
+        col = table[column].astype(str)
+        if sample is not None and (col.groupby([table[k] for k in keys]).nunique() > 1).any():
+            return "within"
+        if (col.groupby(table[specimen]).nunique() > 1).any():
+            return "piece" if sample is not None else "within"
+        return "specimen"
+    # a numeric column varies within a group when its spread there is more than a tenth of its spread overall (a
+    # logged channel's sensor noise inside a sample does not make a between-sample covariate a within-sample one)
+    x = table[column].astype(float)
+    total = float(x.std())
+    if not total > 0:
+        return "specimen"
+    if sample is not None and float((x - x.groupby([table[k] for k in keys]).transform("mean")).std()) > 0.1 * total:
         return "within"
-    if (col.groupby(table[specimen]).nunique() > 1).any():
+    if float((x - x.groupby(table[specimen]).transform("mean")).std()) > 0.1 * total:
         return "piece" if sample is not None else "within"
     return "specimen"
 

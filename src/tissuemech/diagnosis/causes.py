@@ -266,8 +266,9 @@ def what_to_do(finding: dict) -> str:
                 "ranking and widen the model family (more relaxation times, a nonlinear law) before reading causes.")
     if effect == "unexplained_structure":
         cands = finding.get("candidates") or []
-        return (f"Check the lab notes for what changed along {finding.get('covariate', 'this covariate')} in the "
-                f"{str(finding.get('test', '')).replace('_', ' ')} tests"
+        test = str(finding.get("test", ""))
+        where = "across the tests" if test in ("every test", "") else f"in the {test.replace('_', ' ')} tests"
+        return (f"Check the lab notes for what changed along {finding.get('covariate', 'this covariate')} {where}"
                 + (f"; causes whose signature involves it: {', '.join(cands)}" if cands else "")
                 + (f"; a design that would separate it: {finding['separating_design']}"
                    if finding.get("separating_design") else "") + ".")

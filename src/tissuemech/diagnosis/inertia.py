@@ -554,11 +554,17 @@ def _ringing_test(curves, rises, kind: str):
     best = _best_pair(coefs, grid, full=True)
     if best is None:
         return f"the ring coefficients of the {kind} curves are degenerate"
-    p, tau, h = best
+    _, _, h = best
     # the best of len(grid) (period, damping) pairs: Bonferroni over the grid (the frequency of a ringing is
     # not defined under the null, so the p-value of the best pair alone would be anti-conservative)
     lp = min(0.0, h["log10_p"] + np.log10(len(grid)))
     test = {"statistic": float(h["statistic"]), "p_value": 10 ** lp, "log10_p": float(lp)}
+    # the ring's period and decay: the pair that explains most of the curves' early signal (pooled least squares
+    # over the grid, then refined), not the pair of the smallest p (a shared smooth misfit can be the most coherent)
+    pairs = np.asarray(grid, float)
+    rss = np.sum([_ring_fits(c[1], c[2], pairs)[1] / max(c[3], 1e-300) ** 2 for c in curves], axis=0)
+    start = tuple(pairs[int(np.nanargmin(rss))])
+    p, tau = _refine(curves, start)
     amps = []
     for cid, tt, y, level in curves:
         _, coef = _rss(y, np.column_stack([_trend(tt), _ring(tt, p, tau)]))

@@ -290,22 +290,25 @@ def paired_first_load_test(ctx: DiagnosisContext) -> dict | None:
     return out
 
 
-def _scale_correction_cv(ctx: DiagnosisContext, levels: pd.DataFrame, column: str) -> tuple[float, float, str]:
-    """Held-out gain of a curve-level covariate (elapsed time, first load).
+def scale_correction_cv(ctx: DiagnosisContext, levels: pd.DataFrame, column: str,
+                        units: tuple[str, str] | None = None) -> tuple[float, float, str, int]:
+    """Held-out gain of a curve-level covariate (elapsed time, first load, temperature).
 
-    With >= 3 curves per sample: leave one curve out and predict its level from the other curves of the
-    same sample (baseline: their mean; fix: their mean adjusted by b * column, b fitted within samples
-    without the held-out curve). Otherwise leave one sample out and use the specimen's other samples.
-    Error: log(observed/predicted) at every point of the held-out curve."""
+    ``units`` (unit, held): with ("sample", "curve") -- the default with >= 3 curves per sample -- leave one curve
+    out and predict its level from the other curves of the same sample (baseline: their mean; fix: their mean
+    adjusted by b * column, b fitted within samples without the held-out curve); with ("specimen", "sample") --
+    the default otherwise, and the unit of a covariate that changes only between samples -- leave one sample out
+    and use the specimen's other samples. Error: log(observed/predicted) at every point of the held-out curve.
+    Returns (RMS error before, after, the held-out unit, the number of held-out points)."""
     if column == "elapsed_h" and levels["elapsed_h"].isna().any():
         levels = levels.assign(elapsed_h=levels["position"].astype(float))
     levels = levels[levels[column].notna()]
     if levels.empty:
-        return np.nan, np.nan, "curve"
+        return np.nan, np.nan, "curve", 0
     rows = primary_rows(ctx.table)
     point_errors = {c: g.to_numpy(float) for c, g in rows.groupby("curve")["log_ratio"]}
     by_sample = levels.groupby("sample").size().min() >= 3
-    unit, held = ("sample", "curve") if by_sample else ("specimen", "sample")
+    unit, held = units or (("sample", "curve") if by_sample else ("specimen", "sample"))
     unit_codes = pd.factorize(levels[unit])[0]
     held_codes = pd.factorize(levels[held])[0]
     x_all = levels[column].to_numpy(float)
@@ -336,8 +339,9 @@ def _scale_correction_cv(ctx: DiagnosisContext, levels: pd.DataFrame, column: st
             before.append(e - base)
             after.append(e - adj - slope * x_all[i])
     if not before:
-        return np.nan, np.nan, held
-    return rms(np.concatenate(before)), rms(np.concatenate(after)), held
+        return np.nan, np.nan, held, 0
+    b = np.concatenate(before)
+    return rms(b), rms(np.concatenate(after)), held, int(np.isfinite(b).sum())
 
 
 #: elapsed time and run temperature explaining this share of each other's variance across curves cannot be
@@ -404,7 +408,8 @@ def detect_elapsed_time_drift(ctx: DiagnosisContext) -> dict:
     unit = "1/h" if use_time else "1/test"
     span = float(levels["elapsed_h"].max() - levels["elapsed_h"].min()) if use_time else float(
         levels["position"].max() - levels["position"].min())
-    before, after, group = _scale_correction_cv(ctx, levels, "elapsed_h")
+    before, after, group, n_held = scale_correction_cv(
+        ctx, levels, "elapsed_h", None if design.startswith("within samples") else ("specimen", "sample"))
     order = levels.sort_values("elapsed_h" if use_time else "position")["log_scale"].to_numpy()
     runs = st.runs_test(order - np.median(order))
     source = ("hour of elapsed session time" if use_time else
@@ -418,7 +423,7 @@ def detect_elapsed_time_drift(ctx: DiagnosisContext) -> dict:
                 f"{100 * np.expm1(abs(t['estimate']) * span):.0f} %; curve scales ordered by time have "
                 f"{int(runs['n_runs'])} runs (runs test p = {runs['p_value']:.2g})." + _confound_text(t))
     fix = fix_record("elapsed-time covariate: prediction x exp(b0 + kappa t_elapsed)", "rms_log_residual",
-               before, after, f"leave-one-{group}-out", kappa_per_unit=kappa)
+               before, after, f"leave-one-{group}-out", kappa_per_unit=kappa, n_held_out_points=n_held)
     practical = abs(np.expm1(abs(t["estimate"]) * span)) >= 0.05
     return make_finding(eff, t, "t", kappa, unit, practical, evidence, fix, time_source=(
         "elapsed time" if use_time else "test order"), confounded_with=t["confounded_with"],
@@ -466,7 +471,7 @@ def detect_preconditioning(ctx: DiagnosisContext) -> dict:
     lp = min(0.0, t["log10_p"] + np.log10(len(found)))
     t = dict(t, log10_p=lp, p_value=10 ** lp)
     delta = float(np.expm1(t["estimate"]))
-    before, after, group = _scale_correction_cv(ctx, levels, "first_load")
+    before, after, group, n_held = scale_correction_cv(ctx, levels, "first_load")
     known = levels[levels["first_load"].notna()]
     n_first = int(known["first_load"].sum())
     first_tests = known.loc[known["first_load"] == 1, "test"].value_counts().index.tolist()
@@ -477,7 +482,8 @@ def detect_preconditioning(ctx: DiagnosisContext) -> dict:
                 + (f"; Bonferroni over {len(found)} tests" if len(found) > 1 else "") + ")."
                 + _confound_text(t))
     fix = fix_record("first-load indicator (pseudo-elastic factor on virgin loading) / discard first cycle",
-               "rms_log_residual", before, after, f"leave-one-{group}-out", first_load_factor=1 + delta)
+               "rms_log_residual", before, after, f"leave-one-{group}-out", first_load_factor=1 + delta,
+               n_held_out_points=n_held)
     # preconditioning softens: only a stiffer first load is this cause (a softer one is another misfit)
     return make_finding(eff, t, "t", delta, "1 (relative stiffness of first load)", delta >= 0.05, evidence, fix,
                     confounded_with=t.get("confounded_with", []),

@@ -12,12 +12,14 @@ ln(observed/predicted) on the lower half of each curve) is regressed on the run 
 as fixed effects and specimen and sample as random effects (:func:`tissuemech.stats.mixed_coefficient_test`,
 between-within degrees of freedom: a temperature that changes only between specimens is judged on the
 specimens); elapsed time is a control when it varies and is not collinear with temperature; with >= 5 distinct
-temperatures the p-value is the joint F-test of T and T^2, because shift factors are curved in T. ``effect_size`` is the change of the curve level (ln) over the 5-95 % range of
+temperatures the p-value is the stronger of the slope's t and the joint F-test of T and T^2 (shift factors are
+curved in T), Bonferroni x 2. ``effect_size`` is the change of the curve level (ln) over the 5-95 % range of
 temperatures, practical when >= :data:`tissuemech.diagnosis.generic.MIN_EFFECT`.
 
 Fix and held-out gain (leave-one-temperature-out)
 -------------------------------------------------
-Where frequency sweeps exist at >= :data:`MIN_TEMPERATURES` temperatures: for every temperature, the
+Where frequency sweeps of one loading exist at >= :data:`MIN_TEMPERATURES` temperatures (the temperature changes
+within samples: a temperature series): for every temperature, the
 sweeps at the *other* temperatures are shifted automatically (:func:`tissuemech.tts.shift_factors`), a WLF
 function is fitted to their log aT(T) (Arrhenius if WLF fails, linear interpolation of log aT if both fail;
 the one used is reported), log aT of the held-out temperature is predicted from it and the held-out sweep is
@@ -25,8 +27,11 @@ predicted from the training mastercurve (:func:`tissuemech.tts.predict_from_mast
 temperature-blind prediction from the same training sweeps (their unshifted pooled curve at the held-out
 frequencies: what a model without temperature predicts). Metric: RMS of log10 G' and log10 G'' errors
 (decades) over the held-out points both predictions cover; ``gain = (before - after) / before``. Without
-sweeps at several temperatures the fix is a level trend exp(a + b T) of the curve levels, scored leaving each
-temperature out (:func:`level_fix`; metric: RMS ln error of the held-out curves' points).
+such a series (the temperature changes only between samples or specimens, whose sweeps also differ by their
+stiffness) the fix is a level trend exp(a + b T) of the curve levels, read where the
+temperature changes (between the samples of a specimen, else between the curves of a sample) and scored leaving
+each sample (curve) out (:func:`tissuemech.diagnosis.levels.scale_correction_cv`; metric: RMS ln error of the
+held-out curves' points).
 
 The finding carries ``shift_factors`` (:meth:`tissuemech.tts.TTSResult.to_dict` of all sweeps), ``wlf`` and
 ``arrhenius`` (parameters with standard errors) and ``temperatures_c``.
@@ -41,8 +46,8 @@ import xarray as xr
 
 from .. import tts
 from .. import stats as st
-from .findings import (DiagnosisContext, curve_levels, describe_fix, fix_record, make_finding, primary_rows,
-                       untested_finding)
+from .findings import DiagnosisContext, curve_levels, describe_fix, fix_record, make_finding, untested_finding
+from .levels import scale_correction_cv
 from .evidence import run_id
 from .generic import CONFOUNDED_R2, MIN_EFFECT
 
@@ -153,34 +158,6 @@ def _curved_test(levels: pd.DataFrame, controls: Sequence[str] = ()) -> dict | N
                                      controls=tuple(controls))
 
 
-def level_fix(ctx: DiagnosisContext, levels: pd.DataFrame) -> tuple[float, float, int, int]:
-    """Held-out score of a level trend in temperature, exp(a + b T), where no sweeps allow the TTS fix: every
-    distinct temperature is held out in turn, the line is fitted to the other temperatures' curve levels
-    (condition means removed) and predicts the held-out curves' points; before: the other temperatures' mean
-    level. Returns (RMS ln error before, after, folds, held-out points)."""
-    rows = primary_rows(ctx.table)
-    errs = {c: g.to_numpy(float) for c, g in rows.groupby("curve")["log_ratio"]}
-    lv = levels.assign(r=levels["log_scale"] - levels.groupby("condition")["log_scale"].transform("mean"),
-                       group=np.round(levels["temperature_c"] / TEMPERATURE_RESOLUTION_C))
-    before, after = [], []
-    for g in pd.unique(lv["group"]):
-        train, test = lv[lv["group"] != g], lv[lv["group"] == g]
-        if train["temperature_c"].nunique() < 2:
-            continue
-        slope, icpt = np.polyfit(train["temperature_c"], train["r"], 1)
-        for _, row in test.iterrows():
-            e = errs.get(row["curve"])
-            if e is None:
-                continue
-            shift = row["log_scale"] - row["r"]          # the condition mean of this curve's level
-            before.append(e - shift - train["r"].mean())
-            after.append(e - shift - (icpt + slope * row["temperature_c"]))
-    if not before:
-        return np.nan, np.nan, 0, 0
-    b, a = np.concatenate(before), np.concatenate(after)
-    return float(np.sqrt(np.mean(b ** 2))), float(np.sqrt(np.mean(a ** 2))), int(lv["group"].nunique()), int(b.size)
-
-
 def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
     """Curve levels of the baseline regressed on run temperature; fix = TTS scored on a held-out
     temperature (module docstring)."""
@@ -204,22 +181,40 @@ def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
               + (", elapsed-time control" if controls else "") + f"; {t['method']}")
     joint = _curved_test(levels, controls)
     if joint is not None:
-        # the slope gives the size; the p-value is the joint test of (T, T^2): shift factors are curved
-        # in T (WLF), so a straight line understates a temperature dependence
-        t = dict(t, statistic=joint["statistic"], p_value=joint["p_value"], log10_p=joint["log10_p"])
-        design += f", joint F of T and T^2 (df {joint['df1']:.0f}, {joint['df2']:.0f})"
+        # the slope gives the size; the p-value is the stronger of the slope's test and the joint test of (T, T^2),
+        # Bonferroni x 2: shift factors are curved in T (WLF), so over a wide range a straight line understates a
+        # temperature dependence, while over a few degrees the slope alone is the more powerful test
+        lp = min(0.0, min(t["log10_p"], joint["log10_p"]) + np.log10(2.0))
+        if joint["log10_p"] < t["log10_p"]:
+            t = dict(t, statistic=joint["statistic"])
+            design += f", joint F of T and T^2 (df {joint['df1']:.0f}, {joint['df2']:.0f}), Bonferroni x 2 with the slope"
+        else:
+            design += ", t of the slope, Bonferroni x 2 with the joint F of T and T^2"
+        t = dict(t, p_value=10 ** lp, log10_p=lp)
     lo, hi = np.nanquantile(levels["temperature_c"], [0.05, 0.95])
     size = float(t["estimate"] * (hi - lo))
     sweeps = tts.sweeps_from_runs(ctx.runs)
     extra: dict = {"temperatures_c": [float(x) for x in distinct]}
-    b_, a_, n_folds, n_pts = level_fix(ctx, levels)
-    fix = (fix_record("temperature level trend: prediction x exp(a + b T), b from the other temperatures",
-                      "rms_log_residual", b_, a_, "leave-one-temperature-out", per_degc=float(np.expm1(t["estimate"]))
-                      if "estimate" in t else np.nan, n_held_out_points=n_pts) if n_folds >= MIN_TEMPERATURES else None)
-    fix_txt = (f" No frequency sweeps at several temperatures for the TTS fix; a level trend in temperature, fitted "
-               f"leaving each temperature out, predicts the held-out curves with {describe_fix(b_, a_)}."
-               if fix is not None else " No frequency sweeps at several temperatures: the TTS fix is not evaluated.")
-    if len(distinct_temperatures(s.temperature_c for s in sweeps)) >= MIN_TEMPERATURES:
+    # without sweeps for a mastercurve: a level trend in temperature, read where the temperature changes (between the
+    # samples of a specimen, else between the curves of a sample), each held out in turn
+    level = st.variation_level(levels, "temperature_c")
+    units = ("sample", "curve") if level == "within" else ("specimen", "sample") if level == "piece" else None
+    fix, fix_txt = None, " No frequency sweeps at several temperatures: the TTS fix is not evaluated."
+    if units is not None:
+        b_, a_, held, n_pts = scale_correction_cv(ctx, levels, "temperature_c", units)
+        if n_pts:
+            fix = fix_record("temperature level trend: prediction x exp(a + b T), b from the other samples",
+                             "rms_log_residual", b_, a_, f"leave-one-{held}-out",
+                             per_degc=float(np.expm1(t["estimate"])) if "estimate" in t else np.nan,
+                             n_held_out_points=n_pts)
+            fix_txt = (f" No temperature series of one loading for a mastercurve; a level trend in temperature, "
+                       f"fitted within {units[0]}s leaving each {held} out, predicts the held-out curves with "
+                       f"{describe_fix(b_, a_)}.")
+    # a mastercurve shifts the sweeps of one loading measured at several temperatures; where the temperature changes
+    # only between samples or specimens, their sweeps differ by the samples' stiffness too, and the level trend above
+    # is the fix that separates the two
+    series = level == "within"
+    if series and len(distinct_temperatures(s.temperature_c for s in sweeps)) >= MIN_TEMPERATURES:
         full = tts.shift_factors(sweeps)
         ok = np.isfinite(full.log_aT)
         wlf = tts.fit_wlf(full.temperatures_c[ok], full.log_aT[ok], full.log_aT_stderr[ok], full.t_ref_c)
@@ -247,6 +242,6 @@ def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
     evidence = (f"Curve levels ln(observed/predicted) of {ctx.model} change by {size:+.3g} over "
                 f"{lo:.3g}..{hi:.3g} degC across {len(levels)} curves at {len(distinct)} temperatures "
                 f"({', '.join(sorted(levels['test'].unique()))}; {design}; "
-                f"{'F' if 'joint F' in design else 't'} = {t['statistic']:.2f}, p = {t['p_value']:.2g}).{fix_txt}")
-    return make_finding(EFFECT, t, "F" if "joint F" in design else "t", size, "ln(observed/predicted) over the temperature range",
+                f"{'F' if 'joint F of T and T^2 (df' in design else 't'} = {t['statistic']:.2f}, p = {t['p_value']:.2g}).{fix_txt}")
+    return make_finding(EFFECT, t, "F" if "joint F of T and T^2 (df" in design else "t", size, "ln(observed/predicted) over the temperature range",
                    abs(size) >= MIN_EFFECT, evidence, fix, **extra)

@@ -46,6 +46,7 @@ def offset_intercept(table: pd.DataFrame) -> dict | None:
     or None with fewer than 4 usable curves.
     """
     td = offset_rows(table)
+    td = td[np.isfinite(td["residual"]) & np.isfinite(td["predicted"]) & np.isfinite(td["sigma"]) & (td["sigma"] > 0)]
     intercepts, ses, levels_pa, curves = [], [], [], []
     for c, g in td.groupby("curve"):
         if len(g) < 8 or g["predicted"].max() < 1.5 * g["predicted"].min():
