@@ -31,8 +31,7 @@ import warnings
 
 import numpy as np
 import pandas as pd
-from statsmodels.regression.linear_model import OLS
-from statsmodels.tools.tools import add_constant
+import scipy
 
 from ..tts import run_temperature_c
 from .. import stats as st
@@ -290,10 +289,11 @@ def confounded_covariates(table: pd.DataFrame, runs=(), r2_limit: float = CONFOU
 
     Covariates (:func:`curve_covariates`) are linked when one explains >= ``r2_limit`` of the other's
     variance across curves; every connected set of >= 2 is reported with ``covariates``, ``r2`` (pairwise,
-    ``"a|b"``), the joint F-test of the curve levels (median ln(observed/predicted) per curve, numeric members
-    together, OLS) ``joint_statistic``/``joint_p``, ``unique_p`` (each member's partial t-test given the
-    others; large when the set is collinear: the data cannot say which one it is), and ``design`` (what
-    would separate them).
+    ``"a|b"``), the joint F-test of the curve levels (median ln(observed/predicted) per curve, the linearly
+    independent numeric members together, specimen and sample as random effects:
+    :func:`tissuemech.stats.mixed_coefficient_test`) ``joint_statistic``/``joint_p``, ``unique_p`` (each member's
+    partial test given the others; large when the set is collinear: the data cannot say which one it is), and
+    ``design`` (what would separate them).
     """
     frame = curve_covariates(table, runs)
     if frame.empty or len(frame) < 4:
@@ -320,23 +320,31 @@ def confounded_covariates(table: pd.DataFrame, runs=(), r2_limit: float = CONFOU
         groups.setdefault(root(c), []).append(c)
     rows = table[np.isfinite(table["log_ratio"])]
     level = rows.groupby("curve")["log_ratio"].median()
+    pieces = rows.groupby("curve")[["specimen", "sample"]].first()
     out = []
     for members in groups.values():
         if len(members) < 2:
             continue
         numeric = [m for m in members if not m.startswith("factor:")]
-        f = frame.join(level.rename("y")).dropna(subset=["y"] + numeric)
+        f = frame.join(level.rename("y")).join(pieces).dropna(subset=["y"] + numeric)
         joint = {"statistic": np.nan, "p_value": np.nan}
         unique = {}
         if numeric and len(f) > len(numeric) + 2:
-            X = add_constant(f[numeric].astype(float), has_constant="add")
+            # the members are (nearly) collinear by construction: the joint test is on a basis of their span (the
+            # linearly independent members, pivoted QR), with specimen and sample as random effects
+            z = f[numeric].astype(float)
+            z = (z - z.mean()) / z.std().replace(0.0, 1.0)
+            _, r, piv = scipy.linalg.qr(z.to_numpy(), mode="economic", pivoting=True)
+            d = np.abs(np.diag(r))
+            basis = [numeric[i] for i, v in zip(piv, d) if v > 1e-8 * max(d.max(), 1e-300)]
             with warnings.catch_warnings():
-                # the members are collinear by construction: the joint test uses the design's rank (pinv)
                 warnings.simplefilter("ignore")
-                fit = OLS(f["y"].to_numpy(float), X).fit()
-            if np.isfinite(fit.fvalue):
-                joint = {"statistic": float(fit.fvalue), "p_value": float(fit.f_pvalue)}
-            unique = {m: float(fit.pvalues[m]) for m in numeric if m in fit.pvalues}
+                t = st.mixed_coefficient_test(f, "y", basis) if basis else None
+                if t is not None:
+                    joint = {"statistic": float(t["statistic"]), "p_value": float(t["p_value"])}
+                for m in basis:
+                    u = st.mixed_coefficient_test(f, "y", m, controls=tuple(b for b in basis if b != m))
+                    unique[m] = float(u["p_value"]) if u is not None else 1.0
         designs = list(dict.fromkeys(separating_design(m) for m in members))
         out.append({"covariates": members,
                     "r2": {f"{a}|{b}": r for (a, b), r in links.items() if a in members and b in members},
