@@ -469,7 +469,8 @@ def mixed_coefficient_test(table: pd.DataFrame, value: str, covariate: str | Seq
     with G - 1 df, :func:`cluster_regression`; HC3 with one sample), and ``method`` says so. Returns ``statistic``,
     ``p_value``, ``log10_p``, ``estimate``/``std_error`` (one numeric covariate), ``df`` (``df1``/``df2`` for an F),
     ``level`` (:func:`variation_level`), ``n``, ``method``; None when the covariate does not vary, is collinear with
-    the factors and controls, or leaves fewer than :data:`MIN_TEST_DF` degrees of freedom.
+    the factors and controls, or leaves fewer than :data:`MIN_TEST_DF` degrees of freedom where it varies (the
+    fallback never takes more degrees of freedom than that either).
     """
     import statsmodels.api as sm  # noqa: F401  (a slow import, only here; cluster_regression needs it too)
 
@@ -521,11 +522,11 @@ def mixed_coefficient_test(table: pd.DataFrame, value: str, covariate: str | Seq
         p_at["piece"] += p_at.pop("within")
         level = "piece" if level == "within" else level
     df = float(units[level] - p_at[level])
+    if df < MIN_TEST_DF:
+        return None   # too few units where the covariate varies: a property of the design, not of the fit
     joint = categorical or q > 1
     method = None
-    if df < MIN_TEST_DF:
-        method = f"{df:.0f} between-within degrees of freedom at the {level} level"
-    elif n_spec >= 2:
+    if n_spec >= 2:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -566,6 +567,8 @@ def mixed_coefficient_test(table: pd.DataFrame, value: str, covariate: str | Seq
     extra = dict(level=level, n=float(n), n_specimens=float(n_spec), n_pieces=float(n_piece),
                  method=f"{how} ({method})")
     df_fb = float(_n_clusters(res) - 1) if getattr(res, "cov_type", "") == "cluster" else float(res.df_resid)
+    # never more degrees of freedom than the units the covariate varies over (clusters that do not see it add none)
+    df_fb = min(df_fb, df)
     if df_fb < MIN_TEST_DF:
         return None
     if joint:
@@ -580,5 +583,7 @@ def mixed_coefficient_test(table: pd.DataFrame, value: str, covariate: str | Seq
         return statistic_result(f_stat, log10_p_from_f(f_stat, float(len(names)), df_fb), df1=float(len(names)),
                                 df2=df_fb, **extra)
     out = coefficient_test(res, tested[0])
+    out = statistic_result(out["statistic"], log10_p_from_t(out["statistic"], df_fb), estimate=out["estimate"],
+                           std_error=out["std_error"], df=df_fb)
     out.update(extra)
     return out

@@ -11,6 +11,7 @@ from statsmodels.tools.sm_exceptions import MissingDataError
 from tissuemech.canonical import make_run_dataset
 from tissuemech.diagnosis import report
 from tissuemech.diagnosis.decision import fix_margin
+from tissuemech.diagnosis.noise import relative_noise_level
 from tissuemech.diagnosis.baseline import (baseline_adequacy, ranked_candidates, resolved_window_s, spectrum_model,
                                            window_taus)
 
@@ -127,7 +128,7 @@ def test_noise_level_ignores_imposed_inputs_and_reads_the_floor_at_the_typical_m
     noise = {"blocks": {"a|shear_strain": {"relative": 0.0, "absolute": 0.0, "median_abs": 0.1},
                         "a|shear_stress": {"relative": 0.0, "absolute": 0.5, "median_abs": 25.0},
                         "b|storage_modulus": {"relative": 0.03, "absolute": 0.0, "median_abs": 100.0}}}
-    assert report.relative_noise_level(noise) == pytest.approx(np.median([0.02, 0.03]))
+    assert relative_noise_level(noise) == pytest.approx(np.median([0.02, 0.03]))
 
 
 def test_a_model_without_residuals_is_inadequate_and_the_diagnosis_still_returns():

@@ -130,7 +130,7 @@ def test_rim_exponent_and_thesis_bias_of_c20(tmp_path):
 def test_nonseparable_fix_is_the_pipkin_rogers_extension(synthetic):
     """run_diagnosis path: QLV -> Pipkin-Rogers fitted leaving out the extreme CSR rates; held-out gain > 0.
 
-    The fix is the one ``with_model_fixes`` scored with ``_nonseparable_fix(runs, "qlv_linear_prony4", "torque")``
+    The fix is the one ``with_model_fixes`` scored with ``fixes.nonseparable_fix(runs, "qlv_linear_prony4", "torque")``
     on the suite's nonseparable_relaxation dataset (shared with the suite case above)."""
     _, _, res, _ = synthetic("nonseparable_relaxation", SEED, **DESIGN)
     assert res["model"] == "qlv_linear_prony4" and res["fit_info"]["target"] == "torque"

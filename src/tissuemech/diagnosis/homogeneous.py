@@ -86,7 +86,7 @@ FLAT_PROFILE = 1e-6
 PROFILE_95 = 3.841
 
 _SIGNED = (-1e7, 1e7)
-#: effort of the pipeline entry (:func:`run_homogeneous_diagnosis`): random starts per fit, C01 profile points
+#: effort of the pipeline entry (:func:`tissuemech.diagnosis.report.run_homogeneous_diagnosis`): random starts per fit, C01 profile points
 SETTINGS = {"n_random": 4, "n_grid": 41}
 
 
