@@ -354,7 +354,8 @@ MIXED_OPTIMIZERS = ("lbfgs", "powell")
 
 
 def mixed_effects(table: pd.DataFrame, value: str, specimen: str = "specimen", sample: str | None = "sample",
-                  method: Sequence[str] | None = MIXED_OPTIMIZERS) -> dict:
+                  method: Sequence[str] | None = MIXED_OPTIMIZERS, covariates: Sequence[str] = (),
+                  factors: Sequence[str] = ()) -> dict:
     """The package's one linear mixed-effects model: ``value = mu + b_specimen [+ c_sample] + e`` (statsmodels
     ``MixedLM``, REML).
 
@@ -374,6 +375,11 @@ def mixed_effects(table: pd.DataFrame, value: str, specimen: str = "specimen", s
     table : one row per observation with columns ``value`` (already on the scale modelled, e.g. a log), ``specimen``
         and, unless None, ``sample``; rows with a non-finite ``value`` are dropped
     method : optimizers tried in turn by ``MixedLM.fit`` (None: statsmodels' default list)
+    covariates, factors : numeric columns and categorical columns (``C(...)``) of the fixed part, ``value ~ 1 +
+        covariates + factors`` (default: the mean only); their estimates are returned in ``coefficients``
+        (``{column: {"estimate", "std_error"}}``) and ``factor_wald`` (``{column: {"chi2", "df"}}``, the joint Wald
+        statistic of the factor's levels), the fixed-effect covariance in ``fe_cov``; rows missing any of them are
+        dropped
 
     Returns
     -------
@@ -384,10 +390,20 @@ def mixed_effects(table: pd.DataFrame, value: str, specimen: str = "specimen", s
     """
     import statsmodels.formula.api as smf  # a slow import (module note), only here
 
-    d = table[np.isfinite(table[value].to_numpy(float))]
+    keep = np.isfinite(table[value].to_numpy(float))
+    for c in covariates:
+        keep &= np.isfinite(table[c].to_numpy(float))
+    for c in factors:
+        keep &= table[c].notna().to_numpy()
+    d = table[keep]
     spec = d[specimen].astype(str).to_numpy()
     piece = spec + "/" + (d[sample].astype(str).to_numpy() if sample is not None else np.arange(len(d)).astype(str))
-    d = pd.DataFrame({"y": d[value].to_numpy(float), "specimen": spec, "piece": piece})
+    # safe names for the formula (sample-sheet columns may hold any characters)
+    xs = {f"x{i}": c for i, c in enumerate(covariates)}
+    fs = {f"f{i}": c for i, c in enumerate(factors)}
+    fixed = {k: d[c].to_numpy(float) for k, c in xs.items()} | {k: d[c].astype(str).to_numpy() for k, c in fs.items()}
+    d = pd.DataFrame({"y": d[value].to_numpy(float), "specimen": spec, "piece": piece, **fixed})
+    formula = "y ~ 1" + "".join(f" + {k}" for k in xs) + "".join(f" + C({k})" for k in fs)
     n, n_spec, n_piece = len(d), d["specimen"].nunique(), d["piece"].nunique()
     repeated = n_piece < n
     out = {"value": value, "n_runs": n, "n_specimens": int(n_spec), "n_pieces": int(n_piece)}
@@ -398,7 +414,7 @@ def mixed_effects(table: pd.DataFrame, value: str, specimen: str = "specimen", s
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # boundary / convergence warnings: reported through `converged` and the SDs
         vc = {"sample": "0 + C(piece)"} if repeated else None
-        model = smf.mixedlm("y ~ 1", d, groups=d["specimen"], re_formula="1", vc_formula=vc)
+        model = smf.mixedlm(formula, d, groups=d["specimen"], re_formula="1", vc_formula=vc)
         fit = model.fit(reml=True, method=fit_method)
     # statsmodels parameterises the variances relative to the residual scale; cov_params holds the covariance of
     # those relative parameters, so SE(variance) = scale x SE(relative) (the scale's own uncertainty left out)
@@ -412,9 +428,9 @@ def mixed_effects(table: pd.DataFrame, value: str, specimen: str = "specimen", s
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             if repeated:
-                fit = smf.mixedlm("y ~ 1", d, groups=d["piece"]).fit(reml=True, method=fit_method)
+                fit = smf.mixedlm(formula, d, groups=d["piece"]).fit(reml=True, method=fit_method)
             else:
-                fit = smf.ols("y ~ 1", d).fit()
+                fit = smf.ols(formula, d).fit()
     scale = float(fit.scale)
     if boundary and not repeated:
         mean, mean_se = float(fit.params.iloc[0]), float(fit.bse.iloc[0])
@@ -448,12 +464,198 @@ def mixed_effects(table: pd.DataFrame, value: str, specimen: str = "specimen", s
         out["blup_z"] = {str(g): 0.0 for g in model.group_labels}
     else:
         out["blup_z"] = {str(g): float(v.iloc[0]) / sd_b for g, v in fit.random_effects.items()}
+    if covariates or factors:
+        fe = fit.params if boundary and not repeated else fit.fe_params
+        cov = np.asarray(fit.cov_params(), float)[:len(fe), :len(fe)]
+        names = list(fe.index)
+        out["coefficients"] = {c: {"estimate": float(fe[k]), "std_error": float(np.sqrt(max(cov[names.index(k)][names.index(k)], 0.0)))}
+                               for k, c in xs.items()}
+        out["factor_wald"] = {}
+        for k, c in fs.items():
+            idx = [i for i, n in enumerate(names) if n.startswith(f"C({k})[")]
+            b = np.asarray(fe.iloc[idx], float)
+            v = cov[np.ix_(idx, idx)]
+            try:
+                chi2 = float(b @ np.linalg.solve(v, b)) if idx else float("nan")
+            except np.linalg.LinAlgError:
+                chi2 = float("nan")
+            out["factor_wald"][c] = {"chi2": chi2, "df": len(idx)}
+        out["fe_cov"] = cov.tolist()
+        out["fe_names"] = [xs.get(n, n) for n in names]
     out["converged"] = bool(getattr(fit, "converged", True))
-    out["method"] = ("statsmodels MixedLM (REML): value ~ 1 + specimen random intercept"
+    out["method"] = ("statsmodels MixedLM (REML): value ~ " + ("1" if not (covariates or factors) else
+                                                               "fixed covariates") + " + specimen random intercept"
                      + (" (estimated at 0, its boundary: refitted without it)" if boundary else "")
                      + (" + sample variance component nested in specimen" if repeated else
                         "; one run per piece, so the residual SD is the sample-to-sample SD (it includes the "
                         "within-run misfit)")
                      + "; SEs: MixedLM covariance of the variance parameters x scale, sqrt(2/df) for the residual "
                        "variance, delta method for SDs")
+    return out
+
+
+def variation_level(table: pd.DataFrame, column: str, specimen: str = "specimen", sample: str | None = "sample") -> str:
+    """Where a column varies in a nested specimen/sample design: ``"within"`` (between rows of one piece, a
+    ``specimen``/``sample`` pair), ``"piece"`` (between the pieces of one specimen, constant within each) or
+    ``"specimen"`` (constant within every specimen). A numeric column counts as varying within a group when its
+    standard deviation there exceeds a tenth of its overall one."""
+    keys = [specimen] + ([sample] if sample is not None else [])
+    if not pd.api.types.is_numeric_dtype(table[column]) or pd.api.types.is_bool_dtype(table[column]):
+        col = table[column].astype(str)
+        if sample is not None and (col.groupby([table[k] for k in keys]).nunique() > 1).any():
+            return "within"
+        if (col.groupby(table[specimen]).nunique() > 1).any():
+            return "piece" if sample is not None else "within"
+        return "specimen"
+    # a numeric column varies within a group when its spread there is more than a tenth of its spread overall (a
+    # logged channel's sensor noise inside a sample does not make a between-sample covariate a within-sample one)
+    x = table[column].astype(float)
+    total = float(x.std())
+    if not total > 0:
+        return "specimen"
+    if sample is not None and float((x - x.groupby([table[k] for k in keys]).transform("mean")).std()) > 0.1 * total:
+        return "within"
+    if float((x - x.groupby(table[specimen]).transform("mean")).std()) > 0.1 * total:
+        return "piece" if sample is not None else "within"
+    return "specimen"
+
+
+#: fewest residual degrees of freedom of a coefficient test in :func:`mixed_coefficient_test`
+MIN_TEST_DF = 2
+
+
+def mixed_coefficient_test(table: pd.DataFrame, value: str, covariate: str | Sequence[str],
+                           factors: Sequence[str] = (), specimen: str = "specimen", sample: str | None = "sample",
+                           categorical: bool = False, controls: Sequence[str] = ()) -> dict | None:
+    """Test of fixed covariates of ``value`` with specimen and sample as random effects (:func:`mixed_effects`:
+    ``value ~ 1 + covariate(s) + controls + C(factors) + (1 | specimen) + (1 | sample in specimen)``).
+
+    Degrees of freedom by the between-within rule: a covariate that varies within pieces (a ``specimen``/``sample``
+    pair) is referred to n - n_pieces - p_within, one that varies only between the pieces of a specimen to
+    n_pieces - n_specimens - p_piece, one constant within specimens to n_specimens - p_specimen (p: the fixed
+    parameters estimated at that level, the intercept at the specimen level), so that a covariate that follows the
+    specimens is judged on the specimens, not on the curves. One numeric ``covariate`` gives a t-test of its slope;
+    several (a sequence) a joint Wald F; ``categorical`` a joint Wald F over its levels. ``controls``: numeric
+    columns held fixed (not tested). Where the mixed model cannot be fitted (fewer than 2 specimens, a failed or
+    degenerate fit) the fixed part is fitted by OLS with standard errors clustered by specimen (else by sample; t
+    with G - 1 df, :func:`cluster_regression`; HC3 with one sample), and ``method`` says so. Returns ``statistic``,
+    ``p_value``, ``log10_p``, ``estimate``/``std_error`` (one numeric covariate), ``df`` (``df1``/``df2`` for an F),
+    ``level`` (:func:`variation_level`), ``n``, ``method``; None when the covariate does not vary, is collinear with
+    the factors and controls, or leaves fewer than :data:`MIN_TEST_DF` degrees of freedom where it varies (the
+    fallback never takes more degrees of freedom than that either).
+    """
+    import statsmodels.api as sm  # noqa: F401  (a slow import, only here; cluster_regression needs it too)
+
+    tested = [covariate] if isinstance(covariate, str) else list(covariate)
+    cols = [value] + tested + list(controls) + [specimen] + ([sample] if sample is not None else []) + list(factors)
+    d = table[list(dict.fromkeys(cols))].copy()
+    ok = np.isfinite(d[value].to_numpy(float))
+    for c in tested:
+        ok &= d[c].notna().to_numpy()
+        if not categorical:
+            ok &= np.isfinite(pd.to_numeric(d[c], errors="coerce").to_numpy(float))
+    for c in controls:
+        ok &= np.isfinite(pd.to_numeric(d[c], errors="coerce").to_numpy(float))
+    d = d[ok]
+    for c in tested:
+        d[c] = d[c].astype(str) if categorical else d[c].astype(float)
+    for c in controls:
+        d[c] = d[c].astype(float)
+    if any(d[c].nunique() < 2 for c in tested) or len(d) < 4:
+        return None
+    # the fixed-effect design: a covariate collinear with the factors (e.g. a gap set per condition) is not testable
+    dummies = [pd.get_dummies(d[f].astype(str), drop_first=True, dtype=float) for f in factors]
+    xcov = (pd.get_dummies(d[tested[0]], drop_first=True, dtype=float).add_prefix("cov_") if categorical
+            else d[tested])
+    const = pd.Series(1.0, index=d.index, name="const")
+    X = pd.concat([const, xcov, d[list(controls)]] + dummies, axis=1).to_numpy(float)
+    base = pd.concat([const, d[list(controls)]] + dummies, axis=1).to_numpy(float)
+    rank = np.linalg.matrix_rank(X)
+    if rank - np.linalg.matrix_rank(base) < xcov.shape[1] or len(d) - rank < MIN_TEST_DF:
+        return None
+    level = max((variation_level(d, c, specimen, sample) for c in tested),
+                key=("specimen", "piece", "within").index)
+    n = len(d)
+    n_spec = d[specimen].nunique()
+    piece = d[specimen].astype(str) + "/" + (d[sample].astype(str) if sample is not None else pd.Series(
+        np.arange(n).astype(str), index=d.index))
+    n_piece = piece.nunique()
+    repeated = n_piece < n
+    q = xcov.shape[1]
+    p_at = {"specimen": 1, "piece": 0, "within": 0}
+    for f in factors:
+        p_at[variation_level(d, f, specimen, sample)] += int(d[f].nunique()) - 1
+    for c in controls:
+        p_at[variation_level(d, c, specimen, sample)] += 1
+    p_at[level] += q
+    units = {"specimen": n_spec, "piece": n_piece - n_spec, "within": n - n_piece}
+    if not repeated:  # one row per piece: the piece is the residual level
+        units["piece"] = n - n_spec
+        p_at["piece"] += p_at.pop("within")
+        level = "piece" if level == "within" else level
+    df = float(units[level] - p_at[level])
+    if df < MIN_TEST_DF:
+        return None   # too few units where the covariate varies: a property of the design, not of the fit
+    joint = categorical or q > 1
+    method = None
+    if n_spec >= 2:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                me = mixed_effects(d, value, specimen=specimen, sample=sample,
+                                   covariates=tuple(controls) + (() if categorical else tuple(tested)),
+                                   factors=tuple(factors) + ((tested[0],) if categorical else ()))
+            extra = dict(level=level, n=float(n), n_specimens=float(n_spec), n_pieces=float(n_piece))
+            if joint:
+                if categorical:
+                    w = me["factor_wald"][tested[0]]
+                    chi2, k = w["chi2"], w["df"]
+                else:
+                    names = me["fe_names"]
+                    idx = [names.index(c) for c in tested]
+                    fe = np.asarray([me["coefficients"][c]["estimate"] for c in tested])
+                    cov = np.asarray(me["fe_cov"])[np.ix_(idx, idx)]
+                    chi2, k = float(fe @ np.linalg.solve(cov, fe)), len(tested)
+                f_stat = chi2 / max(k, 1)
+                if np.isfinite(f_stat):
+                    return statistic_result(f_stat, log10_p_from_f(f_stat, float(k), df), df1=float(k), df2=df,
+                                            method=me["method"] + "; Wald F, between-within df", **extra)
+            else:
+                c = me["coefficients"][tested[0]]
+                if np.isfinite(c["std_error"]) and c["std_error"] > 0:
+                    t = c["estimate"] / c["std_error"]
+                    return statistic_result(t, log10_p_from_t(t, df), estimate=c["estimate"], std_error=c["std_error"],
+                                            df=df, method=me["method"] + "; t, between-within df", **extra)
+            method = "MixedLM gave no finite standard error"
+        except (ValueError, np.linalg.LinAlgError, KeyError, IndexError) as exc:
+            method = f"MixedLM failed ({type(exc).__name__})"
+    else:
+        method = "fewer than 2 specimens: no specimen random effect"
+    groups = d[specimen].to_numpy() if n_spec >= 2 else (piece.to_numpy() if n_piece >= 2 else None)
+    Xf = pd.concat([xcov, d[list(controls)]] + dummies, axis=1).astype(float)
+    res = cluster_regression(d[value].to_numpy(float), Xf, groups=groups)
+    how = ("OLS with standard errors clustered by " + ("specimen" if n_spec >= 2 else "sample")
+           if groups is not None else "OLS with HC3 standard errors (one sample)")
+    extra = dict(level=level, n=float(n), n_specimens=float(n_spec), n_pieces=float(n_piece),
+                 method=f"{how} ({method})")
+    df_fb = float(_n_clusters(res) - 1) if getattr(res, "cov_type", "") == "cluster" else float(res.df_resid)
+    # never more degrees of freedom than the units the covariate varies over (clusters that do not see it add none)
+    df_fb = min(df_fb, df)
+    if df_fb < MIN_TEST_DF:
+        return None
+    if joint:
+        names = list(xcov.columns)
+        R = np.eye(len(res.params))[[list(res.params.index).index(c) for c in names]]
+        b = R @ np.asarray(res.params, float)
+        V = R @ np.asarray(res.cov_params(), float) @ R.T
+        try:
+            f_stat = float(b @ np.linalg.solve(V, b)) / len(names)
+        except np.linalg.LinAlgError:
+            return None
+        return statistic_result(f_stat, log10_p_from_f(f_stat, float(len(names)), df_fb), df1=float(len(names)),
+                                df2=df_fb, **extra)
+    out = coefficient_test(res, tested[0])
+    out = statistic_result(out["statistic"], log10_p_from_t(out["statistic"], df_fb), estimate=out["estimate"],
+                           std_error=out["std_error"], df=df_fb)
+    out.update(extra)
     return out

@@ -37,8 +37,7 @@ KNOWN_PRIVATE: dict[tuple[str, str, str], str] = {}
 
 #: modules whose function-local package imports are still left -> what is to be done
 KNOWN_LOCAL_IMPORTS: dict[str, str] = {
-    "tissuemech.diagnosis.homogeneous": "the figure writer: keeps matplotlib (through plots) out of the diagnosis",
-    "tissuemech.diagnosis.report": "the figure writer: keeps matplotlib (through plots) out of the diagnosis",
+    "tissuemech.diagnosis.figures": "the figure writers: keep matplotlib (through plots) out of the diagnosis",
     "tissuemech.tts": "the optional mastercurve figure: keeps matplotlib out of every import of tts (the diagnosis "
                       "imports tts for run temperatures)",
 }

@@ -10,6 +10,8 @@ from statsmodels.tools.sm_exceptions import MissingDataError
 
 from tissuemech.canonical import make_run_dataset
 from tissuemech.diagnosis import report
+from tissuemech.diagnosis.decision import fix_margin
+from tissuemech.diagnosis.noise import relative_noise_level
 from tissuemech.diagnosis.baseline import (baseline_adequacy, ranked_candidates, resolved_window_s, spectrum_model,
                                            window_taus)
 
@@ -87,11 +89,11 @@ def test_window_spans_what_the_tests_resolve():
 
 def test_fix_margin_is_the_noise_standard_error_of_the_metric():
     eps = 0.02
-    m = report.fix_margin({"parameters": {"n_held_out_points": 50}}, eps, alpha=0.01)
+    m = fix_margin({"parameters": {"n_held_out_points": 50}}, eps, alpha=0.01)
     assert m == pytest.approx(sps.norm.ppf(0.99) * eps / np.sqrt(100))
     # a curve-level fix that reports no count: one held-out level per curve
-    assert report.fix_margin(None, eps, 0.01, n_default=12) == pytest.approx(sps.norm.ppf(0.99) * eps / np.sqrt(24))
-    assert np.isnan(report.fix_margin(None, np.nan, n_default=12)) and np.isnan(report.fix_margin(None, eps))
+    assert fix_margin(None, eps, 0.01, n_default=12) == pytest.approx(sps.norm.ppf(0.99) * eps / np.sqrt(24))
+    assert np.isnan(fix_margin(None, np.nan, n_default=12)) and np.isnan(fix_margin(None, eps))
 
 
 def test_a_detector_missing_a_quantity_is_not_testable(monkeypatch):
@@ -119,14 +121,14 @@ def test_inadequate_baseline_is_the_first_finding_and_blocks_blame(diagnosed):
     none_ok = report.diagnose(runs, table, "qlv_bad", fit_info, adequacy=[bad])
     assert [f["effect"] for f in none_ok["findings"] if f["detected"]] == ["baseline_inadequate"]
     assert none_ok["unexplained"] == [] and none_ok["significant_fix_not_evaluated"] == []
-    assert "no cause is named" in none_ok["findings"][0]["evidence"]
+    assert "only causes whose test and fix do not use its predictions may be named" in none_ok["findings"][0]["evidence"]
 
 
 def test_noise_level_ignores_imposed_inputs_and_reads_the_floor_at_the_typical_magnitude():
     noise = {"blocks": {"a|shear_strain": {"relative": 0.0, "absolute": 0.0, "median_abs": 0.1},
                         "a|shear_stress": {"relative": 0.0, "absolute": 0.5, "median_abs": 25.0},
                         "b|storage_modulus": {"relative": 0.03, "absolute": 0.0, "median_abs": 100.0}}}
-    assert report.relative_noise_level(noise) == pytest.approx(np.median([0.02, 0.03]))
+    assert relative_noise_level(noise) == pytest.approx(np.median([0.02, 0.03]))
 
 
 def test_a_model_without_residuals_is_inadequate_and_the_diagnosis_still_returns():

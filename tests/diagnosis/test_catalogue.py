@@ -29,31 +29,43 @@ def test_null_design_raises_no_finding(diagnosed):
     assert i2["identifiable"] is False and "not identifiable" in i2["evidence"].lower()
 
 
+#: causes whose fix is a model-level refit (scored by report.with_model_fixes on a fitted baseline) or is read from
+#: data these constructed designs do not have: on a constructed design (a given prediction, nothing refitted) their
+#: fix cannot be scored, so they must be significant, listed as such, and never named. Fixed here, not read from
+#: the findings, so that a fix that silently goes missing (or appears from nowhere) fails the test.
+NO_SCORED_FIX = {"nonseparable_relaxation", "unidentified_i2_dependence"}
+
+
 @pytest.mark.parametrize("effect", CATALOGUE_IDS)
 def test_single_effect_is_top_finding_with_positive_gain(diagnosed, effect):
-    """The injected cause is named with a fix that beats the noise-calibrated margin; a cause whose fix is not
-    scored on these constructed designs (no model-level refit here) is never named but listed as significant
-    with its fix not evaluated."""
+    """The injected cause, and no other, is named with a fix that beats the noise-calibrated margin; a cause of
+    :data:`NO_SCORED_FIX` is never named but listed as significant with its fix not evaluated, and nothing else is
+    named in its place."""
     _, _, res = diagnosed(effect, **{**SMALL, **DESIGN.get(effect, {})})
     f = finding(res, effect)
-    if f["fix"] is None:
-        assert not f["detected"] and top_finding(res) != effect
+    named = [g["effect"] for g in res["findings"] if g["detected"]]
+    if effect in NO_SCORED_FIX:
+        assert f["fix"] is None and not f["detected"] and named == [], named
         assert [e["effect"] for e in res["significant_fix_not_evaluated"]][:1] == [effect]
         assert res["significant_fix_not_evaluated"][0]["p_holm"] < 0.01
+        assert "fix was not scored" in f["decision"] and f["what_to_do"].startswith("Not named")
         # its structure is not named either: every unexplained entry lists it among the candidates
         assert all(effect in u["candidates"] for u in res["unexplained"]), res["unexplained"]
     else:
-        assert top_finding(res) == effect, [(f["effect"], f["log10_p"]) for f in res["findings"][:3]]
+        assert named == [effect], [(g["effect"], g["log10_p"]) for g in res["findings"][:3]]
         top = res["findings"][0]
-        assert top["p_holm"] < 0.01 and top["evidence"]
+        assert top["p_holm"] < 0.01 and top["evidence"] and top["what_to_do"]
         assert top["fix"]["before"] - top["fix"]["after"] > top["fix"]["margin"] > 0, top["fix"]
         assert res["unexplained"] == []
 
 
 def test_effect_sizes_are_recovered(diagnosed):
     # drift injected at 10 %/h, preconditioning +20 %, inertia dI = 2e-7 kg m^2, offset 0.1 Pa, C01 = 30 Pa
-    drift = finding(diagnosed("elapsed_time_drift", **SMALL)[2], "elapsed_time_drift")
-    assert drift["effect_size"] == pytest.approx(0.10, abs=0.05)
+    # the small design's fixed test order leaves the drift to the sample means within each specimen (2 per specimen
+    # there, 3 df): the drift is read on the effect's own design (4 samples per specimen, 20 %/h)
+    drift = finding(diagnosed("elapsed_time_drift", **{**SMALL, **DESIGN["elapsed_time_drift"]})[2],
+                    "elapsed_time_drift")
+    assert drift["effect_size"] == pytest.approx(0.20, abs=0.05)
     pre = finding(diagnosed("preconditioning", **SMALL)[2], "preconditioning")
     assert pre["effect_size"] == pytest.approx(0.20, abs=0.05)
     inertia = finding(diagnosed("instrument_inertia", **SMALL)[2], "instrument_inertia")

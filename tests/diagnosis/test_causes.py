@@ -174,3 +174,53 @@ def test_shuffled_temperature_order_separates_temperature_from_time():
     assert "follows the elapsed time" not in drift["evidence"]
     assert not any({"channel_temperature", "elapsed_time"} <= set(c["covariates"])
                    for c in confounded_covariates(table, runs))
+
+
+# ------------------------------------------------------------------------------------------------
+# what to do, and wording that stays bounded
+# ------------------------------------------------------------------------------------------------
+def test_every_finding_of_a_diagnosis_says_what_to_do(diagnosed):
+    from tissuemech.diagnosis.causes import what_to_do
+
+    _, _, res = diagnosed("instrument_inertia", n_specimens=4, n_samples=2, n_points=16)
+    by_id = {f["effect"]: f for f in res["findings"]}
+    assert all(f["what_to_do"] for f in res["findings"])
+    inertia = by_id["instrument_inertia"]
+    assert inertia["detected"] and f"dI = {inertia['effect_size']:.2g} kg m^2" in inertia["what_to_do"]
+    assert by_id["unidentified_i2_dependence"]["what_to_do"].startswith("Not testable with these data; it needs normal force")
+    quiet = [f for f in res["findings"] if f["tested"] and not f["significant"]]
+    assert quiet and all(f["what_to_do"].startswith("Nothing to do") for f in quiet)
+    assert what_to_do({"effect": "yield_or_slip", "detected": True, "yield_strain": 0.25, "fix": None}) \
+        .startswith("Keep the strain amplitude below 25 %")
+
+
+def test_wording_of_changes_and_scores_is_bounded():
+    from tissuemech.diagnosis.findings import describe_fix, describe_log_change
+
+    assert describe_log_change(0.05) == "change by +5.1 %"
+    assert describe_log_change(np.log(40.0)) == "rise by a factor 40"
+    assert describe_log_change(-30.0) == "fall by more than a factor 1000"
+    assert describe_fix(0.034, 0.0219) == "held-out error 0.034 -> 0.0219 (36 % lower)"
+    assert describe_fix(50.28, 4.67e6).endswith("(more than 100x higher: the fix makes the held-out predictions worse)")
+
+
+def test_an_intercept_larger_than_the_curves_is_not_called_an_offset(monkeypatch):
+    """The CNF replicates under a collapsed baseline gave "+1.34e+06 Pa ... 1.83e+09 % of the lowest curve level": an
+    intercept no transducer offset can make (an offset is part of every observed stress)."""
+    from tissuemech.diagnosis import time_domain
+
+    rows = []
+    for c in range(4):
+        t = np.geomspace(0.1, 50.0, 12)
+        obs = 0.07 * (1 + 0.2 * np.exp(-t))
+        rows.append(pd.DataFrame({"curve": f"r{c}", "test": "stress_relaxation", "quantity": "shear_stress",
+                                  "condition": "stress_relaxation@0.001", "strain": 0.001, "time_in_test": t,
+                                  "observed": obs, "predicted": obs / 3.0, "residual": obs * 2 / 3, "sigma": 0.01,
+                                  "predicted_abs": obs / 3.0, "radius_m": np.nan, "log_ratio": np.log(3.0)}))
+    table = pd.concat(rows, ignore_index=True)
+    monkeypatch.setattr(time_domain, "offset_intercept", lambda tab: {
+        "statistic": 1.01, "p_value": 0.33, "log10_p": -0.48, "estimate": 1.34e6, "std_error": 1.3e6, "df": 3.0,
+        "curves": [f"r{c}" for c in range(4)]})
+    f = time_domain.detect_torque_offset(DiagnosisContext(runs=[], table=table))
+    assert not f["practical"]
+    assert "more than the lowest curve level itself" in f["evidence"] and "e+09 %" not in f["evidence"]

@@ -199,6 +199,29 @@ def test_outlier_specimen_among_five_is_named():
     assert null["tested"] and null["p_value"] > 0.01
 
 
+def test_outlier_rows_list_every_specimen_with_the_ratio_this_design_could_name():
+    """A 2.4x specimen among 5 whose log-levels scatter by 0.15: not named (3 df), but listed with its ratio and
+    deletion t, next to the ratio this design would need; that ratio is what the test names: a specimen 5 % above it
+    passes the threshold, 5 % below it does not (the deletion test run again on the levels, moved)."""
+    from tissuemech import stats as st
+    from tissuemech.diagnosis.covariates import outlier_rows
+    from tissuemech.diagnosis.levels import specimen_levels
+
+    ctx = make_runs([[0, 2, 1] for _ in range(5)], outlier=2.4, specimen_sd=0.15, sample_sd=0.02, seed=5)
+    f = detect_outlier_specimen(ctx)
+    rows = {r["covariate"]: r for r in outlier_rows(ctx, [f], alpha=0.01)}
+    assert set(rows) == {f"sp{b}" for b in range(5)} and rows["sp0"]["kind"] == "outlier specimen"
+    r = rows["sp0"]
+    assert r["ratio"] == pytest.approx(2.4, rel=0.3) and r["deletion_t"] > 2 and not r["named"]
+    assert r["ratio_needed"] > r["ratio"] and "this design names an outlier from about" in r["evidence"]
+    levels = specimen_levels(curve_levels(ctx.table))
+    others = levels.drop("sp0").to_numpy()
+    threshold = 0.01 / 2 / 1          # first Holm step of a family of one tested cause
+    for factor, named in ((1.05, True), (0.95, False)):
+        moved = np.r_[np.log(factor * r["ratio_needed"]) + np.median(others), others]
+        assert (st.deletion_outlier_test(moved)["p_value"] < threshold) is named
+
+
 @pytest.mark.parametrize("n", [1, 2])
 def test_outlier_specimen_not_testable_below_three_specimens(n):
     f = detect_outlier_specimen(make_runs([[0, 2]] * n, outlier=3.0))

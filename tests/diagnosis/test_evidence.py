@@ -6,9 +6,9 @@ import pytest
 
 from tissuemech.canonical import make_run_dataset
 from tissuemech.diagnosis import evidence as ev
+from tissuemech.diagnosis import noise as nz
 from tissuemech.models.recursion import prony_branch_histories
 from tissuemech.spectra import prony_complex_modulus
-from tissuemech.stats import robust_noise_sd
 
 THESIS_TAUS = np.array([0.1, 1.09, 9.91, 100.0])
 THESIS_G = np.array([0.00033, 0.23447, 0.21368, 0.14447])
@@ -97,16 +97,16 @@ def _noisy_relaxations(rel, floor_pa, n_curves=6, seed=0):
 
 def test_noise_model_is_read_from_the_within_curve_scatter():
     """Known truth: 2 % relative noise on smooth relaxations -> the estimate finds 2 %, not the 1 % constant."""
-    noise = ev.estimate_noise(_noisy_relaxations(0.02, 0.0))
+    noise = nz.estimate_noise(_noisy_relaxations(0.02, 0.0))
     block = noise["blocks"]["stress_relaxation|shear_stress"]
     assert block["relative"] == pytest.approx(0.02, rel=0.15)
     assert block["n_curves"] == 6 and "differences of order 2-4" in block["source"]
-    noise3 = ev.estimate_noise(_noisy_relaxations(0.003, 0.0))
+    noise3 = nz.estimate_noise(_noisy_relaxations(0.003, 0.0))
     assert noise3["blocks"]["stress_relaxation|shear_stress"]["relative"] == pytest.approx(0.003, rel=0.2)
 
 
 def test_absolute_floor_is_separated_from_the_relative_noise():
-    noise = ev.estimate_noise(_noisy_relaxations(0.005, 2.0))
+    noise = nz.estimate_noise(_noisy_relaxations(0.005, 2.0))
     block = noise["blocks"]["stress_relaxation|shear_stress"]
     assert block["absolute"] == pytest.approx(2.0, rel=0.35)
     assert block["relative"] < 0.012
@@ -115,15 +115,15 @@ def test_absolute_floor_is_separated_from_the_relative_noise():
 def test_robust_noise_sd_of_white_noise_on_a_trend():
     rng = np.random.default_rng(1)
     x = np.linspace(0, 10, 4000)
-    assert robust_noise_sd(3.0 * x ** 2 / 100 + rng.normal(0, 0.5, x.size)) == pytest.approx(0.5, rel=0.06)
+    assert nz.robust_noise_sd(3.0 * x ** 2 / 100 + rng.normal(0, 0.5, x.size)) == pytest.approx(0.5, rel=0.06)
 
 
 def test_declared_torque_resolution_sets_the_floor_only_with_a_radius():
     noise = {"blocks": {"stress_relaxation|shear_stress": {"relative": 0.0, "absolute": 0.0}}}
-    sd = ev.noise_sd(noise, "stress_relaxation", "shear_stress", np.array([10.0]), radius_m=0.01,
+    sd = nz.noise_sd(noise, "stress_relaxation", "shear_stress", np.array([10.0]), radius_m=0.01,
                      torque_resolution_nm=1e-7)
     assert sd == pytest.approx(2 * 1e-7 / (np.pi * 0.01 ** 3))
-    sd = ev.noise_sd(noise, "stress_relaxation", "shear_stress", np.array([10.0]), torque_resolution_nm=1e-7)
+    sd = nz.noise_sd(noise, "stress_relaxation", "shear_stress", np.array([10.0]), torque_resolution_nm=1e-7)
     assert np.isnan(sd).all()
 
 

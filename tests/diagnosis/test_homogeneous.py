@@ -132,3 +132,26 @@ def test_budday_brain_shear_calibration_mispredicts_uniaxial_and_the_i2_term_fix
     assert f[I2_ID]["fix"]["gain"] > 0
     assert set(table["calibration"]) >= {"simple_shear", "all_modes", "shear+tension", "shear+compression",
                                          "compression+tension"}
+
+
+def test_the_multimode_engine_follows_the_one_decision_rule(monkeypatch):
+    """A cause whose fix was never scored is not named (before, a NaN gain counted as a pass): with the held-out
+    errors unavailable, the strong I2 truth's causes are significant and relevant, listed as such, and named not;
+    the JSON carries the rule and the noise model as the parallel-plate diagnosis does."""
+    from tissuemech.diagnosis import homogeneous
+    from tissuemech.diagnosis.decision import DECISION_RULE
+
+    runs = make_multimode(2 * TYPICAL_SHARE, seed=1)
+    original = homogeneous.held_out_error
+
+    def unscored(*args, **kwargs):
+        return dict(original(*args, **kwargs), nrmse=float("nan"))
+
+    monkeypatch.setattr(homogeneous, "held_out_error", unscored)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res, _ = diagnose_homogeneous(runs, **FAST)
+    assert res["decision_rule"] == DECISION_RULE and res["noise_model"]["relative_level"] > 0
+    assert [f["effect"] for f in res["findings"] if f["detected"]] == []
+    assert {e["effect"] for e in res["significant_fix_not_evaluated"]} == {ASYMMETRY_ID, I2_ID}
+    assert all("fix was not scored" in f["decision"] for f in res["findings"] if f["effect"] in (ASYMMETRY_ID, I2_ID))

@@ -1,12 +1,13 @@
 """Diagnosis: what a fitted model gets wrong, the named cause, the fix and its held-out gain.
 
-Modules: :mod:`.evidence` (residual tables, cross-test consistency), the statistics (cluster regression,
-Holm) are in :mod:`tissuemech.stats`, below; :mod:`.catalogue` (named causes, detectors, fixes), :mod:`.temperature` (temperature dependence, TTS fix),
-:mod:`.inertia` (inertia-dominated oscillation points), :mod:`.causes` (registry of every named cause),
-:mod:`.generic` (unnamed structure, confounded covariates),
-:mod:`.baseline` (fitted models on runs, extension fits), :mod:`.homogeneous` (simple shear + uniaxial
-specimens: cross-mode prediction, tension-compression asymmetry, I2 identifiability), :mod:`.report`
-(``diagnose``, ``run_diagnosis``, JSON/netCDF/figures).
+One module a stage: :mod:`.baseline` (fitted models on the runs, extension fits) -> :mod:`.noise` (the noise of the
+data) -> :mod:`.evidence` (residual tables, cross-test consistency) -> detectors (:mod:`.levels`,
+:mod:`.oscillation`, :mod:`.time_domain`, :mod:`.inertia`, :mod:`.temperature`; unnamed structure in
+:mod:`.generic` and :mod:`.covariates`; the shared finding records in :mod:`.findings`, the contract in
+:mod:`.catalogue`) registered once in :mod:`.causes` -> :mod:`.decision` (the one rule) -> :mod:`.fixes` (fixes
+that refit the baseline) -> :mod:`.report` (``diagnose``, ``run_diagnosis``, JSON/netCDF) and :mod:`.figures`.
+:mod:`.homogeneous` diagnoses simple shear + uniaxial specimens (cross-mode prediction, tension-compression
+asymmetry, I2 identifiability) under the same rule. The statistics (cluster regression, mixed models, Holm) are
+in :mod:`tissuemech.stats`, below.
 """
-from .catalogue import CATALOGUE_IDS  # noqa: F401
-from .causes import CAUSE_IDS  # noqa: F401
+from .causes import CATALOGUE_IDS, CAUSE_IDS  # noqa: F401

@@ -11,7 +11,8 @@ them into one row per (run, point, quantity) with
 * ``observed``, ``predicted``, ``residual`` = observed - predicted (quantity units), ``sigma`` (noise SD of the
   observed value from :func:`estimate_noise`: the within-curve scatter of the data, never an instrument
   constant; a torque resolution is used only where declared), ``std_residual`` = residual / sigma,
-  ``rel_residual`` = residual / |predicted|, ``log_ratio`` = ln(observed / predicted) where both are positive;
+  ``rel_residual`` = residual / |predicted|, ``log_ratio`` = ln(observed / predicted) where both are positive
+  (the noise model is :mod:`.noise`);
 * covariates: ``strain`` [1], ``strain_sq``, ``log_rate`` (log10 of the nominal rate in 1/s),
   ``strain_x_log_rate``, ``strain_sq_x_log_rate``, ``time_in_test`` [s], ``log_time`` (log10 s),
   ``elapsed_time`` [s since the session start: the ``total_time`` channel, else the run's ``started_at``
@@ -42,23 +43,12 @@ import xarray as xr
 import scipy
 
 from ..models.recursion import prony_branch_histories
-from ..stats import relative_differences
+from .noise import ABOVE_NOISE_SIGMAS, COMPARED_QUANTITIES, estimate_noise, noise_sd
 
-#: a row enters the level and structure tests only where its OBSERVED magnitude exceeds this many noise SDs
-#: (a detection convention, not an instrument property)
-ABOVE_NOISE_SIGMAS = 5.0
-#: fewest second differences a noise block needs for the binned variance fit; fewer -> relative scale only
-_MIN_BIN_POINTS = 10
 
 #: logged channels carried into the residual table as covariates when a run has them
 LOGGED_CHANNELS = ("temperature", "gap", "normal_force", "raw_phase", "deflection_angle")
 
-#: quantities a residual table may compare, in preference order
-COMPARED_QUANTITIES = ("shear_stress", "storage_modulus", "loss_modulus", "torque", "normal_force",
-                       "shear_strain", "relaxation_modulus", "nominal_stress")
-
-OSCILLATORY_TESTS = ("amplitude_sweep", "frequency_sweep")
-TIME_DOMAIN_TESTS = ("constant_shear_rate", "stress_relaxation", "creep_recovery", "simple_shear")
 
 
 def run_id(run: xr.Dataset) -> str:
@@ -109,127 +99,6 @@ def condition_label(run: xr.Dataset) -> str:
         return f"{test}@{float(a['strain_pct']):g}%"
     return test
 
-
-#: oscillation quantities that are a torque divided by the strain amplitude (their absolute noise is not constant)
-MODULI = ("storage_modulus", "loss_modulus")
-
-
-def _stress_per_modulus(run: xr.Dataset, test: str, quantity: str) -> np.ndarray | None:
-    """The strain amplitude of every point of a sweep's modulus (stress amplitude = modulus x amplitude);
-    None for other quantities and where the sweep records no strain amplitude."""
-    if quantity not in MODULI or test not in OSCILLATORY_TESTS:
-        return None
-    n = run[quantity].size
-    if "shear_strain" in run and run["shear_strain"].size == n and np.isfinite(run["shear_strain"].values).any():
-        return np.asarray(run["shear_strain"].values, float)
-    if "strain_pct" in run.attrs:
-        return np.full(n, float(run.attrs["strain_pct"]) / 100.0)
-    return None
-
-
-def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
-    """Noise model of the measured quantities, from the data themselves (no instrument constant).
-
-    Within every curve the relative differences of order 2-4 (acquisition order; of ln|y| or of y/|y|,
-    whichever is smallest for that curve, see :func:`tissuemech.stats.relative_differences`) measure the point-to-point
-    scatter; smooth trends (power laws in frequency, exponential decays, polynomial ramps) contribute little.
-    Per (test, quantity) block the points are pooled over curves, binned by |y| (quantiles), and the
-    robust variance per bin, s_b^2 = (1.4826 MAD)^2 (relative units), is fitted by NNLS as
-    ``relative^2 + absolute^2 / |y|^2`` -- i.e. SD(y) = sqrt(absolute^2 + (relative |y|)^2). With too few
-    points for bins only ``relative`` is estimated. The storage and loss moduli of sweeps are a torque over
-    the strain amplitude, so their absolute part is not constant: where every sweep of the block records its
-    strain amplitude, |y| is the stress amplitude |modulus| x amplitude, ``absolute`` is in stress units
-    (``absolute_units``) and a point's floor is ``absolute`` / amplitude (:func:`noise_sd`); points of an
-    amplitude sweep at amplitudes where the torque is noise are then recognised as such (``above_noise``).
-    A torque resolution declared for the instrument
-    (run attribute ``torque_resolution_nm``, from ``dataset.yaml``) replaces the absolute part of stress
-    quantities when the run also records its plate radius (rim stress 2 M / (pi R^3)).
-
-    Returns
-    -------
-    dict ``{"method", "blocks": {"<test>|<quantity>": {"relative" [1], "absolute" [quantity units],
-    "median_abs" [quantity units], "n_points", "n_curves", "source"}}}``; a block with fewer than 5 points
-    per curve is absent (its rows get NaN sigma and are excluded from noise-scaled tests).
-    """
-    pooled: dict[str, list] = {}
-    for run in runs:
-        test = str(run.attrs.get("test", "unknown"))
-        for q in COMPARED_QUANTITIES:
-            if q not in run or run[q].ndim != 1:
-                continue
-            pooled.setdefault(f"{test}|{q}", []).append((run[q].values, _stress_per_modulus(run, test, q)))
-    blocks = {}
-    for key, curves in pooled.items():
-        # a modulus block is pooled in stress amplitude only when every sweep records its strain amplitude
-        per_strain = all(a is not None for _, a in curves)
-        parts = [relative_differences(y, a if per_strain else None) for y, a in curves]
-        parts = [(m, d) for m, d in parts if m.size]
-        if not parts:
-            continue
-        mag = np.concatenate([m for m, _ in parts])
-        d2 = np.concatenate([d for _, d in parts])
-        rel_all = 1.4826 * np.median(np.abs(d2))
-        entry = {"relative": float(rel_all), "absolute": 0.0, "n_points": int(mag.size), "n_curves": len(parts),
-                 "median_abs": float(np.median(mag)),
-                 "source": "within-curve scatter (relative differences of order 2-4), relative only"}
-        n_bins = min(8, mag.size // _MIN_BIN_POINTS)
-        if n_bins >= 3:
-            edges = np.quantile(mag, np.linspace(0, 1, n_bins + 1))
-            idx = np.clip(np.searchsorted(edges, mag, side="right") - 1, 0, n_bins - 1)
-            rows, rhs = [], []
-            for b in range(n_bins):
-                sel = idx == b
-                if sel.sum() >= _MIN_BIN_POINTS:
-                    s_b = 1.4826 * np.median(np.abs(d2[sel]))
-                    rows.append([1.0, 1.0 / np.median(mag[sel]) ** 2])
-                    rhs.append(s_b ** 2)
-            if len(rows) >= 3:
-                coef, _ = scipy.optimize.nnls(np.asarray(rows), np.asarray(rhs))
-                entry.update(relative=float(np.sqrt(coef[0])), absolute=float(np.sqrt(coef[1])),
-                             source="within-curve scatter (relative differences of order 2-4), binned by |y|: "
-                                    "SD = sqrt(absolute^2 + (relative |y|)^2)")
-        if per_strain and key.split("|")[1] in MODULI and key.split("|")[0] in OSCILLATORY_TESTS:
-            # the instrument's absolute noise is a torque: a modulus carries it divided by the strain amplitude
-            entry["absolute_units"] = "Pa of stress amplitude (the modulus floor is absolute / strain amplitude)"
-            if entry["absolute"] > 0:
-                entry["source"] += "; |y| and absolute as stress amplitude |modulus| x strain amplitude"
-        blocks[key] = entry
-    declared = {float(r.attrs["torque_resolution_nm"]) for r in runs if "torque_resolution_nm" in r.attrs}
-    method = "within-curve residual scale (differences of order 2-4, per curve the smallest), per test and quantity"
-    if declared:
-        method += f"; declared torque resolution {sorted(declared)} N m used as the stress floor where R is known"
-    return {"method": method, "blocks": blocks}
-
-
-def noise_sd(noise: Mapping, test: str, quantity: str, observed: np.ndarray, strain: np.ndarray | None = None,
-             radius_m: float = np.nan, torque_resolution_nm: float = np.nan) -> np.ndarray:
-    """Per-point noise SD (quantity units) of observed values under :func:`estimate_noise`'s model.
-
-    A declared torque resolution (N m) with a known radius R (m) gives the absolute floor of a stress as
-    2 M / (pi R^3) and of a modulus as that over the strain amplitude; it is used when larger than the
-    estimated floor. NaN where the block has no estimate.
-    """
-    obs = np.abs(np.asarray(observed, float))
-    b = noise.get("blocks", {}).get(f"{test}|{quantity}")
-    if b is None:
-        return np.full(obs.shape, np.nan)
-    floor = np.full(obs.shape, float(b["absolute"]))
-    if "absolute_units" in b:
-        # estimated in stress amplitude (estimate_noise): a modulus's floor is that over the strain amplitude
-        amp = np.abs(np.asarray(strain, float)) if strain is not None else np.full(obs.shape, np.nan)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            floor = np.where(np.isfinite(amp) & (amp > 0), floor / amp, np.nan) * np.ones(obs.shape)
-    if np.isfinite(torque_resolution_nm) and np.isfinite(radius_m) and radius_m > 0:
-        declared = 2.0 * torque_resolution_nm / (np.pi * radius_m ** 3)
-        if quantity in ("storage_modulus", "loss_modulus", "relaxation_modulus") and strain is not None:
-            with np.errstate(divide="ignore", invalid="ignore"):
-                declared = declared / np.abs(np.asarray(strain, float))
-        if quantity == "torque":
-            declared = torque_resolution_nm
-        if quantity in ("shear_stress", "torque", "storage_modulus", "loss_modulus", "relaxation_modulus"):
-            floor = np.fmax(floor, declared)
-    sd = np.sqrt(floor ** 2 + (float(b["relative"]) * obs) ** 2)
-    return np.where(sd > 0, sd, np.nan)
 
 
 def first_load_flags(runs: Sequence[xr.Dataset]) -> list[float]:

@@ -1,6 +1,7 @@
-"""What every detector of the catalogue shares: the cause ids and their signatures (which covariate
-structure each cause explains), the diagnosis context, the finding and fix records and the diagnosis.json writer, curve levels
-and the leave-one-group-out scoring of a correction. The catalogue itself is :mod:`.catalogue`."""
+"""What every detector shares: the diagnosis context, the finding and fix records and the diagnosis.json
+writer, curve levels, the leave-one-group-out scoring of a correction and the one table of designs that separate
+confounded covariates (:data:`SEPARATING_DESIGN`). The finding contract is :mod:`.catalogue`'s, the registry of
+causes :mod:`.causes`."""
 from __future__ import annotations
 
 import json
@@ -15,72 +16,40 @@ import xarray as xr
 from ..canonical import to_jsonable, write_text
 from ..records import Finding
 
-CATALOGUE_IDS: tuple[str, ...] = (
-    "nonseparable_relaxation", "rim_stress_nonlinearity", "wall_slip", "elapsed_time_drift",
-    "preconditioning", "instrument_inertia", "torque_offset", "outlier_specimen", "amplitude_softening",
-    "finite_rise_time", "unidentified_i2_dependence",
-)
-
-#: test kinds whose residuals each cause distorts: a generic structure in these tests is explained once the
-#: cause is named (within a curve, strain, time and predicted level are collinear, so a cause that bends a
-#: curve shows up on all of them). "*": the cause scales whole curves and bends none.
-DISTORTS: dict[str, tuple[str, ...]] = {
-    "nonseparable_relaxation": ("constant_shear_rate", "stress_relaxation", "creep_recovery", "frequency_sweep",
-                                "amplitude_sweep"),
-    "rim_stress_nonlinearity": ("constant_shear_rate", "stress_relaxation", "creep_recovery"),
-    "wall_slip": ("constant_shear_rate", "creep_recovery"),
-    "elapsed_time_drift": ("*",),
-    "preconditioning": ("*",),
-    "instrument_inertia": ("frequency_sweep",),
-    "torque_offset": ("constant_shear_rate", "stress_relaxation", "creep_recovery"),
-    "outlier_specimen": ("*",),
-    "amplitude_softening": ("amplitude_sweep",),
-    "finite_rise_time": ("stress_relaxation", "frequency_sweep"),
-    "unidentified_i2_dependence": (),
-    # a temperature shift moves a curve along log time/frequency: it bends every rate-dependent curve
-    "temperature_dependence": ("constant_shear_rate", "stress_relaxation", "creep_recovery", "frequency_sweep",
-                               "amplitude_sweep"),
-    "inertia_dominated_points": ("frequency_sweep", "amplitude_sweep"),
-    "inertial_ringing": ("stress_relaxation",),
-}
-
-#: covariates whose structure each cause explains in any test (curve-level signatures)
-EXPLAINS: dict[str, tuple[str, ...]] = {
-    "nonseparable_relaxation": ("strain_x_log_rate", "strain_sq_x_log_rate", "log_rate"),
-    "rim_stress_nonlinearity": ("strain",),
-    "wall_slip": ("inverse_gap", "channel_gap"),
-    "elapsed_time_drift": ("elapsed_time", "test_order"),
-    "preconditioning": ("first_load", "test_order", "elapsed_time"),
-    "instrument_inertia": ("frequency_sq", "channel_raw_phase"),
-    "torque_offset": ("predicted_abs",),
-    "outlier_specimen": (),
-    "amplitude_softening": (),
-    "finite_rise_time": ("log_time",),
-    "unidentified_i2_dependence": ("channel_normal_force",),
-    "temperature_dependence": ("channel_temperature", "covariate_temperature_c", "temperature_c"),
-    "inertia_dominated_points": ("frequency_sq", "channel_raw_phase"),
-    "inertial_ringing": (),
+#: what would separate a covariate from the others it is confounded with in a design: the one table the
+#: detectors (``separating_design`` of a finding) and the confounded-set report (``confounded``) quote;
+#: keys are the kinds of :func:`separating_design`
+SEPARATING_DESIGN = {
+    "test_order": "vary the pauses between tests and shuffle the test order between samples, so that elapsed time "
+                  "and the position in the sequence vary independently (a drift of the instrument or specimen "
+                  "follows the clock, an effect of the loading history follows the position)",
+    "first_load": "repeat the first test of each sample later in its sequence, or vary which test comes first",
+    "temperature": "hold the temperature constant over the session, or change it in steps that do not follow the "
+                   "clock (repeat one temperature at the start and at the end of the series, or randomise the "
+                   "temperature order)",
+    "elapsed_time": "record started_at or total_time, and repeat a reference test at the start and at the end of "
+                    "the session at constant conditions (at least three tests per sample)",
+    "condition": "randomise the test order across samples, or repeat a reference test (same kind and condition as "
+                 "an early one) at the end of each sample's sequence",
+    "specimen": "interleave the specimens (alternate samples of different specimens over the session, or spread "
+                "each specimen over several days), so that specimen and session time vary independently",
+    "gap": "measure at two gaps at the same conditions",
+    "strain": "repeat the test at two strain amplitudes at the same conditions",
+    "factor": "cross the factor levels with the other covariates (each level at several of their values)",
 }
 
 
-def explains(effect: str, test: str, covariate: str, level: str,
-             confounded: Sequence[Sequence[str]] = ()) -> bool:
-    """Whether a named ``effect`` accounts for generic structure in ``covariate`` of ``test`` residuals.
-
-    Curve-level (``across curves``) structure is explained only through the covariates of the cause's own
-    signature (:data:`EXPLAINS`) -- a detected drift, preconditioning or outlier does *not* explain every
-    across-curve covariate (a significant temperature channel stays unexplained unless a temperature cause
-    is named) -- or through a covariate that is confounded with one of them in this design
-    (``confounded``: sets of covariate names that the design cannot separate,
-    :func:`tissuemech.diagnosis.generic.confounded_covariates`). Within-curve structure is explained by the
-    causes that distort the shape of that test's curves.
-    """
-    own = EXPLAINS.get(effect, ())
-    if covariate in own:
-        return True
-    if level == "within curves":
-        return test in DISTORTS.get(effect, ())  # whole-curve causes ("*": drift, first load, outlier) bend no curve
-    return any(covariate in group and any(c in own for c in group) for group in confounded)
+def separating_design(covariate: str) -> str:
+    """The :data:`SEPARATING_DESIGN` sentence of a covariate name (residual-table column, curve-level column or
+    ``factor:<column>``)."""
+    name = covariate.lower()
+    for key, kinds in (("first_load", ("first_load",)), ("test_order", ("position", "test_order", "order")),
+                       ("temperature", ("temperature",)), ("elapsed_time", ("elapsed",)),
+                       ("condition", ("condition",)), ("specimen", ("specimen",)), ("gap", ("gap",)),
+                       ("strain", ("strain",))):
+        if any(k in name for k in kinds):
+            return SEPARATING_DESIGN[key]
+    return SEPARATING_DESIGN["factor"]
 
 
 TIME_DOMAIN = ("stress_relaxation", "constant_shear_rate", "simple_shear", "creep_recovery")
@@ -125,12 +94,44 @@ def make_finding(effect: str, test: dict, statistic_name: str, effect_size: floa
     return out
 
 
+def describe_fix(before: float, after: float) -> str:
+    """A held-out score in bounded plain words: "held-out error 0.12 -> 0.08 (33 % lower)", "... (2.5x higher)",
+    "... (more than 100x higher)"."""
+    try:
+        b, a = float(before), float(after)
+    except (TypeError, ValueError):
+        return "not scored"
+    if not (np.isfinite(b) and np.isfinite(a)) or b < 0 or a < 0:
+        return "not scored"
+    head = f"held-out error {b:.3g} -> {a:.3g}"
+    if a <= b:
+        return head + (f" ({100 * (b - a) / b:.0f} % lower)" if b > 0 else " (unchanged)")
+    if b == 0 or a / b > 100:
+        return head + " (more than 100x higher: the fix makes the held-out predictions worse)"
+    return head + (f" ({100 * (a - b) / b:.0f} % higher)" if a < 2 * b else f" ({a / b:.2g}x higher)")
+
+
 def fix_record(model: str, metric: str, before: float, after: float, cv: str, **parameters) -> dict:
     gain = (before - after) / before if before > 0 and np.isfinite(after) else np.nan
     return {"model": model, "metric": metric, "before": float(before), "after": float(after),
-            "gain": float(gain), "cv": cv,
+            "gain": float(gain), "cv": cv, "summary": describe_fix(before, after),
             "parameters": {k: (float(v) if isinstance(v, (int, float, np.floating)) else v)
                            for k, v in parameters.items()}}
+
+
+def describe_log_change(log_change: float) -> str:
+    """A change of ln(observed/predicted) in bounded plain words: "change by +12.3 %" up to a factor 3, else
+    "rise/fall by a factor 40" (beyond a factor 1000: "by more than a factor 1000")."""
+    try:
+        x = float(log_change)
+    except (TypeError, ValueError):
+        x = np.nan
+    if not np.isfinite(x):
+        return "change by an undetermined amount"
+    if abs(x) <= np.log(3.0):
+        return f"change by {100 * np.expm1(x):+.1f} %"
+    way = "rise" if x > 0 else "fall"
+    return f"{way} by a factor {np.exp(abs(x)):.2g}" if abs(x) < np.log(1e3) else f"{way} by more than a factor 1000"
 
 
 def rms(x) -> float:
@@ -189,14 +190,6 @@ def curve_levels(table: pd.DataFrame) -> pd.DataFrame:
     out["order_source"] = source
     out["first_load"] = np.where(position.notna(), (position == 1).astype(float), np.nan)
     return out
-
-
-def fixed_effect_design(frame: pd.DataFrame, columns: Sequence[str], fixed_effects: Sequence[str]) -> pd.DataFrame:
-    X = frame[list(columns)].astype(float).copy()
-    for fe in fixed_effects:
-        if frame[fe].nunique() > 1:
-            X = X.join(pd.get_dummies(frame[fe], prefix=fe, drop_first=True, dtype=float))
-    return X
 
 
 def demean_by(frame: pd.DataFrame, value: str, by: str) -> np.ndarray:

@@ -1,17 +1,14 @@
 """Generic detection of residual structure that no catalogued cause names.
 
-Every numeric covariate of the residual table (strain, log rate and their products, time within a test,
-elapsed time, test order, first load, frequency^2, 1/gap, the predicted level, every logged channel and
-every ``covariate_*`` column of ``samples.csv``) is tested, per block of comparable rows (test kind x
-quantity), with a regression of the log-residual ln(observed/predicted) on the covariate:
-
-* a covariate that varies *within* curves is tested within curves (both sides demeaned per curve, so the
-  level differences between samples do not enter) with standard errors clustered by curve;
-* a covariate that is constant within each curve (elapsed time, order, first load, sample-sheet columns,
-  channel means) is tested across curve levels with sample (else specimen) and condition fixed effects
-  (population variability and a misfit that differs by condition are not structure in the covariate;
-  :func:`tissuemech.diagnosis.catalogue.level_regression`), clustered by sample; a covariate collinear
-  with them (e.g. a fixed test order) is not testable and skipped.
+Every numeric covariate of the residual table that varies *within* curves (strain, log rate and their
+products, time within a test, frequency^2, 1/gap, the predicted level, every logged channel and every numeric
+``covariate_*`` column of ``samples.csv`` where it changes during a test) is tested, per block of comparable rows
+(test kind x quantity), with a regression of the log-residual ln(observed/predicted) on the covariate, both sides
+demeaned per curve (the level differences between samples do not enter), standard errors clustered by curve.
+A covariate that is constant within each curve (the session clock, sample-sheet columns, channel means) is an
+across-curve covariate: it is tested once over every test, with specimen and sample as random effects, in the
+covariates table (:mod:`tissuemech.diagnosis.covariates`), not here; so is elapsed time, which within one curve is
+the curve's own time axis.
 
 Specimen-to-specimen variability is expected and not scanned (an unusual specimen is the catalogue's
 ``outlier_specimen``).
@@ -34,20 +31,24 @@ import warnings
 
 import numpy as np
 import pandas as pd
-from statsmodels.regression.linear_model import OLS
-from statsmodels.tools.tools import add_constant
+import scipy
 
 from ..tts import run_temperature_c
 from .. import stats as st
-from .catalogue import between_sample_test, level_regression, spectrum_shape_basis
 from .evidence import run_id
+from .findings import separating_design
+from .oscillation import spectrum_shape_basis
 
 #: smallest structured misfit (log-residual change over the covariate range) worth reporting
 MIN_EFFECT = 0.03
 
 #: residual-table columns scanned as covariates (plus every ``channel_*`` and ``covariate_*`` column)
-COVARIATES = ("strain", "log_rate", "strain_x_log_rate", "strain_sq_x_log_rate", "log_time", "elapsed_time",
-              "test_order", "first_load", "frequency_sq", "inverse_gap", "predicted_abs")
+COVARIATES = ("strain", "log_rate", "strain_x_log_rate", "strain_sq_x_log_rate", "log_time", "frequency_sq",
+              "inverse_gap", "predicted_abs")
+
+#: residual-table columns of the session clock: constant within curves, tested in the covariates table and
+#: compared here with the other across-curve covariates for confounding
+SESSION_COVARIATES = ("elapsed_time", "test_order", "first_load")
 
 #: smallest number of curves in a block for a test
 MIN_CURVES = 3
@@ -95,29 +96,9 @@ def test_covariate(block: pd.DataFrame, cov: str) -> dict | None:
         span = _range(x)
         level = "within curves"
     else:
-        lv = b.groupby("curve").agg(y=("log_ratio", "median"), x=(cov, "mean"), specimen=("specimen", "first"),
-                                    sample=("sample", "first"), condition=("condition", "first"),
-                                    test=("test", "first")).rename(columns={"x": cov})
-        if lv[cov].nunique() < 3 or len(lv) < 5:
-            return None
-        # within samples (sample + condition fixed effects) and between samples (two-stage on sample
-        # means): population variability and condition-specific misfit are not structure in the covariate
-        found = []
-        res = level_regression(lv, "y", [cov], sets=[("sample", "condition")])
-        if res is not None:
-            found.append(st.coefficient_test(res, cov))
-        between = between_sample_test(lv, "y", cov)
-        if between is not None:
-            found.append(between)
-        if not found:
-            return None
-        t = min(found, key=lambda f: f["log10_p"])
-        lp = min(0.0, t["log10_p"] + np.log10(len(found)))
-        t = dict(t, log10_p=lp, p_value=10 ** lp)
-        span = _range(lv[cov].to_numpy(float))
-        return {"covariate": cov, "level": "across curves", "statistic": t["statistic"], "p_value": t["p_value"],
-                "log10_p": t["log10_p"], "effect_size": float(t["estimate"] * span), "slope": t["estimate"],
-                "n_curves": int(b["curve"].nunique()), "n_points": int(len(b))}
+        # constant within curves: an across-curve covariate, tested once over every test with specimen and sample
+        # as random effects in the covariates table (tissuemech.diagnosis.covariates), not per block here
+        return None
     t = st.coefficient_test(res, cov)
     return {"covariate": cov, "level": level, "statistic": t["statistic"], "p_value": t["p_value"],
             "log10_p": t["log10_p"], "effect_size": float(t["estimate"] * span), "slope": t["estimate"],
@@ -244,25 +225,6 @@ def serial_structure(table: pd.DataFrame) -> dict:
 #: multicollinearity (Kutner, Nachtsheim, Neter & Li 2005, Applied Linear Statistical Models, 5th ed., 10.5)
 CONFOUNDED_R2 = 0.9
 
-#: what separates a covariate from the others in a design (used in the ``design`` sentence)
-SEPARATING_DESIGN = {
-    "temperature": "repeat one temperature at the start and at the end of the series (or measure heating and "
-                   "cooling, or randomise the temperature order) so that temperature no longer follows the clock",
-    "elapsed_time": "repeat a reference test at the start and at the end of the session at constant conditions",
-    "test_order": "shuffle the test order between samples",
-    "gap": "measure at two gaps at the same conditions",
-    "strain": "repeat the sweep at two strain amplitudes at the same conditions",
-    "factor": "cross the factor levels with the other covariates (each level at several of their values)",
-}
-
-
-def _kind(name: str) -> str:
-    for key in ("temperature", "elapsed_time", "test_order", "gap", "strain"):
-        if key in name:
-            return key
-    return "factor"
-
-
 def curve_covariates(table: pd.DataFrame, runs=()) -> pd.DataFrame:
     """One row per curve (index: curve id) of every covariate that is constant within curves: the numeric
     :func:`covariate_columns` whose within-curve range is < 5 % of their range across curves (curve mean),
@@ -275,7 +237,7 @@ def curve_covariates(table: pd.DataFrame, runs=()) -> pd.DataFrame:
         return pd.DataFrame()
     g = rows.groupby("curve", sort=False)
     out = {}
-    for c in covariate_columns(rows):
+    for c in [c for c in SESSION_COVARIATES if c in rows] + covariate_columns(rows):
         x = rows[c].astype(float)
         if not np.isfinite(x).any():
             continue
@@ -327,10 +289,11 @@ def confounded_covariates(table: pd.DataFrame, runs=(), r2_limit: float = CONFOU
 
     Covariates (:func:`curve_covariates`) are linked when one explains >= ``r2_limit`` of the other's
     variance across curves; every connected set of >= 2 is reported with ``covariates``, ``r2`` (pairwise,
-    ``"a|b"``), the joint F-test of the curve levels (median ln(observed/predicted) per curve, numeric members
-    together, OLS) ``joint_statistic``/``joint_p``, ``unique_p`` (each member's partial t-test given the
-    others; large when the set is collinear: the data cannot say which one it is), and ``design`` (what
-    would separate them).
+    ``"a|b"``), the joint F-test of the curve levels (median ln(observed/predicted) per curve, the linearly
+    independent numeric members together, specimen and sample as random effects:
+    :func:`tissuemech.stats.mixed_coefficient_test`) ``joint_statistic``/``joint_p``, ``unique_p`` (each member's
+    partial test given the others; large when the set is collinear: the data cannot say which one it is), and
+    ``design`` (what would separate them).
     """
     frame = curve_covariates(table, runs)
     if frame.empty or len(frame) < 4:
@@ -357,29 +320,37 @@ def confounded_covariates(table: pd.DataFrame, runs=(), r2_limit: float = CONFOU
         groups.setdefault(root(c), []).append(c)
     rows = table[np.isfinite(table["log_ratio"])]
     level = rows.groupby("curve")["log_ratio"].median()
+    pieces = rows.groupby("curve")[["specimen", "sample"]].first()
     out = []
     for members in groups.values():
         if len(members) < 2:
             continue
         numeric = [m for m in members if not m.startswith("factor:")]
-        f = frame.join(level.rename("y")).dropna(subset=["y"] + numeric)
+        f = frame.join(level.rename("y")).join(pieces).dropna(subset=["y"] + numeric)
         joint = {"statistic": np.nan, "p_value": np.nan}
         unique = {}
         if numeric and len(f) > len(numeric) + 2:
-            X = add_constant(f[numeric].astype(float), has_constant="add")
+            # the members are (nearly) collinear by construction: the joint test is on a basis of their span (the
+            # linearly independent members, pivoted QR), with specimen and sample as random effects
+            z = f[numeric].astype(float)
+            z = (z - z.mean()) / z.std().replace(0.0, 1.0)
+            _, r, piv = scipy.linalg.qr(z.to_numpy(), mode="economic", pivoting=True)
+            d = np.abs(np.diag(r))
+            basis = [numeric[i] for i, v in zip(piv, d) if v > 1e-8 * max(d.max(), 1e-300)]
             with warnings.catch_warnings():
-                # the members are collinear by construction: the joint test uses the design's rank (pinv)
                 warnings.simplefilter("ignore")
-                fit = OLS(f["y"].to_numpy(float), X).fit()
-            if np.isfinite(fit.fvalue):
-                joint = {"statistic": float(fit.fvalue), "p_value": float(fit.f_pvalue)}
-            unique = {m: float(fit.pvalues[m]) for m in numeric if m in fit.pvalues}
-        kinds = sorted({_kind(m) for m in members})
+                t = st.mixed_coefficient_test(f, "y", basis) if basis else None
+                if t is not None:
+                    joint = {"statistic": float(t["statistic"]), "p_value": float(t["p_value"])}
+                for m in basis:
+                    u = st.mixed_coefficient_test(f, "y", m, controls=tuple(b for b in basis if b != m))
+                    unique[m] = float(u["p_value"]) if u is not None else 1.0
+        designs = list(dict.fromkeys(separating_design(m) for m in members))
         out.append({"covariates": members,
                     "r2": {f"{a}|{b}": r for (a, b), r in links.items() if a in members and b in members},
                     "joint_statistic": joint["statistic"], "joint_p": joint["p_value"], "unique_p": unique,
                     "n_curves": int(len(f)),
                     "design": f"{', '.join(members)} vary together across the {len(frame)} curves of this design "
                               f"(R^2 >= {r2_limit}); to separate them: "
-                              + "; ".join(SEPARATING_DESIGN[k] for k in kinds) + "."})
+                              + "; ".join(designs) + "."})
     return out

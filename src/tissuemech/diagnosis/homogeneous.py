@@ -35,8 +35,13 @@ Findings (the :mod:`.report` JSON contract)
 
 The parallel-plate causes of the catalogue are reported as untested (no plates, no time or rate data).
 ``unexplained``: runs tests on the residual signs of the joint fix fit, per mode (structure no named cause
-accounts for, e.g. a higher-order law would be needed). Holm at ``alpha/2`` within the named causes and
-within the structure tests, as in :func:`tissuemech.diagnosis.report.diagnose`.
+accounts for, e.g. a higher-order law would be needed). A cause is named by the one decision rule of
+:mod:`.decision` (:data:`~tissuemech.diagnosis.decision.DECISION_RULE`, as for parallel-plate data): Holm at
+``alpha/2`` within the named causes and within the structure tests, practical relevance, and a fix whose
+leave-one-mode-out improvement beats the noise margin (eps: the relative noise of the runs, from their own
+scatter, :func:`tissuemech.diagnosis.noise.relative_noise_level`); a significant, relevant cause without a scored
+fix goes to ``significant_fix_not_evaluated``. The JSON carries ``decision_rule`` and ``noise_model`` as the
+parallel-plate diagnosis does.
 
 ``cross_mode`` (extra JSON block): every candidate law's shear-only predictions of compression and tension,
 its joint fit (AICc, parameters, stability flags) and every rotation's held-out NRMSE, with the gains.
@@ -54,10 +59,10 @@ from .. import fitting as F
 from ..models.hyperelastic import stability_flags
 from ..models.registry import get_model
 from .. import stats as st
-from ..canonical import write_netcdf
-from .catalogue import CATALOGUE_IDS, fix_record, untested_finding
-from .evidence import residual_table_to_xarray
-from .findings import write_diagnosis_json
+from .causes import CATALOGUE_IDS
+from .decision import DECISION_RULE, apply_rule, ordered
+from .findings import fix_record, untested_finding
+from .noise import estimate_noise, relative_noise_level
 
 ASYMMETRY_ID = "tension_compression_asymmetry"
 I2_ID = "unidentified_i2_dependence"
@@ -81,7 +86,7 @@ FLAT_PROFILE = 1e-6
 PROFILE_95 = 3.841
 
 _SIGNED = (-1e7, 1e7)
-#: effort of the pipeline entry (:func:`run_homogeneous_diagnosis`): random starts per fit, C01 profile points
+#: effort of the pipeline entry (:func:`tissuemech.diagnosis.report.run_homogeneous_diagnosis`): random starts per fit, C01 profile points
 SETTINGS = {"n_random": 4, "n_grid": 41}
 
 
@@ -172,7 +177,7 @@ def fit_law(law: Law, curves: Sequence[F.Curve], seed: int = 0, n_random: int = 
     return F.fit(problem(law, curves, fixed, scope), starts=[start] if start else (), n_random=n_random, seed=seed)
 
 
-def predict(law: Law, params: Mapping[str, float], curve: F.Curve) -> np.ndarray:
+def predict_stress(law: Law, params: Mapping[str, float], curve: F.Curve) -> np.ndarray:
     """Stress the law predicts at the curve's points (P12 for shear, P11 for uniaxial; Pa)."""
     pred = F.predict(get_model(law.model), params, curve, "none")
     return np.asarray(next(iter(pred.values())), float)
@@ -192,7 +197,7 @@ def log_ratios(law: Law, params: Mapping[str, float], curves: Sequence[F.Curve])
     the same sign (near zero strain the ratio carries no information)."""
     r, s = [], []
     for c in curves:
-        y, f = _observed(c), predict(law, params, c)
+        y, f = _observed(c), predict_stress(law, params, c)
         sig = _sigma(c, f)
         ok = (np.abs(f) > MIN_SNR * sig) & (np.abs(y) > MIN_SNR * sig) & (np.sign(y) == np.sign(f))
         r.append(np.log(y[ok] / f[ok]))
@@ -206,7 +211,7 @@ def held_out_error(law: Law, params: Mapping[str, float], curves: Sequence[F.Cur
     ev = F.evaluate(get_model(law.model), params, list(curves), "none")
     lr, _ = log_ratios(law, params, curves)
     c = max(curves, key=lambda c: np.nanmax(np.abs(_observed(c))))
-    y, f = _observed(c), predict(law, params, c)
+    y, f = _observed(c), predict_stress(law, params, c)
     i = int(np.nanargmax(np.abs(y)))
     return {"nrmse": ev["nrmse"], "rmse_pa": ev["rmse"], "mean_log_ratio": float(np.mean(lr)) if lr.size else np.nan,
             "rel_error_at_max": float((f[i] - y[i]) / y[i])}
@@ -349,46 +354,41 @@ def diagnose_homogeneous(runs: Sequence[xr.Dataset], alpha: float = st.ALPHA, se
                                            "parallel plates, no time, rate or instrument channels)"))
     generic = _structure_tests(by_mode, ext, fits[ext.key, "all_modes"].params)
 
-    # --- multiplicity: alpha/2 to the named causes, alpha/2 to the structure scan (Holm within each) ----
-    tested = [f for f in findings if f["tested"] and np.isfinite(f["p_value"])]
-    rej_c, adj_c = st.holm([f["p_value"] for f in tested], alpha / 2)
-    rej_g, adj_g = st.holm([g["p_value"] for g in generic], alpha / 2)
-    for f, r, a in zip(tested, rej_c, adj_c):
-        gain = (f.get("fix") or {}).get("gain", np.nan)
-        f["p_holm"] = float(min(2 * a, 1.0))
-        f["significant"] = bool(r)
-        f["detected"] = bool(r and f["practical"] and (not np.isfinite(gain) or gain > 0))
-    for f in findings:
-        f.setdefault("detected", False)
-        f.setdefault("p_holm", np.nan)
-        f.setdefault("significant", False)
+    # --- the decision rule of the parallel-plate diagnosis (decision.DECISION_RULE) ---------------------
+    noise = estimate_noise(runs)
+    eps = relative_noise_level(noise)
+    if not np.isfinite(eps):
+        eps = F.NoiseModel().relative
+    not_evaluated = apply_rule(findings, generic, alpha, eps, n_default=float(len(all_c)))
     unexplained = []
-    for g, r, a in zip(generic, rej_g, adj_g):
-        g["p_holm"], g["significant"] = float(min(2 * a, 1.0)), bool(r)
-        if r and g["practical"]:
-            unexplained.append({"effect": "unexplained_structure", **g, "candidates": [], "evidence": (
+    for g in generic:
+        if g["significant"] and g["practical"]:
+            entry = {"effect": "unexplained_structure", **g, "candidates": [], "evidence": (
                 f"{ext.key} fitted to all modes still misfits {g['test']} ({g['mode']}) systematically: residual "
                 f"signs cluster along {g['covariate']} (runs z = {g['statistic']:.2f}, Holm p = {g['p_holm']:.2g}), "
                 f"rms log residual {100 * g['effect_size']:.1f} %; no named cause accounts for it (a law with more "
-                f"terms, or specimen differences between the modes' averaged curves).")})
-    detected = sorted([f for f in findings if f["detected"]], key=lambda f: f["log10_p"])
-    rest = [f for f in findings if not f["detected"]]
-    rest.sort(key=lambda f: f["log10_p"] if np.isfinite(f.get("log10_p", np.nan)) else 1.0)
+                f"terms, or specimen differences between the modes' averaged curves).")}
+            entry["what_to_do"] = ("Try a law with more terms, or check whether the modes' averaged curves come from "
+                                   "different specimens.")
+            unexplained.append(entry)
     result = {
         "model": base.key, "kind": "homogeneous_multimode",
         "fit_info": {"calibration": "simple_shear", "baseline": base.key, "baseline_formula": base.formula,
                      "extension": ext.key, "extension_formula": ext.formula, "target": "none",
                      "modes": {m: [rid for rid, _ in by_mode[m]] for m in MODES},
                      "noise_model": "1 % relative + 0.03 Pa floor (tissuemech.fitting.NoiseModel)"},
-        "alpha": alpha, "n_tests": len(tested) + len(generic), "findings": detected + rest,
-        "unexplained": unexplained, "not_identifiable": not_identifiable, "structure_tests": generic,
+        "alpha": alpha, "decision_rule": DECISION_RULE,
+        "noise_model": {**noise, "relative_level": eps},
+        "n_tests": sum(1 for f in findings if f["tested"]) + len(generic), "findings": ordered(findings),
+        "unexplained": unexplained, "significant_fix_not_evaluated": not_evaluated,
+        "not_identifiable": not_identifiable, "structure_tests": generic,
         "cross_mode": {"shear_only": shear_only, "joint": joint, "rotations": rotations,
                        "best_law_by_rotation": best_law, "best_uniaxial_predictor": best_uniaxial,
                        "mean_gain_extension_vs_baseline": float(np.mean([r["gain_extension_vs_baseline"]
                                                                          for r in rotations]))},
         "profiles": profiles,
     }
-    return result, residual_table(by_mode, fits, use)
+    return result, mode_residual_table(by_mode, fits, use)
 
 
 def _asymmetry_finding(by_mode, fits, base: Law, ext: Law, rotations) -> dict:
@@ -413,6 +413,8 @@ def _asymmetry_finding(by_mode, fits, base: Law, ext: Law, rotations) -> dict:
     after = float(np.mean([r[ext.key] for r in uni]))
     fix = fix_record(f"{ext.key} ({ext.formula}) calibrated on shear + the other uniaxial mode", "held_out_nrmse",
                before, after, "; ".join(r["label"] for r in uni) + f" (before: {base.key} calibrated on shear alone)",
+               n_held_out_points=float(sum(_observed(c).size for m in ("compression", "tension")
+                                           for c in _curves(by_mode, [m]))),
                **{r["label"]: r[ext.key] for r in uni})
     e_c = 100 * np.expm1(rc.mean())
     e_t = 100 * np.expm1(rt.mean())
@@ -471,6 +473,7 @@ def _i2_finding(by_mode, fits, base: Law, ext: Law, rotations, seed: int, n_grid
     fix = fix_record(f"{ext.key} ({ext.formula}) fitted to all modes jointly", "held_out_nrmse (mean over rotations)",
                before, after, "; ".join(r["label"] for r in rotations) + f" (before: {base.key} on the same modes)",
                delta_aicc=fa.aicc - fb.aicc, C01_pa=c01, C10_pa=c10, C01_ci95_low_pa=lo, C01_ci95_high_pa=hi,
+               n_held_out_points=float(sum(_observed(c).size for c in all_c)),
                **{r["label"]: r[ext.key] for r in rotations})
     shear_txt = (f"Not identifiable from simple shear alone: I1 = I2 = 3 + gamma^2, so the C10 and C01 Jacobian "
                  f"columns have correlation {rho_shear:+.4f} (|rho| -> 1) and the chi-square profile over C01 in "
@@ -516,7 +519,7 @@ def _ogden_note(by_mode, fits, finding: dict) -> None:
     ps, pa = fits[law.key, "simple_shear"].params, fits[law.key, "all_modes"].params
     flipped = dict(ps, alpha1=-ps["alpha1"])
     c = _curves(by_mode, ["shear"])
-    diff = max(float(np.max(np.abs(predict(law, flipped, x) - predict(law, ps, x)))) for x in c)
+    diff = max(float(np.max(np.abs(predict_stress(law, flipped, x) - predict_stress(law, ps, x)))) for x in c)
     finding["evidence"] += (f" The one-term Ogden law shows the same blind spot: its shear response is identical for "
                             f"alpha and -alpha (max difference {diff:.2g} Pa); shear alone gives alpha1 = "
                             f"{ps['alpha1']:+.3g}, all modes {pa['alpha1']:+.3g}.")
@@ -529,7 +532,7 @@ def _structure_tests(by_mode, law: Law, params: Mapping[str, float]) -> list[dic
     for m in MODES:
         for rid, c in by_mode[m]:
             x = c.obs_inputs("shear_strain" if m == "shear" else "stretch")
-            y, f = _observed(c), predict(law, params, c)
+            y, f = _observed(c), predict_stress(law, params, c)
             sig = _sigma(c, f)
             ok = np.abs(f) > MIN_SNR * sig
             order = np.argsort(x[ok])
@@ -546,7 +549,7 @@ def _structure_tests(by_mode, law: Law, params: Mapping[str, float]) -> list[dic
     return out
 
 
-def residual_table(by_mode, fits, laws: Sequence[Law]) -> pd.DataFrame:
+def mode_residual_table(by_mode, fits, laws: Sequence[Law]) -> pd.DataFrame:
     """Residuals of every law under every calibration (module docstring of :func:`diagnose_homogeneous`)."""
     rows = []
     for law in laws:
@@ -556,7 +559,7 @@ def residual_table(by_mode, fits, laws: Sequence[Law]) -> pd.DataFrame:
             trained = MODES if calib == "all_modes" else calib.split("+") if "+" in calib else ["shear"]
             for m in MODES:
                 for rid, c in by_mode[m]:
-                    y, f = _observed(c), predict(law, res.params, c)
+                    y, f = _observed(c), predict_stress(law, res.params, c)
                     sig = _sigma(c, f)
                     x = c.obs_inputs("shear_strain") if m == "shear" else c.obs_inputs("stretch") - 1.0
                     with np.errstate(divide="ignore", invalid="ignore"):
@@ -574,105 +577,3 @@ def residual_table(by_mode, fits, laws: Sequence[Law]) -> pd.DataFrame:
 # ------------------------------------------------------------------------------------------------
 # figures
 # ------------------------------------------------------------------------------------------------
-def write_figures(by_mode, table: pd.DataFrame, result: dict, fig_dir) -> list:
-    """Before/after predictions per mode, residual map (log ratio vs strain), C01 profiles and the
-    cross-mode held-out errors. Returns the PNG paths."""
-    from pathlib import Path
-
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ..plots import save_pyplot_figure
-
-    fig_dir = Path(fig_dir)
-    fig_dir.mkdir(parents=True, exist_ok=True)
-    base, ext = result["fit_info"]["baseline"], result["fit_info"]["extension"]
-    other = {"compression": "shear+tension", "tension": "shear+compression", "shear": "compression+tension"}
-    paths = []
-
-    fig, axes = plt.subplots(1, 3, figsize=(13, 4))
-    for ax, m in zip(axes, MODES):
-        t = table[table["mode"] == m]
-        d = t[(t["model"] == base) & (t["calibration"] == "simple_shear")].sort_values("strain")
-        ax.plot(d["strain"], d["observed"] / 1e3, "ko", ms=3, label="data")
-        ax.plot(d["strain"], d["predicted"] / 1e3, "C3--", label=f"{base}, shear only")
-        j = t[(t["model"] == ext) & (t["calibration"] == "all_modes")].sort_values("strain")
-        ax.plot(j["strain"], j["predicted"] / 1e3, "C0-", label=f"{ext}, all modes")
-        h = t[(t["model"] == ext) & (t["calibration"] == other[m])].sort_values("strain")
-        ax.plot(h["strain"], h["predicted"] / 1e3, "C2:", label=f"{ext}, fit {other[m]} (held out)")
-        ax.set_xlabel("amount of shear gamma" if m == "shear" else "lambda - 1")
-        ax.set_ylabel("P12 [kPa]" if m == "shear" else "P11 [kPa]")
-        ax.set_title(m)
-        ax.axhline(0, color="k", lw=0.4)
-    axes[0].legend(fontsize=7)
-    fig.suptitle("before (shear-calibrated I1 law) and after (I2 term, all modes / held-out mode)")
-    paths.append(save_pyplot_figure(fig, fig_dir / "predictions_before_after.png"))  # PNG (report pattern) + SVG
-
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
-    for ax, (model, calib, title) in zip(axes, ((base, "simple_shear", "shear-calibrated baseline"),
-                                                (ext, "all_modes", "I2 extension, all modes"))):
-        for m, color in zip(MODES, ("C1", "C3", "C0")):
-            d = table[(table["model"] == model) & (table["calibration"] == calib) & (table["mode"] == m)]
-            d = d[np.isfinite(d["log_ratio"])].sort_values("strain")
-            # negative and positive strains drawn apart so a two-sided shear curve is not joined across zero
-            label = m
-            for side in (d[d["strain"] < 0], d[d["strain"] > 0]):
-                if len(side):
-                    ax.plot(side["strain"], 100 * side["log_ratio"], "-o", color=color, ms=3, label=label)
-                    label = None
-        ax.axhline(0, color="k", lw=0.5)
-        ax.set_xlabel("gamma (shear) or lambda - 1 (uniaxial)")
-        ax.set_title(f"{title}: {model}", fontsize=9)
-    axes[0].set_ylabel("ln(observed / predicted) [%]")
-    axes[0].legend(fontsize=8)
-    fig.suptitle("residual map per mode (points above the noise floor)")
-    paths.append(save_pyplot_figure(fig, fig_dir / "residual_map_modes.png"))  # PNG (report pattern) + SVG
-
-    prof = result["profiles"]
-    fig, ax = plt.subplots(figsize=(6, 4))
-    ax.plot(np.asarray(prof["c01_pa"]) / 1e3, prof["delta_shear"], "C3-o", ms=3, label="simple shear only (flat)")
-    ax.plot(np.asarray(prof["c01_pa"]) / 1e3, prof["delta_all_modes"], "C0-o", ms=3, label="all modes")
-    ax.axhline(prof["level_95"], color="k", ls=":", lw=0.8, label="95 % level")
-    ax.set_ylim(-0.5, max(10.0, 1.1 * prof["level_95"]))
-    ax.set_xlabel(f"C01 of {prof['law']} [kPa] (other parameters refitted)")
-    ax.set_ylabel("Delta chi2 / s^2")
-    ax.legend(fontsize=8)
-    ax.set_title("profile of the I2 coefficient")
-    paths.append(save_pyplot_figure(fig, fig_dir / "c01_profile.png"))  # PNG (report pattern) + SVG
-
-    rot = result["cross_mode"]["rotations"]
-    fig, ax = plt.subplots(figsize=(7, 4))
-    y = np.arange(len(rot))
-    ref = "ogden1" if "ogden1" in rot[0] else None
-    width = 0.27 if ref else 0.4
-    ax.barh(y - width, [r[base] for r in rot], height=width, label=f"{base} (I1 only)")
-    ax.barh(y, [r[ext] for r in rot], height=width, label=f"{ext} (+ C01)")
-    if ref:
-        ax.barh(y + width, [r[ref] for r in rot], height=width, label=f"{ref} (reference)")
-    shear_only = [(i, r["shear_only_baseline"]) for i, r in enumerate(rot) if "shear_only_baseline" in r]
-    if shear_only:
-        ax.plot([v for _, v in shear_only], [i for i, _ in shear_only], "kx", ms=9,
-                label=f"{base} calibrated on shear alone")
-    ax.set_yticks(y, [r["label"] for r in rot], fontsize=8)
-    ax.set_xlabel("held-out NRMSE")
-    ax.legend(fontsize=8)
-    ax.set_title("cross-mode prediction (leave one mode out)")
-    paths.append(save_pyplot_figure(fig, fig_dir / "cross_mode_gains.png"))  # PNG (report pattern) + SVG
-    return paths
-
-
-def run_homogeneous_diagnosis(runs: Sequence[xr.Dataset], out_json, out_nc, fig_dir, dataset: str = "",
-                              alpha: float = st.ALPHA, seed: int = 0) -> dict:
-    """Pipeline entry for multi-mode homogeneous data: ``diagnosis.json``, the residual netCDF, figures."""
-    result, table = diagnose_homogeneous(runs, alpha=alpha, seed=seed, **SETTINGS)
-    write_diagnosis_json(result, out_json, dataset=dataset)
-    ds = residual_table_to_xarray(table)
-    for name, unit in (("observed", "Pa"), ("predicted", "Pa"), ("residual", "Pa"), ("sigma", "Pa")):
-        ds[name].attrs["units"] = unit
-    ds.attrs.update({"dataset": dataset, "kind": "homogeneous_multimode", "baseline": result["model"],
-                     "extension": result["fit_info"]["extension"]})
-    write_netcdf(ds, out_nc)
-    result["figures"] = [str(p) for p in write_figures(mode_curves(runs), table, result, fig_dir)]
-    return result

@@ -1,122 +1,26 @@
 """Causes read from curve levels (one level per curve from the baseline's residuals): elapsed-time drift,
-preconditioning (first load) and an outlier specimen, the level regressions they share
-(:func:`level_regression`, :func:`between_sample_test`) and the confounded-covariate bookkeeping. Part of
-:mod:`.catalogue`."""
+preconditioning (first load) and an outlier specimen, the within-sample mixed-model test they share
+(:func:`within_test`: specimen and sample as random effects, the covariate read within samples, else within
+specimens) and the confounded-covariate bookkeeping. Detectors of the registry :mod:`.causes`."""
 from __future__ import annotations
 
 from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
-from statsmodels.regression.linear_model import OLS
-from statsmodels.tools.tools import add_constant
 import xarray as xr
 
 from .. import stats as st
 from ..tts import run_temperature_c
 from .evidence import condition_label, run_id
-from .findings import (DiagnosisContext, curve_levels, demean_by, fix_record, fixed_effect_design, make_finding,
-                       primary_rows, rms, untested_finding)
+from .findings import (DiagnosisContext, curve_levels, demean_by, fix_record, make_finding, primary_rows, rms,
+                       separating_design, untested_finding)
 
 # ------------------------------------------------------------------------------------------------
 # curve-level scale: elapsed-time drift, preconditioning, outlier specimen
 # ------------------------------------------------------------------------------------------------
-#: fixed-effect sets tried in order for curve-level regressions: the sample absorbs sample-to-sample
-#: stiffness variability (so drift and first load are read within samples), the condition a misfit that
-#: differs by condition; a set is used when the design stays full rank with >= 3 residual dof
-FIXED_EFFECT_SETS = (("sample", "condition"), ("sample", "test"), ("sample",), ("specimen", "condition"),
-                     ("specimen", "test"), ("specimen",), ("condition",), ())
-
-
-def level_regression(levels: pd.DataFrame, y: str, columns: Sequence[str], require_condition: bool = False,
-                     sets: Sequence[tuple[str, ...]] | None = None):
-    """Curve-level OLS ``y ~ columns + fixed effects`` (first usable set of :data:`FIXED_EFFECT_SETS`),
-    standard errors clustered by sample (t with G - 1 df, :func:`tissuemech.stats.cluster_regression`). Returns the result (with
-    ``fixed_effects`` set) or None when no set leaves the columns estimable.
-
-    ``require_condition``: only sets with condition fixed effects are tried when the condition varies
-    (a covariate collinear with the condition is then reported as untestable rather than confounded)."""
-    sets = FIXED_EFFECT_SETS if sets is None else sets
-    if require_condition and levels["condition"].nunique() > 1:
-        sets = [fes for fes in sets if "condition" in fes]
-    for fes in sets:
-        # a covariate that is (nearly) constant within the fixed-effect groups is identified by noise only
-        # (e.g. a logged gap channel with its sensor noise inside one sample): not estimable there
-        if any(fe in levels and levels[c].std() > 0 and
-               (levels[c] - levels.groupby(fe)[c].transform("mean")).std() < 0.05 * levels[c].std()
-               for fe in fes if fe in ("sample", "specimen") for c in columns):
-            continue
-        X = fixed_effect_design(levels, columns, [fe for fe in fes if fe in levels])
-        X = X.loc[:, (X.std() > 0) | X.columns.isin(columns)]
-        if any(X[c].std() == 0 for c in columns) or len(levels) - X.shape[1] - 1 < 3:
-            continue
-        Xc = add_constant(X, has_constant="add").to_numpy(float)
-        if np.linalg.matrix_rank(Xc) == Xc.shape[1]:
-            groups = levels["sample"].to_numpy() if "sample" in levels else None
-            res = st.cluster_regression(levels[y].to_numpy(float), X, groups=groups)
-            res.fixed_effects = list(fes)
-            return res
-    return None
-
-
-def between_sample_test(levels: pd.DataFrame, y: str, column: str) -> dict | None:
-    """Two-stage test of a covariate that varies between samples: condition effects are removed from the
-    curve levels (condition fixed effects), the residual levels and the covariate are averaged per sample,
-    and the sample means are regressed on the covariate with specimen fixed effects (plain OLS, df = samples
-    - parameters). Curves of one sample share its stiffness, so the sample -- not the curve -- is the unit
-    of replication for such covariates (curve-level cluster-robust errors are anti-conservative here); where
-    the design cannot afford specimen fixed effects and some specimen has several samples, the specimen means
-    are regressed instead (samples of one specimen share its level), with at least 3 residual df."""
-    lv = levels[np.isfinite(levels[y]) & np.isfinite(levels[column])]
-    if lv["sample"].nunique() < 5:
-        return None
-    r = lv[y] - lv.groupby("condition")[y].transform("mean")
-    xr_ = lv[column] - lv.groupby("condition")[column].transform("mean")
-    agg = pd.DataFrame({"r": r, "x": xr_, "sample": lv["sample"], "specimen": lv["specimen"]}).groupby("sample").agg(
-        r=("r", "mean"), x=("x", "mean"), specimen=("specimen", "first"))
-    if agg["x"].std() == 0:
-        return None
-    for fes in (["specimen"], []):
-        if not fes and agg["specimen"].nunique() < len(agg):
-            # without specimen fixed effects, samples of one specimen share its random level: their means are not
-            # independent replicates, so the specimen (its mean over samples) is the unit of replication
-            agg = agg.groupby("specimen").agg(r=("r", "mean"), x=("x", "mean")).assign(
-                specimen=lambda a: a.index)
-            if agg["x"].std() == 0:
-                return None
-        X = fixed_effect_design(agg.rename(columns={"x": column}), [column], fes)
-        Xc = add_constant(X, has_constant="add").to_numpy(float)
-        if len(agg) - Xc.shape[1] >= 3 and np.linalg.matrix_rank(Xc) == Xc.shape[1] and X[column].std() > 0:
-            res = OLS(agg["r"].to_numpy(float), Xc).fit()
-            k = list(X.columns).index(column) + 1
-            est, se = float(res.params[k]), float(res.bse[k])
-            tval = est / se if se > 0 else 0.0
-            out = st.statistic_result(tval, st.log10_p_from_t(tval, res.df_resid), estimate=est, std_error=se,
-                           df=float(res.df_resid))
-            out["design"] = ("sample means, specimen fixed effects" if fes else
-                             "specimen means" if agg.index.name == "specimen" else "sample means, no fixed effects")
-            return out
-    return None
-
-
 #: within-sample |correlation| above which two curve-level covariates are reported as confounded
 CONFOUND_CORRELATION = 0.9
-
-#: the design that would separate a curve-level covariate from each confounder (``condition``: the test
-#: condition when the covariate is collinear with it within samples, i.e. a fixed test order)
-SEPARATING_DESIGN = {
-    "position": "vary the pauses between tests, or start the samples of one session at different times, so "
-                "that elapsed time varies at a fixed position in the sequence (a drift of the instrument or "
-                "specimen follows the clock, an effect of the loading history follows the position)",
-    "first_load": "repeat the first test of each sample later in its sequence, or vary which test comes first",
-    "temperature_c": "hold the temperature constant over the session, or change it in steps that are not "
-                     "monotone in time (e.g. a randomised or up-and-down temperature sequence)",
-    "elapsed_h": "record started_at or total_time and run at least three tests per sample, so that a time "
-                 "trend can be read from the tests after the first load",
-    "condition": "randomise the test order across samples, or repeat a reference test (same kind and "
-                 "condition as an early one) at the end of each sample's sequence",
-}
-
 
 def _within_corr(levels: pd.DataFrame, a: str, b: str) -> float:
     """Correlation of two curve-level covariates after removing sample means (NaN when undefined)."""
@@ -150,19 +54,51 @@ def _usable(levels: pd.DataFrame, column: str) -> bool:
     return bool(len(v) and v.notna().all() and v.nunique() > 2)
 
 
+def _varies_within(x: pd.Series, groups: pd.Series) -> bool:
+    return bool((x - x.groupby(groups).transform("mean")).abs().max() > 1e-12 * max(float(x.abs().max()), 1e-300))
+
+
+def within_test(levels: pd.DataFrame, column: str, controls: Sequence[str] = ()) -> tuple[dict, str] | None:
+    """Mixed-model test of ``column`` read within samples, else within specimens: the condition as fixed effects,
+    specimen and sample as random effects (:func:`tissuemech.stats.mixed_coefficient_test`, between-within
+    degrees of freedom). Within samples, the column and its ``controls`` are centred on their sample's mean; where
+    that leaves nothing testable (one curve per sample, or a fixed test order that makes the column follow the
+    condition), each sample's mean, centred on its specimen's mean, is tested across the samples of a specimen. So a
+    trend of the session clock is read inside a specimen, never from the specimens' differences (a block design
+    measures the specimens one after the other). Returns ``(test, design sentence)`` or None."""
+    factors = ("condition",) if levels["condition"].nunique() > 1 else ()
+    cols = [column, *controls]
+    x = {c: levels[c].astype(float) for c in cols}
+    if _varies_within(x[column], levels["sample"]):
+        frame = levels.assign(**{c: x[c] - x[c].groupby(levels["sample"]).transform("mean") for c in cols})
+        t = st.mixed_coefficient_test(frame, "log_scale", column, factors, controls=tuple(controls))
+        if t is not None:
+            return t, (f"within samples (condition fixed effects, specimen and sample random effects"
+                       + (f", controlled for {', '.join(controls)}" if controls else "") + f"; {t['method']})")
+    means = {c: x[c].groupby(levels["sample"]).transform("mean") for c in cols}
+    if not _varies_within(means[column], levels["specimen"]):
+        return None
+    frame = levels.assign(**{c: means[c] - means[c].groupby(levels["specimen"]).transform("mean") for c in cols})
+    t = st.mixed_coefficient_test(frame, "log_scale", column, factors, controls=tuple(controls))
+    if t is None:
+        return None
+    return t, (f"between the samples of each specimen (sample means centred on the specimen's; condition fixed "
+               f"effects, specimen and sample random effects" + (f", controlled for {', '.join(controls)}"
+                                                                 if controls else "") + f"; {t['method']})")
+
+
 def _level_tests(levels: pd.DataFrame, column: str):
-    """Curve-level tests of ``column`` (elapsed time or first load), each controlled for the other and for
-    the logged temperature where the design allows (the largest estimable set of controls): within samples with sample and condition fixed effects (clustered by sample) and,
-    for covariates that vary between samples, the two-stage :func:`between_sample_test`; the stronger with
-    a Bonferroni factor. Returns ``(test, design)`` or ``(None, None)``; ``test`` carries ``controls`` (the
-    covariates held fixed) and ``confounded_with`` (covariates whose within-sample correlation with
-    ``column`` reaches :data:`CONFOUND_CORRELATION`, or ``condition`` when the condition explains that
-    share squared of its within-sample variance, with the design that would separate them in
-    ``separating_design``). Elapsed time is read within samples only with the first-load control when the
-    first loads are known and not absorbed by the condition effects (a within-sample trend needs two curves
-    after the first load; otherwise the slope is the first-load contrast). Elapsed time falls back to the position in the sequence when no time was
-    recorded. Designs in which the covariate is collinear with the condition within samples (a fixed
-    test order) are not used within samples: a misfit that differs by condition would pass for the effect."""
+    """Curve-level test of ``column`` (elapsed time or first load) within samples, else within specimens
+    (:func:`within_test`), controlled for the other and for the logged temperature where the design allows (the
+    largest estimable set of controls). Returns ``(test, design)`` or ``(None, None)``; ``test`` carries
+    ``controls`` (the covariates held fixed) and ``confounded_with`` (covariates whose within-sample correlation
+    with ``column`` reaches :data:`CONFOUND_CORRELATION`, or ``condition`` when the condition explains that share
+    squared of its within-sample variance, with the design that would separate them in ``separating_design``).
+    Elapsed time is read with the first-load control when the first loads are known and not absorbed by the
+    condition effects (a within-sample trend needs two curves after the first load; otherwise the slope is the
+    first-load contrast). Elapsed time falls back to the position in the sequence when no time was recorded.
+    A covariate collinear with the condition within samples (a fixed test order) is not testable: a misfit that
+    differs by condition would pass for the effect."""
     time_recorded = _usable(levels, "elapsed_h")
     if column == "elapsed_h" and not time_recorded:
         if not _usable(levels, "position"):
@@ -176,28 +112,20 @@ def _level_tests(levels: pd.DataFrame, column: str):
     controls = [c for c in (other, "temperature_c") if c in levels and _usable(levels, c)]
     if "first_load" in controls and levels.groupby("condition")["first_load"].nunique().max() == 1:
         controls.remove("first_load")  # each condition always or never first: the condition effects absorb it
-    found = []
     combos = [[column] + controls] + ([[column, controls[0]]] if len(controls) > 1 else []) + [[column]]
     if column == "elapsed_h" and "first_load" in controls:
         # a trend within a sample needs two curves after its first load: without them the within-sample
         # slope is the first-load contrast itself (preconditioning), so it is only read with that control
         combos = [c for c in combos if "first_load" in c]
+    found = None
     for cols in combos:
-        res = level_regression(levels, "log_scale", cols, sets=[("sample", "condition")])
-        if res is not None:
-            t = st.coefficient_test(res, column)
-            found.append((dict(t, controls=cols[1:]),
-                          "within samples (sample + condition fixed effects"
-                          + (f", controlled for {', '.join(cols[1:])})" if cols[1:] else ")")))
+        got = within_test(levels, column, cols[1:])
+        if got is not None:
+            found = (dict(got[0], controls=cols[1:]), got[1])
             break
-    if column != "first_load":
-        b = between_sample_test(levels, "log_scale", column)
-        if b is not None:
-            found.append((dict(b, controls=[]), f"between samples ({b['design']})"))
-    if not found:
+    if found is None:
         return None, None
-    t, design = min(found, key=lambda f: f[0]["log10_p"])
-    lp = min(0.0, t["log10_p"] + np.log10(len(found)))
+    t, design = found
     confounded = []
     # the first load is position 1: only time and temperature can be confounded with it
     candidates = ("elapsed_h", "temperature_c") if column == "first_load" else (
@@ -207,8 +135,7 @@ def _level_tests(levels: pd.DataFrame, column: str):
             confounded.append(c)
     if _condition_share(levels, column) >= CONFOUND_CORRELATION ** 2:
         confounded.append("condition")
-    return dict(t, log10_p=lp, p_value=10 ** lp, confounded_with=confounded,
-                separating_design=[SEPARATING_DESIGN[c] for c in confounded]), design
+    return dict(t, confounded_with=confounded, separating_design=[separating_design(c) for c in confounded]), design
 
 
 def _run_sequences(runs: Sequence[xr.Dataset]) -> list[list[xr.Dataset]]:
@@ -363,22 +290,25 @@ def paired_first_load_test(ctx: DiagnosisContext) -> dict | None:
     return out
 
 
-def _scale_correction_cv(ctx: DiagnosisContext, levels: pd.DataFrame, column: str) -> tuple[float, float, str]:
-    """Held-out gain of a curve-level covariate (elapsed time, first load).
+def scale_correction_cv(ctx: DiagnosisContext, levels: pd.DataFrame, column: str,
+                        units: tuple[str, str] | None = None) -> tuple[float, float, str, int]:
+    """Held-out gain of a curve-level covariate (elapsed time, first load, temperature).
 
-    With >= 3 curves per sample: leave one curve out and predict its level from the other curves of the
-    same sample (baseline: their mean; fix: their mean adjusted by b * column, b fitted within samples
-    without the held-out curve). Otherwise leave one sample out and use the specimen's other samples.
-    Error: log(observed/predicted) at every point of the held-out curve."""
+    ``units`` (unit, held): with ("sample", "curve") -- the default with >= 3 curves per sample -- leave one curve
+    out and predict its level from the other curves of the same sample (baseline: their mean; fix: their mean
+    adjusted by b * column, b fitted within samples without the held-out curve); with ("specimen", "sample") --
+    the default otherwise, and the unit of a covariate that changes only between samples -- leave one sample out
+    and use the specimen's other samples. Error: log(observed/predicted) at every point of the held-out curve.
+    Returns (RMS error before, after, the held-out unit, the number of held-out points)."""
     if column == "elapsed_h" and levels["elapsed_h"].isna().any():
         levels = levels.assign(elapsed_h=levels["position"].astype(float))
     levels = levels[levels[column].notna()]
     if levels.empty:
-        return np.nan, np.nan, "curve"
+        return np.nan, np.nan, "curve", 0
     rows = primary_rows(ctx.table)
     point_errors = {c: g.to_numpy(float) for c, g in rows.groupby("curve")["log_ratio"]}
     by_sample = levels.groupby("sample").size().min() >= 3
-    unit, held = ("sample", "curve") if by_sample else ("specimen", "sample")
+    unit, held = units or (("sample", "curve") if by_sample else ("specimen", "sample"))
     unit_codes = pd.factorize(levels[unit])[0]
     held_codes = pd.factorize(levels[held])[0]
     x_all = levels[column].to_numpy(float)
@@ -409,8 +339,9 @@ def _scale_correction_cv(ctx: DiagnosisContext, levels: pd.DataFrame, column: st
             before.append(e - base)
             after.append(e - adj - slope * x_all[i])
     if not before:
-        return np.nan, np.nan, held
-    return rms(np.concatenate(before)), rms(np.concatenate(after)), held
+        return np.nan, np.nan, held, 0
+    b = np.concatenate(before)
+    return rms(b), rms(np.concatenate(after)), held, int(np.isfinite(b).sum())
 
 
 #: elapsed time and run temperature explaining this share of each other's variance across curves cannot be
@@ -465,19 +396,20 @@ def detect_elapsed_time_drift(ctx: DiagnosisContext) -> dict:
     if confound:
         return untested_finding(eff, confound) | {
             "confounded_with": ["temperature_c"],
-            "separating_design": ["repeat a reference temperature at the start and the end of the session"]}
+            "separating_design": [separating_design("temperature_c")]}
     t, design = _level_tests(levels, "elapsed_h")
     if t is None:
         return untested_finding(eff, "elapsed time (total_time/started_at) and the test order do not vary across "
                               "curves in a way that is not confounded with the test conditions; a design that "
-                              f"would: {SEPARATING_DESIGN['condition']}"
-                              + ("" if _usable(levels, "elapsed_h") else f"; {SEPARATING_DESIGN['elapsed_h']}"))
+                              f"would: {separating_design('condition')}"
+                              + ("" if _usable(levels, "elapsed_h") else f"; {separating_design('elapsed_h')}"))
     kappa = float(np.expm1(t["estimate"]))
     use_time = _usable(levels, "elapsed_h")
     unit = "1/h" if use_time else "1/test"
     span = float(levels["elapsed_h"].max() - levels["elapsed_h"].min()) if use_time else float(
         levels["position"].max() - levels["position"].min())
-    before, after, group = _scale_correction_cv(ctx, levels, "elapsed_h")
+    before, after, group, n_held = scale_correction_cv(
+        ctx, levels, "elapsed_h", None if design.startswith("within samples") else ("specimen", "sample"))
     order = levels.sort_values("elapsed_h" if use_time else "position")["log_scale"].to_numpy()
     runs = st.runs_test(order - np.median(order))
     source = ("hour of elapsed session time" if use_time else
@@ -491,7 +423,7 @@ def detect_elapsed_time_drift(ctx: DiagnosisContext) -> dict:
                 f"{100 * np.expm1(abs(t['estimate']) * span):.0f} %; curve scales ordered by time have "
                 f"{int(runs['n_runs'])} runs (runs test p = {runs['p_value']:.2g})." + _confound_text(t))
     fix = fix_record("elapsed-time covariate: prediction x exp(b0 + kappa t_elapsed)", "rms_log_residual",
-               before, after, f"leave-one-{group}-out", kappa_per_unit=kappa)
+               before, after, f"leave-one-{group}-out", kappa_per_unit=kappa, n_held_out_points=n_held)
     practical = abs(np.expm1(abs(t["estimate"]) * span)) >= 0.05
     return make_finding(eff, t, "t", kappa, unit, practical, evidence, fix, time_source=(
         "elapsed time" if use_time else "test order"), confounded_with=t["confounded_with"],
@@ -505,9 +437,20 @@ def detect_preconditioning(ctx: DiagnosisContext) -> dict:
     (controlled for elapsed time where recorded), the stronger with a Bonferroni factor."""
     eff = "preconditioning"
     levels = curve_levels(ctx.table)
+    per_sample: dict[tuple, int] = {}
+    for r in ctx.runs:
+        key = (str(r.attrs.get("specimen")), str(r.attrs.get("sample")))
+        per_sample[key] = per_sample.get(key, 0) + 1
+    if per_sample and max(per_sample.values()) == 1:
+        return untested_finding(eff, f"every one of the {len(per_sample)} samples has a single test: no first load "
+                                     f"can be compared with a later test of the same sample; a design that would: "
+                                     f"{separating_design('first_load')}")
+    if levels.empty:
+        return untested_finding(eff, "no curve of these data has a level from the baseline (it predicts none of "
+                                     "the tests)")
     if levels["first_load"].isna().all():
-        return untested_finding(eff, "the measuring order of the tests on each sample is unknown (no order, started_at "
-                              "or total_time): the first load cannot be identified")
+        return untested_finding(eff, "the measuring order of the tests on each sample is unknown (no distinct order, "
+                                     "started_at or total_time within a sample): the first load cannot be identified")
     found = []
     paired = paired_first_load_test(ctx)
     if paired is not None:
@@ -523,12 +466,12 @@ def detect_preconditioning(ctx: DiagnosisContext) -> dict:
         return untested_finding(eff, "no sample has a first load comparable with a later repeat of the same kind of "
                               "measurement and the first-load indicator is confounded with the test conditions "
                               "(one test per sample, or the first test is always the same kind); a design that "
-                              f"would: {SEPARATING_DESIGN['first_load']}")
+                              f"would: {separating_design('first_load')}")
     t, design = min(found, key=lambda f: f[0]["log10_p"])
     lp = min(0.0, t["log10_p"] + np.log10(len(found)))
     t = dict(t, log10_p=lp, p_value=10 ** lp)
     delta = float(np.expm1(t["estimate"]))
-    before, after, group = _scale_correction_cv(ctx, levels, "first_load")
+    before, after, group, n_held = scale_correction_cv(ctx, levels, "first_load")
     known = levels[levels["first_load"].notna()]
     n_first = int(known["first_load"].sum())
     first_tests = known.loc[known["first_load"] == 1, "test"].value_counts().index.tolist()
@@ -539,7 +482,8 @@ def detect_preconditioning(ctx: DiagnosisContext) -> dict:
                 + (f"; Bonferroni over {len(found)} tests" if len(found) > 1 else "") + ")."
                 + _confound_text(t))
     fix = fix_record("first-load indicator (pseudo-elastic factor on virgin loading) / discard first cycle",
-               "rms_log_residual", before, after, f"leave-one-{group}-out", first_load_factor=1 + delta)
+               "rms_log_residual", before, after, f"leave-one-{group}-out", first_load_factor=1 + delta,
+               n_held_out_points=n_held)
     # preconditioning softens: only a stiffer first load is this cause (a softer one is another misfit)
     return make_finding(eff, t, "t", delta, "1 (relative stiffness of first load)", delta >= 0.05, evidence, fix,
                     confounded_with=t.get("confounded_with", []),
@@ -570,8 +514,11 @@ def detect_outlier_specimen(ctx: DiagnosisContext) -> dict:
     levels = curve_levels(ctx.table)
     n_spec = levels["specimen"].nunique()
     if n_spec < 3:
-        return untested_finding(eff, f"only {n_spec} specimen(s): an outlier specimen needs at least 3 specimens "
-                              "(one to test against the spread of at least two others)")
+        n_runs = len({str(r.attrs.get("specimen")) for r in ctx.runs})
+        have = (f"{n_spec} specimen{'s' if n_spec != 1 else ''} with a curve level" if n_spec else
+                f"no curve with a level from the baseline ({n_runs} specimen{'s' if n_runs != 1 else ''} in the runs)")
+        return untested_finding(eff, f"not testable here: {have}; an outlier specimen needs at least 3 specimens "
+                                     "(one tested against the spread of at least two others)")
     try:
         spec = specimen_levels(levels)
     except ValueError as exc:

@@ -1,6 +1,7 @@
 """Causes read from oscillation tests: uncorrected instrument inertia in frequency sweeps (with the
-spectrum-shape control and the raw-phase bound) and amplitude softening in amplitude sweeps. Part of
-:mod:`.catalogue`."""
+spectrum-shape control and the raw-phase bound) and amplitude softening in amplitude sweeps (read from every sweep
+above its noise floor, relative to the baseline where it predicts the sweep). Detectors of the registry
+:mod:`.causes`."""
 from __future__ import annotations
 
 import numpy as np
@@ -9,8 +10,11 @@ import scipy
 
 from .. import stats as st
 from ..spectra import log_spaced_taus, prony_oscillation_basis, tau_window_from_frequency
-from .evidence import booij_thoone
-from .findings import DiagnosisContext, cv_group_column, demean_by, fix_record, group_cv, make_finding, untested_finding
+from .evidence import booij_thoone, run_id
+from .findings import (DiagnosisContext, cv_group_column, describe_log_change, fix_record, group_cv, make_finding, rms,
+                       untested_finding)
+from .inertia import classify_raw_phase
+from .noise import estimate_noise, points_above_floor
 
 # ------------------------------------------------------------------------------------------------
 # frequency sweep: inertia
@@ -248,20 +252,111 @@ def _kraus(log_g0, p):
     return np.log(r_inf + (1.0 - r_inf) / (1.0 + 10.0 ** (2 * m * (log_g0 - lgc))))
 
 
+def _kraus_levels(frame: pd.DataFrame, p) -> pd.Series:
+    """Each sweep's level ln G'_0 given the Kraus shape ``p`` (least squares: the mean of y - ln K)."""
+    k = _kraus(frame["log_g0"].to_numpy(), p) if p is not None else np.zeros(len(frame))
+    return pd.Series(frame["y"].to_numpy() - k, index=frame.index).groupby(frame["curve"]).mean()
+
+
+def kraus_fit(frame: pd.DataFrame) -> np.ndarray:
+    """Kraus shape [r_inf, log10 gamma_c, m] of the sweeps of ``frame`` (``curve``, ``log_g0``, ``y`` = ln G' or
+    ln(G'/prediction)), each sweep with its own level (profiled)."""
+    lg = frame["log_g0"].to_numpy()
+    y = frame["y"].to_numpy()
+    codes = pd.factorize(frame["curve"])[0]
+    counts = np.bincount(codes)
+
+    def resid(p):
+        r = y - _kraus(lg, p)
+        return r - (np.bincount(codes, r) / counts)[codes]
+
+    sol = scipy.optimize.least_squares(resid, [0.7, float(np.quantile(lg, 0.7)), 0.8],
+                                       bounds=([0.01, lg.min() - 1, 0.2], [1.0, lg.max() + 1, 3.0]))
+    return sol.x
+
+
+def _kraus_errors(train: pd.DataFrame, test: pd.DataFrame, p) -> np.ndarray:
+    """Held-out ln errors of ``test`` points: the Kraus shape ``p`` (None: constant G') with each sweep's level from
+    its training points, or from its own points where the whole sweep is held out (its level is the sample's
+    stiffness, not the softening's business)."""
+    levels = _kraus_levels(train, p)
+    own = _kraus_levels(test, p)
+    lv = test["curve"].map(levels).fillna(test["curve"].map(own)).to_numpy(float)
+    k = _kraus(test["log_g0"].to_numpy(), p) if p is not None else 0.0
+    return test["y"].to_numpy() - lv - k
+
+
+def onset_strain(p) -> float:
+    """Strain amplitude at which the Kraus factor has fallen to 0.95 (NaN when it never does)."""
+    r_inf, lgc, m = p
+    if r_inf >= 0.95:
+        return np.nan
+    return float(10 ** lgc * ((1.0 - r_inf) / (0.95 - r_inf) - 1.0) ** (1.0 / (2.0 * m)))
+
+
+def _sweep_points(ctx: DiagnosisContext, noise: dict) -> tuple[pd.DataFrame, list[str]]:
+    """One row per usable amplitude-sweep point: ``curve``, ``strain``, ``log_g0``, ``y`` and where y comes from.
+
+    y = ln(G'/prediction) where the baseline predicts the sweep (its law's own amplitude dependence is then not a
+    softening), else ln G' (a linear-viscoelastic material has one G' at one frequency, whatever the amplitude).
+    Points whose stress amplitude is not above the noise floor (the data's scatter, or the declared torque
+    resolution: :func:`tissuemech.diagnosis.noise.points_above_floor`; never a fixed torque) are left out, and so
+    are points beyond a raw phase of 90 deg (inertia-dominated or yielded, :func:`classify_raw_phase`)."""
+    rows, sources = [], []
+    pred = ctx.table[(ctx.table["test"] == "amplitude_sweep") & (ctx.table["quantity"] == "storage_modulus")] \
+        if len(ctx.table) else pd.DataFrame()
+    for r in ctx.runs_of("amplitude_sweep"):
+        if "shear_strain" not in r or "storage_modulus" not in r:
+            continue
+        cid = run_id(r)
+        amp = np.abs(np.asarray(r["shear_strain"].values, float))
+        g1 = np.asarray(r["storage_modulus"].values, float)
+        cls = classify_raw_phase(r)
+        keep = np.isfinite(amp) & (amp > 0) & np.isfinite(g1) & (g1 > 0) & ~cls["inertia"] & ~cls["yield"]
+        keep &= points_above_floor(r, "storage_modulus", noise)
+        y = np.log(np.where(g1 > 0, g1, np.nan))
+        source = "ln G'"
+        p = pred[pred["curve"] == cid] if len(pred) else pred
+        if len(p) and np.isfinite(p["log_ratio"]).any():
+            lr = np.full(g1.size, np.nan)
+            lr[p["point"].to_numpy(int)] = p["log_ratio"].to_numpy(float)
+            y = lr
+            source = f"ln(G'/{ctx.model})"
+        keep &= np.isfinite(y)
+        if keep.sum() < 3:
+            continue
+        sources.append(source)
+        rows.append(pd.DataFrame({"curve": cid, "strain": amp[keep], "log_g0": np.log10(amp[keep]), "y": y[keep],
+                                  "point": np.flatnonzero(keep)}))
+    return (pd.concat(rows, ignore_index=True) if rows else pd.DataFrame()), sources
+
+
 def detect_amplitude_softening(ctx: DiagnosisContext) -> dict:
-    """Slope of the amplitude-sweep G' log-residual against log strain amplitude (cluster by sweep)."""
+    """G' falling with strain amplitude in the amplitude sweeps, read from every sweep above the noise floor.
+
+    Test: within-sweep regression of y (:func:`_sweep_points`) on log amplitude and on amplitude (the latter weighs
+    the large amplitudes where softening acts), Bonferroni x 2; standard errors clustered by sweep with >= 3 sweeps,
+    heteroscedasticity-robust over the points of fewer sweeps (the points of one sweep against its own scatter).
+    Size: the fitted change of G' over the sweep's amplitudes; practical when G' falls by >= 5 %. Fix: a Kraus shape
+    (:func:`kraus_fit`) with each sweep's own level, scored leaving one sweep out (>= 3 sweeps) or one point out
+    (fewer sweeps). Baseline-free when no sweep is predicted by the baseline."""
     eff = "amplitude_softening"
-    a = ctx.table[(ctx.table["test"] == "amplitude_sweep") & (ctx.table["quantity"] == "storage_modulus")]
-    a = a[np.isfinite(a["log_ratio"]) & (a["strain"] > 0) & a.get("above_noise", True)]
+    sweeps = ctx.runs_of("amplitude_sweep")
+    if not sweeps:
+        return untested_finding(eff, "not testable here: no amplitude sweep")
+    noise = estimate_noise(sweeps)
+    a, sources = _sweep_points(ctx, noise)
     if a.empty or a["strain"].nunique() < 4:
-        return untested_finding(eff, "no amplitude sweep above the torque noise floor")
-    a = a.assign(log_g0=np.log10(a["strain"]), y=demean_by(a, "log_ratio", "curve"))
-    # softening sets in above gamma_c: test the within-sweep trend on log amplitude and on amplitude
-    # (the latter weights the large amplitudes where Kraus softening acts), Bonferroni x 2
+        return untested_finding(eff, f"not testable here: {len(sweeps)} amplitude sweep(s), but fewer than 4 "
+                                     f"amplitudes stand above the noise floor (the data's own scatter or the declared "
+                                     f"torque resolution) below any raw phase of 90 deg")
+    a = a.assign(yd=a["y"] - a.groupby("curve")["y"].transform("mean"))
+    n_sweeps = a["curve"].nunique()
+    groups = a["curve"].to_numpy() if n_sweeps >= 3 else None
     tests = []
     for cov in ("log_g0", "strain"):
         xd = a[cov] - a.groupby("curve")[cov].transform("mean")
-        r = st.cluster_regression(a["y"].to_numpy(), pd.DataFrame({cov: xd.to_numpy()}), groups=a["curve"].to_numpy())
+        r = st.cluster_regression(a["yd"].to_numpy(), pd.DataFrame({cov: xd.to_numpy()}), groups=groups)
         tt = st.coefficient_test(r, cov)
         tests.append((tt, cov, float(tt["estimate"] * (a[cov].max() - a[cov].min()))))
     t, cov_used, total = min(tests, key=lambda x: x[0]["log10_p"])
@@ -269,34 +364,37 @@ def detect_amplitude_softening(ctx: DiagnosisContext) -> dict:
     t = dict(t, log10_p=lp, p_value=10 ** lp)
     decades = float(a["log_g0"].max() - a["log_g0"].min())
     change = float(np.expm1(total))
-
-    def kraus_centred(frame, p):
-        k = _kraus(frame["log_g0"].to_numpy(), p)
-        return k - pd.Series(k, index=frame.index).groupby(frame["curve"]).transform("mean").to_numpy()
-
-    def fit(train):
-        def resid(p):
-            return train["y"].to_numpy() - kraus_centred(train, p)
-        lg = train["log_g0"].to_numpy()
-        sol = scipy.optimize.least_squares(resid, [0.7, float(np.quantile(lg, 0.7)), 0.8],
-                            bounds=([0.05, lg.min() - 1, 0.2], [1.0, lg.max() + 1, 3.0]))
-        return sol.x
-
-    def error(test, par):
-        # the sweep's level is the sample's stiffness (not the softening's business): compare shapes
-        y = test["y"].to_numpy()
-        return y if par is None else y - kraus_centred(test, par)
-
-    group = cv_group_column(a)
-    before, after = group_cv(a, group, fit, error)
-    full = fit(a)
-    evidence = (f"Amplitude-sweep G' falls relative to {ctx.model} with strain amplitude: within-sweep trend on "
-                f"{'log amplitude' if cov_used == 'log_g0' else 'amplitude'} t = {t['statistic']:.2f} "
-                f"({a['curve'].nunique()} sweeps, clustered), a {100 * change:+.0f} % change over {decades:.1f} "
-                f"decades of amplitude "
-                f"({100 * a['strain'].min():.2g}-{100 * a['strain'].max():.2g} %); Kraus fit G'inf/G'0 = "
-                f"{full[0]:.2f}, gamma_c = {100 * 10 ** full[1]:.2g} %, m = {full[2]:.2f}.")
+    # held out: whole sweeps with >= 3 of them, else single points of the sweep(s)
+    unit = "curve" if n_sweeps >= 3 else "point_key"
+    a = a.assign(point_key=a["curve"] + "#" + a["point"].astype(str))
+    eb, ea = [], []
+    for g in pd.unique(a[unit]):
+        test, train = a[a[unit] == g], a[a[unit] != g]
+        if train["log_g0"].nunique() < 4:
+            continue
+        try:
+            p = kraus_fit(train)
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        eb.append(_kraus_errors(train, test, None))
+        ea.append(_kraus_errors(train, test, p))
+    before = rms(np.concatenate(eb)) if eb else np.nan
+    after = rms(np.concatenate(ea)) if ea else np.nan
+    full = kraus_fit(a)
+    onset = onset_strain(full)
+    floor_txt = ("declared torque resolution" if any("torque_resolution_nm" in r.attrs for r in sweeps)
+                 else "the sweeps' own scatter")
+    evidence = (f"Amplitude-sweep G' falls with strain amplitude ({', '.join(sorted(set(sources)))}; {n_sweeps} "
+                f"sweep(s), {len(a)} points above the noise floor of {floor_txt} and below any raw phase of 90 deg): "
+                f"within-sweep trend on {'log amplitude' if cov_used == 'log_g0' else 'amplitude'} t = "
+                f"{t['statistic']:.2f}: G' {describe_log_change(total).replace('change by', 'changes by').replace('rise by', 'rises by').replace('fall by', 'falls by')} over "
+                f"{decades:.1f} decades of amplitude ({100 * a['strain'].min():.2g}-{100 * a['strain'].max():.2g} %); "
+                f"Kraus fit G'inf/G'0 = {full[0]:.2f}, gamma_c = {100 * 10 ** full[1]:.2g} %, m = {full[2]:.2f}"
+                + (f", G' 5 % below its plateau from {100 * onset:.2g} %" if np.isfinite(onset) else "") + ".")
     fix = fix_record("Kraus amplitude softening G'(g0) = G'inf + (G'0 - G'inf)/(1 + (g0/gc)^(2m))",
-               "rms_log_residual_amplitude_sweep_shape", before, after, f"leave-one-{group}-out",
-               ratio_inf=full[0], gamma_c=10 ** full[1], m=full[2], n_held_out_points=len(a))
-    return make_finding(eff, t, "t", change, "relative change of G' over the sweep", change <= -0.05, evidence, fix)
+                     "rms_log_residual_amplitude_sweep_shape", before, after,
+                     "leave-one-sweep-out" if unit == "curve" else "leave-one-point-out",
+                     ratio_inf=full[0], gamma_c=10 ** full[1], m=full[2], onset_strain=onset,
+                     n_held_out_points=len(a))
+    return make_finding(eff, t, "t", change, "relative change of G' over the sweep", change <= -0.05, evidence, fix,
+                        baseline_free=all(src == "ln G'" for src in sources))

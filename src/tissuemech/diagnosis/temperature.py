@@ -7,18 +7,19 @@ its ``temperature_c`` attribute (sample sheet / export); never a default
 (:func:`tissuemech.tts.run_temperature_c`). When fewer than :data:`MIN_TEMPERATURES` distinct temperatures
 (rounded to :data:`TEMPERATURE_RESOLUTION_C`) are present the cause is not testable.
 
-The per-curve level of the baseline's residual (:func:`tissuemech.diagnosis.catalogue.curve_levels`: median
-ln(observed/predicted) on the lower half of each curve) is regressed on the run temperature
-(:func:`tissuemech.diagnosis.catalogue.level_regression`, sample/condition fixed effects where the design
-allows, cluster-robust by sample; elapsed time as a control when it varies and is not collinear with
-temperature; with >= 5 distinct temperatures the p-value is the joint F-test of T and
-T^2, because shift factors are curved in T; and the two-stage between-sample test when >= 5 samples); the
-stronger with a Bonferroni factor 2. ``effect_size`` is the change of the curve level (ln) over the 5-95 % range of
+The per-curve level of the baseline's residual (:func:`tissuemech.diagnosis.findings.curve_levels`: median
+ln(observed/predicted) on the lower half of each curve) is regressed on the run temperature with the condition
+as fixed effects and specimen and sample as random effects (:func:`tissuemech.stats.mixed_coefficient_test`,
+between-within degrees of freedom: a temperature that changes only between specimens is judged on the
+specimens); elapsed time is a control when it varies and is not collinear with temperature; with >= 5 distinct
+temperatures the p-value is the stronger of the slope's t and the joint F-test of T and T^2 (shift factors are
+curved in T), Bonferroni x 2. ``effect_size`` is the change of the curve level (ln) over the 5-95 % range of
 temperatures, practical when >= :data:`tissuemech.diagnosis.generic.MIN_EFFECT`.
 
 Fix and held-out gain (leave-one-temperature-out)
 -------------------------------------------------
-Where frequency sweeps exist at >= :data:`MIN_TEMPERATURES` temperatures: for every temperature, the
+Where frequency sweeps of one loading exist at >= :data:`MIN_TEMPERATURES` temperatures (the temperature changes
+within samples: a temperature series): for every temperature, the
 sweeps at the *other* temperatures are shifted automatically (:func:`tissuemech.tts.shift_factors`), a WLF
 function is fitted to their log aT(T) (Arrhenius if WLF fails, linear interpolation of log aT if both fail;
 the one used is reported), log aT of the held-out temperature is predicted from it and the held-out sweep is
@@ -26,7 +27,11 @@ predicted from the training mastercurve (:func:`tissuemech.tts.predict_from_mast
 temperature-blind prediction from the same training sweeps (their unshifted pooled curve at the held-out
 frequencies: what a model without temperature predicts). Metric: RMS of log10 G' and log10 G'' errors
 (decades) over the held-out points both predictions cover; ``gain = (before - after) / before``. Without
-sweeps at several temperatures the fix is not evaluated (``fix`` None).
+such a series (the temperature changes only between samples or specimens, whose sweeps also differ by their
+stiffness) the fix is a level trend exp(a + b T) of the curve levels, read where the
+temperature changes (between the samples of a specimen, else between the curves of a sample) and scored leaving
+each sample (curve) out (:func:`tissuemech.diagnosis.levels.scale_correction_cv`; metric: RMS ln error of the
+held-out curves' points).
 
 The finding carries ``shift_factors`` (:meth:`tissuemech.tts.TTSResult.to_dict` of all sweeps), ``wlf`` and
 ``arrhenius`` (parameters with standard errors) and ``temperatures_c``.
@@ -41,8 +46,8 @@ import xarray as xr
 
 from .. import tts
 from .. import stats as st
-from .catalogue import (DiagnosisContext, between_sample_test, curve_levels, make_finding, fix_record,
-                        level_regression, untested_finding)
+from .findings import DiagnosisContext, curve_levels, describe_fix, fix_record, make_finding, untested_finding
+from .levels import scale_correction_cv
 from .evidence import run_id
 from .generic import CONFOUNDED_R2, MIN_EFFECT
 
@@ -137,25 +142,20 @@ def _time_control(levels: pd.DataFrame) -> list[str]:
     return ["elapsed_h"] if r2 < CONFOUNDED_R2 else []
 
 
+def _factors(levels: pd.DataFrame) -> tuple[str, ...]:
+    return ("condition",) if levels["condition"].nunique() > 1 else ()
+
+
 def _curved_test(levels: pd.DataFrame, controls: Sequence[str] = ()) -> dict | None:
-    """Joint Wald F-test of temperature and (centred) temperature^2 in the curve-level regression (same
-    fixed effects and robust covariance as :func:`level_regression`); None with < 5 distinct temperatures."""
+    """Joint Wald F-test of temperature and (centred) temperature^2 in the curve-level mixed model (condition
+    fixed effects, specimen and sample random effects, :func:`tissuemech.stats.mixed_coefficient_test`); None with
+    < 5 distinct temperatures."""
     if levels["temperature_c"].nunique() < 5:
         return None
     t = levels["temperature_c"]
     lv = levels.assign(temperature_sq=((t - t.mean()) / max(float(t.std()), 1e-12)) ** 2)
-    res = level_regression(lv, "log_scale", ["temperature_c", "temperature_sq"] + list(controls))
-    if res is None:
-        return None
-    names = list(res.params.index)
-    R = np.zeros((2, len(names)))
-    R[0, names.index("temperature_c")] = 1.0
-    R[1, names.index("temperature_sq")] = 1.0
-    w = res.f_test(R)
-    f = float(np.squeeze(w.fvalue))
-    df2 = float(w.df_denom)
-    return {"statistic": f, "df1": 2.0, "df2": df2, "log10_p": st.log10_p_from_f(f, 2.0, df2),
-            "p_value": 10 ** st.log10_p_from_f(f, 2.0, df2)}
+    return st.mixed_coefficient_test(lv, "log_scale", ["temperature_c", "temperature_sq"], _factors(levels),
+                                     controls=tuple(controls))
 
 
 def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
@@ -172,36 +172,49 @@ def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
     levels = levels.assign(temperature_c=levels["curve"].map(temps)).dropna(subset=["temperature_c"])
     if len(levels) < 4 or levels["temperature_c"].nunique() < MIN_TEMPERATURES:
         return untested_finding(EFFECT, "not testable here: fewer than 4 residual curves with a temperature")
-    found = []
     controls = _time_control(levels)
-    res = level_regression(levels, "log_scale", ["temperature_c"] + controls)
-    if res is not None:
-        lin = st.coefficient_test(res, "temperature_c")
-        design = (f"curve levels, fixed effects {res.fixed_effects or 'none'}"
-                  + (", elapsed-time control" if controls else ""))
-        joint = _curved_test(levels, controls)
-        if joint is not None:
-            # the slope gives the size; the p-value is the joint test of (T, T^2): shift factors are curved
-            # in T (WLF), so a straight line understates a temperature dependence
-            lin = dict(lin, statistic=joint["statistic"], p_value=joint["p_value"], log10_p=joint["log10_p"])
-            design += f", joint F of T and T^2 (df {joint['df1']:.0f}, {joint['df2']:.0f})"
-        found.append((lin, design))
-    b = between_sample_test(levels, "log_scale", "temperature_c")
-    if b is not None:
-        found.append((b, f"between samples ({b['design']})"))
-    if not found:
-        return untested_finding(EFFECT, "not testable here: temperature is collinear with the sample/condition "
-                                        "fixed effects of this design")
-    t, design = min(found, key=lambda f: f[0]["log10_p"])
-    lp = min(0.0, t["log10_p"] + np.log10(len(found)))
-    t = dict(t, log10_p=lp, p_value=10 ** lp)
+    t = st.mixed_coefficient_test(levels, "log_scale", "temperature_c", _factors(levels), controls=tuple(controls))
+    if t is None:
+        return untested_finding(EFFECT, "not testable here: temperature is collinear with the test conditions of this "
+                                        "design")
+    design = (f"curve levels, condition fixed effects, specimen and sample random effects"
+              + (", elapsed-time control" if controls else "") + f"; {t['method']}")
+    joint = _curved_test(levels, controls)
+    if joint is not None:
+        # the slope gives the size; the p-value is the stronger of the slope's test and the joint test of (T, T^2),
+        # Bonferroni x 2: shift factors are curved in T (WLF), so over a wide range a straight line understates a
+        # temperature dependence, while over a few degrees the slope alone is the more powerful test
+        lp = min(0.0, min(t["log10_p"], joint["log10_p"]) + np.log10(2.0))
+        if joint["log10_p"] < t["log10_p"]:
+            t = dict(t, statistic=joint["statistic"])
+            design += f", joint F of T and T^2 (df {joint['df1']:.0f}, {joint['df2']:.0f}), Bonferroni x 2 with the slope"
+        else:
+            design += ", t of the slope, Bonferroni x 2 with the joint F of T and T^2"
+        t = dict(t, p_value=10 ** lp, log10_p=lp)
     lo, hi = np.nanquantile(levels["temperature_c"], [0.05, 0.95])
     size = float(t["estimate"] * (hi - lo))
     sweeps = tts.sweeps_from_runs(ctx.runs)
     extra: dict = {"temperatures_c": [float(x) for x in distinct]}
-    fix = None
-    fix_txt = " No frequency sweeps at several temperatures: the TTS fix is not evaluated."
-    if len(distinct_temperatures(s.temperature_c for s in sweeps)) >= MIN_TEMPERATURES:
+    # without sweeps for a mastercurve: a level trend in temperature, read where the temperature changes (between the
+    # samples of a specimen, else between the curves of a sample), each held out in turn
+    level = st.variation_level(levels, "temperature_c")
+    units = ("sample", "curve") if level == "within" else ("specimen", "sample") if level == "piece" else None
+    fix, fix_txt = None, " No frequency sweeps at several temperatures: the TTS fix is not evaluated."
+    if units is not None:
+        b_, a_, held, n_pts = scale_correction_cv(ctx, levels, "temperature_c", units)
+        if n_pts:
+            fix = fix_record("temperature level trend: prediction x exp(a + b T), b from the other samples",
+                             "rms_log_residual", b_, a_, f"leave-one-{held}-out",
+                             per_degc=float(np.expm1(t["estimate"])) if "estimate" in t else np.nan,
+                             n_held_out_points=n_pts)
+            fix_txt = (f" No temperature series of one loading for a mastercurve; a level trend in temperature, "
+                       f"fitted within {units[0]}s leaving each {held} out, predicts the held-out curves with "
+                       f"{describe_fix(b_, a_)}.")
+    # a mastercurve shifts the sweeps of one loading measured at several temperatures; where the temperature changes
+    # only between samples or specimens, their sweeps differ by the samples' stiffness too, and the level trend above
+    # is the fix that separates the two
+    series = level == "within"
+    if series and len(distinct_temperatures(s.temperature_c for s in sweeps)) >= MIN_TEMPERATURES:
         full = tts.shift_factors(sweeps)
         ok = np.isfinite(full.log_aT)
         wlf = tts.fit_wlf(full.temperatures_c[ok], full.log_aT[ok], full.log_aT_stderr[ok], full.t_ref_c)
@@ -229,6 +242,6 @@ def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
     evidence = (f"Curve levels ln(observed/predicted) of {ctx.model} change by {size:+.3g} over "
                 f"{lo:.3g}..{hi:.3g} degC across {len(levels)} curves at {len(distinct)} temperatures "
                 f"({', '.join(sorted(levels['test'].unique()))}; {design}; "
-                f"{'F' if 'joint F' in design else 't'} = {t['statistic']:.2f}, p = {t['p_value']:.2g}).{fix_txt}")
-    return make_finding(EFFECT, t, "F" if "joint F" in design else "t", size, "ln(observed/predicted) over the temperature range",
+                f"{'F' if 'joint F of T and T^2 (df' in design else 't'} = {t['statistic']:.2f}, p = {t['p_value']:.2g}).{fix_txt}")
+    return make_finding(EFFECT, t, "F" if "joint F of T and T^2 (df" in design else "t", size, "ln(observed/predicted) over the temperature range",
                    abs(size) >= MIN_EFFECT, evidence, fix, **extra)
