@@ -567,28 +567,29 @@ def draw_folder_design(rng: np.random.Generator, effects: dict) -> dict:
         shown &= set(SHOWN_BY[e])
     if not shown:
         raise ValueError(f"no test kind shows all of {sorted(effects)} at once")
+    # every draw is made whatever the effects, so that a seed gives the same design with and without them
     names = [f for f in FAMILIES if set(FAMILIES[f]) & shown]
     family = names[int(rng.integers(len(names)))]
     pool = FAMILIES[family]
+    keep, pick = rng.uniform(size=len(FOLDER_TESTS)), int(rng.integers(64))
     if family == "random":
-        kinds = [k for k in pool if rng.uniform() < 0.6]
+        kinds = [k for k, u in zip(pool, keep) if u < 0.6]
     elif family == "no_relaxation":
-        kinds = [k for k in pool if rng.uniform() < 0.7]
+        kinds = [k for k, u in zip(pool, keep) if u < 0.7]
     elif family == "sweeps_ramps":
-        kinds = [k for k in pool[:2] if rng.uniform() < 0.7] or [str(rng.choice(pool[:2]))]
+        kinds = [k for k, u in zip(pool[:2], keep) if u < 0.7] or [pool[pick % 2]]
         kinds.append("constant_shear_rate")
     else:
         kinds = list(pool)
     if not kinds:
-        kinds = [str(rng.choice(pool))]
+        kinds = [pool[pick % len(pool)]]
     if not set(kinds) & shown:
-        kinds.append(str(rng.choice(sorted(set(pool) & shown))))
+        allowed = sorted(set(pool) & shown)
+        kinds.append(allowed[pick % len(allowed)])
     kinds = [k for k in FOLDER_TESTS if k in kinds]
-    if "outlier_specimen" in effects:
-        n_spec = int(rng.integers(4, 7))              # an outlier among 4-6 specimens
-    else:
-        n_spec = 1 if rng.uniform() < 0.2 else int(rng.integers(2, 9))
-    per_spec = [int(rng.integers(1, 4)) for _ in range(n_spec)]
+    one, n_any, n_out = rng.uniform(), int(rng.integers(2, 9)), int(rng.integers(4, 7))
+    n_spec = n_out if "outlier_specimen" in effects else (1 if one < 0.2 else n_any)   # an outlier among 4-6
+    per_spec = [int(k) for k in rng.integers(1, 4, size=8)[:n_spec]]
     need = max([MIN_SAMPLES.get(e, 1) for e in effects] + [1])
     while sum(per_spec) < need:
         per_spec[int(np.argmin(per_spec))] += 1
@@ -596,8 +597,11 @@ def draw_folder_design(rng: np.random.Generator, effects: dict) -> dict:
     pieces = ([(s, j) for s in range(n_spec) for j in range(per_spec[s])] if layout == "blocks" else
               [(s, j) for j in range(max(per_spec)) for s in range(n_spec) if j < per_spec[s]])
     days = int(min(len(pieces), rng.choice([1, 1, 1, 2, 2, 3])))
-    f_max = _log_uniform(rng, 1.0, 20.0) if "instrument_inertia" not in effects else _log_uniform(rng, 50.0, 100.0)
-    n_creep = 2 if "preconditioning" in effects and kinds == ["creep_recovery"] else int(rng.integers(1, 3))
+    f_low, f_high = _log_uniform(rng, 1.0, 20.0), _log_uniform(rng, 50.0, 100.0)
+    f_max = f_high if "instrument_inertia" in effects else f_low
+    n_creep = int(rng.integers(1, 3))
+    if "preconditioning" in effects and kinds == ["creep_recovery"]:
+        n_creep = 2
     settings = {
         "amplitude_sweep": {"frequency_hz": float(rng.choice([0.5, 1.0, 2.0])), "n": int(rng.integers(8, 16)),
                             "strain_max": _log_uniform(rng, 0.01, 0.1)},
@@ -619,6 +623,7 @@ def draw_folder_design(rng: np.random.Generator, effects: dict) -> dict:
             extra = next(k for k in ("amplitude_sweep", "frequency_sweep") if k not in kinds)
             kinds = [k for k in FOLDER_TESTS if k in kinds or k == extra]
     fixed = rng.permutation(64)
+    u_force, u_phase = rng.uniform(size=2)
     return {
         "family": family, "kinds": kinds, "n_specimens": n_spec, "samples_per_specimen": per_spec,
         "layout": layout, "sequence": pieces, "days": days,
@@ -626,8 +631,8 @@ def draw_folder_design(rng: np.random.Generator, effects: dict) -> dict:
         "format": str(rng.choice(FORMATS)), "torque_unit": str(rng.choice(list(TORQUE_UNITS))),
         "frequency_unit": str(rng.choice(["Hz", "rad/s"])), "strain_unit": str(rng.choice(["%", "1"])),
         "geometry_source": str(rng.choice(["samples", "yaml", "export"])),
-        "logs_normal_force": bool("normal_force_preload" in effects or rng.uniform() < 0.5),
-        "logs_raw_phase": bool("instrument_inertia" in effects or rng.uniform() < 0.7),
+        "logs_normal_force": bool(u_force < 0.5 or "normal_force_preload" in effects),
+        "logs_raw_phase": bool(u_phase < 0.7 or "instrument_inertia" in effects),
         "settings": settings,
     }
 
@@ -789,8 +794,8 @@ def simulate_folder(seed: int, effects: dict | None = None, dataset: str | None 
     spec_names = [f"S{s + 1}" for s in range(n_spec)]
     spec_sd = float(rng.uniform(0.05, 0.3))
     spec_log = {s: float(rng.normal() * spec_sd) for s in spec_names}
+    out = str(rng.choice(spec_names))
     if "outlier_specimen" in effects:
-        out = str(rng.choice(spec_names))
         spec_log[out] += float(np.log1p(EFFECT_SIZES["outlier_specimen"]["factor_minus_1"] * effects["outlier_specimen"]))
         truth.specimens["outlier"] = out
     truth.specimens["log_factor"] = spec_log
@@ -810,16 +815,17 @@ def simulate_folder(seed: int, effects: dict | None = None, dataset: str | None 
             day, clock = int(day_of[si]), 0.0
         spec, smp = spec_names[s], f"s{j + 1}"
         gap = float(rng.choice(truth.gap_m))
-        temp_nominal, temp_logged, a_t = nominal_t, nominal_t + float(rng.uniform(-0.1, 0.1)), 1.0
+        control, spread = float(rng.uniform(-0.1, 0.1)), float(rng.uniform(-1.0, 1.0))
+        temp_nominal, temp_logged, a_t = nominal_t, nominal_t + control, 1.0
         if "temperature_dependence" in effects:
             c = EFFECT_SIZES["temperature_dependence"]
             temp_nominal = nominal_t + c["spread_k"] * (si % 3 - 1)
-            temp_logged = temp_nominal + float(rng.uniform(-0.1, 0.1))
+            temp_logged = temp_nominal + control
             c1 = c["wlf_c1"] * effects["temperature_dependence"]
             a_t = 10.0 ** (-c1 * (temp_nominal - nominal_t) / (c["wlf_c2_k"] + temp_nominal - nominal_t))
         if "temperature_spread" in effects:
             c = FOLDER_EFFECT_SIZES["temperature_spread"]
-            d_t = c["spread_k"] * effects["temperature_spread"] * float(rng.uniform(-1.0, 1.0))
+            d_t = c["spread_k"] * effects["temperature_spread"] * spread
             temp_logged = nominal_t + d_t
             a_t = 10.0 ** (-c["wlf_c1"] * d_t / (c["wlf_c2_k"] + d_t))
         preload = _log_uniform(rng, *PRELOAD_RANGE_N)
