@@ -799,6 +799,7 @@ def simulate_folder(seed: int, effects: dict | None = None, dataset: str | None 
         spec_log[out] += float(np.log1p(EFFECT_SIZES["outlier_specimen"]["factor_minus_1"] * effects["outlier_specimen"]))
         truth.specimens["outlier"] = out
     truth.specimens["log_factor"] = spec_log
+    truth.specimens["log_sd"] = spec_sd
     pieces = design["sequence"]
     day_of = np.repeat(np.arange(design["days"]), np.diff(np.linspace(0, len(pieces), design["days"] + 1).round()
                                                           .astype(int)))

@@ -473,3 +473,62 @@ def test_temperature_spread_and_preload_show_only_in_the_logged_channels():
         q = "storage_modulus" if "storage_modulus" in rec["channels"] else "shear_stress"
         ratio = float(np.median(preload[key]["channels"][q] / null[key]["channels"][q]))
         assert ratio == pytest.approx((f_n / 0.1) ** 0.15, rel=0.02)
+
+
+# ------------------------------------------------------------------- CI subset of the pipeline-path calibration
+# Seeds never used in development (benchmarks/pipeline_calibration.DEVELOPMENT_SEEDS lists them so that no
+# calibration run reuses them): 20 null folders and one folder per cause at 1x, each analysed by the pipeline's path
+# (tissuemech.analysis.analyse_dataset through pipeline_calibration.one, with the repository's configuration).
+CI_NULL_SEEDS = [32500000 + i for i in range(20)]
+CI_CAUSE_SEEDS = {e: 32600000 + 1000 * k for k, e in enumerate(ir.FOLDER_EFFECTS)}
+
+
+@pytest.fixture(scope="module")
+def pipeline_config():
+    import yaml
+
+    return yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+
+
+def _ci_design(seed, effects):
+    rng = np.random.default_rng(seed)
+    ir.draw_truth(rng)
+    rng.choice(ir.PLATE_DIAMETERS_MM)
+    return ir.draw_folder_design(rng, effects)
+
+
+def test_ci_subset_spans_designs():
+    """The CI subset's seeds are outside every seed range a calibration run may use, the cause folders cover at
+    least three test families and the nulls all five."""
+    from pipeline_calibration import DEVELOPMENT_SEEDS
+
+    for s in CI_NULL_SEEDS + list(CI_CAUSE_SEEDS.values()):
+        assert any(a <= s <= b for a, b in DEVELOPMENT_SEEDS)
+    assert len({_ci_design(s, {e: 1.0})["family"] for e, s in CI_CAUSE_SEEDS.items()}) >= 3
+    assert {_ci_design(s, {})["family"] for s in CI_NULL_SEEDS} == set(ir.FAMILIES)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", CI_NULL_SEEDS)
+def test_pipeline_path_names_nothing_on_a_null_folder(seed, tmp_path, pipeline_config):
+    """No detected cause, no unexplained entry, no rejected export and no crash on a null dataset folder (the
+    family-wise false-alarm count of the 20 is the number of these cases that fail; the target rate is 1 %)."""
+    from pipeline_calibration import one
+
+    row = one((None, 0.0, seed), tmp_path, pipeline_config)
+    assert row["error"] is None, row.get("trace", row["error"])
+    assert row["detected"] == [] and row["unexplained"] == [], (row["design"], row["law"], row["kernel"],
+                                                                row["detected"], row["unexplained"])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("effect", list(CI_CAUSE_SEEDS))
+def test_pipeline_path_names_the_injected_cause(effect, tmp_path, pipeline_config):
+    """The cause injected at 1x is named (the preload: attributed to the normal-force channel), no other cause is
+    named, nothing crashes."""
+    from pipeline_calibration import NAMED_AS, one
+
+    row = one((effect, 1.0, CI_CAUSE_SEEDS[effect]), tmp_path, pipeline_config)
+    assert row["error"] is None, row.get("trace", row["error"])
+    assert row["named"], (row["design"], row["verdict"], row["detected"], row["unexplained"])
+    assert [e for e in row["detected"] if e != NAMED_AS[effect]] == [], row["detected"]
