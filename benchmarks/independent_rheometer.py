@@ -44,7 +44,39 @@ strain increment, slip length b per wall), ``outlier_specimen`` (one specimen's 
 temperatures; time scales shifted by WLF), ``instrument_inertia`` (a motor-inertia calibration error,
 frequency sweeps extended to high frequency, raw phase channel always written).
 
-Entry point: :func:`generate` ``(seed, effects=None) -> (runs, truth)``.
+Entry points: :func:`generate` ``(seed, effects=None) -> (runs, truth)`` (canonical runs, the runs-only studies of
+issue 12) and :func:`write_dataset_folder` ``(seed, folder, effects=None) -> truth`` (a folder as a user drops it in
+``raw/``, for the pipeline-path calibration of issue 32).
+
+Dataset folders
+---------------
+:func:`write_dataset_folder` draws the truth as :func:`generate` does (plate diameters 8-50 mm) and a design
+(:func:`draw_folder_design`) that varies every choice a detector could key on:
+
+* **test subsets** (:data:`FAMILIES`): any subset of the five kinds; sweeps, ramps and creep without relaxation;
+  sweeps and ramps only; creep only; creep and relaxations only;
+* **creep-recovery** (stress-controlled, :func:`creep_response`): the motor torque ramped to the stress an operator
+  would set (2 digits, the truth's nominal material taken to a target strain of 1-15 %), held 30-300 s and removed;
+  at every time the torque balances the plate torque of the QLV material (exact per-step QLV update, Brent's method
+  per step) plus, with creep ringing, the rotor's ``I theta''`` (average-acceleration Newmark rule);
+* **specimens and sequence**: 1 specimen (20 %) or 2-8, 1-3 samples each, measured in blocks (all samples of a
+  specimen in a row) or interleaved (round robin); the tests of a sample in a random order per sample or one fixed
+  order for all; one to three days (``started_at`` resets to each day's start, days may be apart);
+* **instrument and files** (:data:`FORMATS`): RheoCompass CSV (UTF-16 LE, tab, CRLF, decimal comma, simple header),
+  RheoCompass text (UTF-8, decimal point, project header), TA TRIOS text (one file per sample, one ``[step]`` per
+  test, selected by the sheet's ``block``); torque in N·m, mN·m or µN·m; frequency in Hz or rad/s; strain in % or 1;
+  the plate radius stated in ``samples.csv``, in ``dataset.yaml`` or by the export (``Measuring System: PP25``,
+  TRIOS ``Geometry name``/``Diameter``/``Gap``; the gap then from the export's gap channel or header); a
+  normal-force channel in half the datasets (a 0.02-0.5 N preload per sample), a raw-phase channel in 70 %;
+* **truth** written beside the folder (``<folder>.truth.json``), never inside what the pipeline reads.
+
+Effects of the folders (:data:`FOLDER_EFFECT_SIZES`): those above, plus ``creep_ringing`` (the motor inertia in
+the creep torque balance; a null creep is the inertia-free response), ``temperature_spread`` (each sample at
+T + U(-1, 1) x 4 K in its logged temperature channel only, WLF time shift), ``normal_force_preload`` (each sample's
+moduli x (F / 0.1 N)^0.15 with F its logged preload). The elapsed-time drift runs on each day's session clock.
+A power dataset's design is drawn among those that hold a test showing its effect (:data:`SHOWN_BY`,
+:data:`MIN_SAMPLES`; an outlier specimen among 4-6); every random draw is made whatever the effects, so one seed
+gives the same design and noise at every magnitude.
 """
 from __future__ import annotations
 
@@ -288,17 +320,9 @@ def draw_truth(rng: np.random.Generator) -> Truth:
                  motor_inertia=_log_uniform(rng, 5e-6, 5e-5), temperature_c=float(rng.choice([20.0, 25.0, 37.0])))
 
 
-def draw_design(rng: np.random.Generator, effects: dict) -> list[dict]:
-    """Per sample, a random subset of the tests in a random order, with random settings."""
-    n_spec = int(rng.integers(1, 7))
-    if "outlier_specimen" in effects:
-        n_spec = max(n_spec, 2)        # an outlier needs other specimens (no extra draw: null designs unchanged)
-    min_samples = 1
-    if "temperature_dependence" in effects:   # at least 3 samples in all, so all 3 temperatures are run
-        min_samples = -(-3 // n_spec)
-    tests = []
-    f_max = _log_uniform(rng, 1.0, 20.0) if "instrument_inertia" not in effects else _log_uniform(rng, 50.0, 100.0)
-    settings = {
+def draw_test_settings(rng: np.random.Generator, f_max: float) -> dict:
+    """Settings of the sweeps, ramps and relaxations of a design (ranges in the module docstring)."""
+    return {
         "amplitude_sweep": {"frequency_hz": float(rng.choice([0.5, 1.0, 2.0])), "n": int(rng.integers(8, 16)),
                             "strain_max": _log_uniform(rng, 0.01, 0.1)},
         "frequency_sweep": {"strain": _log_uniform(rng, 0.001, 0.01), "f_min": _log_uniform(rng, 0.01, 0.2),
@@ -309,6 +333,19 @@ def draw_design(rng: np.random.Generator, effects: dict) -> list[dict]:
                               "rise_s": _log_uniform(rng, 0.02, 0.5), "hold_s": _log_uniform(rng, 30.0, 300.0),
                               "n": int(rng.integers(12, 25))},
     }
+
+
+def draw_design(rng: np.random.Generator, effects: dict) -> list[dict]:
+    """Per sample, a random subset of the tests in a random order, with random settings."""
+    n_spec = int(rng.integers(1, 7))
+    if "outlier_specimen" in effects:
+        n_spec = max(n_spec, 2)        # an outlier needs other specimens (no extra draw: null designs unchanged)
+    min_samples = 1
+    if "temperature_dependence" in effects:   # at least 3 samples in all, so all 3 temperatures are run
+        min_samples = -(-3 // n_spec)
+    tests = []
+    f_max = _log_uniform(rng, 1.0, 20.0) if "instrument_inertia" not in effects else _log_uniform(rng, 50.0, 100.0)
+    settings = draw_test_settings(rng, f_max)
     kinds = [k for k in TESTS if rng.uniform() < 0.7] or [str(rng.choice(TESTS[2:]))]
     if not any(k in kinds for k in ("constant_shear_rate", "stress_relaxation")):
         kinds.append(str(rng.choice(TESTS[2:])))          # the baseline is fitted to ramps/relaxations
@@ -603,15 +640,7 @@ def draw_folder_design(rng: np.random.Generator, effects: dict) -> dict:
     if "preconditioning" in effects and kinds == ["creep_recovery"]:
         n_creep = 2
     settings = {
-        "amplitude_sweep": {"frequency_hz": float(rng.choice([0.5, 1.0, 2.0])), "n": int(rng.integers(8, 16)),
-                            "strain_max": _log_uniform(rng, 0.01, 0.1)},
-        "frequency_sweep": {"strain": _log_uniform(rng, 0.001, 0.01), "f_min": _log_uniform(rng, 0.01, 0.2),
-                            "f_max": f_max, "n": int(rng.integers(8, 16))},
-        "constant_shear_rate": {"rates": sorted(_log_uniform(rng, 1e-3, 0.5) for _ in range(int(rng.integers(1, 3)))),
-                                "strain_max": float(rng.uniform(0.1, 0.5)), "n": int(rng.integers(12, 25))},
-        "stress_relaxation": {"strains": sorted(float(rng.uniform(0.01, 0.4)) for _ in range(int(rng.integers(1, 4)))),
-                              "rise_s": _log_uniform(rng, 0.02, 0.5), "hold_s": _log_uniform(rng, 30.0, 300.0),
-                              "n": int(rng.integers(12, 25))},
+        **draw_test_settings(rng, f_max),
         "creep_recovery": {"target_strains": sorted(_log_uniform(rng, 0.01, 0.15) for _ in range(n_creep)),
                            "rise_s": _log_uniform(rng, 0.002, 0.05), "creep_s": _log_uniform(rng, 30.0, 300.0),
                            "per_decade": int(rng.integers(10, 21))},

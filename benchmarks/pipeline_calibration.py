@@ -136,7 +136,7 @@ def one(job: tuple, work_dir, config: dict, keep: bool = False, figures: bool = 
             done = analyse_dataset(raw, res, config, figures=figures)
         rejected = done["ingest_report"][done["ingest_report"]["status"] != "ok"]
         row.update(n_runs=int((done["ingest_report"]["status"] == "ok").sum()), rejected=len(rejected),
-                   scopes=done["scopes"], diagnosis_scope=done["diagnosis_scope"])
+                   scopes=done["scopes"], diagnosis_scope=done["diagnosis_scope"], stage_s=done["seconds"])
         if len(rejected):
             row["error"] = f"ingest rejected {len(rejected)} export(s): {rejected['reason'].iloc[0]}"
         result = done["diagnosis"]

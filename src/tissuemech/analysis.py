@@ -16,6 +16,7 @@ separate adapters because one job per stage imports only what that stage needs (
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -55,9 +56,10 @@ def analyse_dataset(raw_folder, results_folder, config: Mapping, *, figures: boo
 
     Returns
     -------
-    ``{"dataset", "tests", "scopes", "tts", "diagnosis_scope", "ingest_report", "ranking", "diagnosis"}``:
-    the scopes fitted, the ingest report and ranking tables, the diagnosis result (``None`` where the workflow
-    does not diagnose the dataset).
+    ``{"dataset", "tests", "scopes", "tts", "diagnosis_scope", "ingest_report", "ranking", "diagnosis",
+    "seconds"}``: the scopes fitted, the ingest report and ranking tables, the diagnosis result (``None`` where the
+    workflow does not diagnose the dataset) and the wall-clock seconds of each stage (``ingest``, ``average``,
+    ``tts``, ``fit``, ``rank``, ``diagnose``).
     """
     folder, out = Path(raw_folder), Path(results_folder)
     name = folder.name
@@ -69,12 +71,19 @@ def analyse_dataset(raw_folder, results_folder, config: Mapping, *, figures: boo
     tts_config = config.get("tts", {})
     fig = out / "figures"
     done = {"dataset": name, "tests": tests, "scopes": list(scopes), "tts": tts,
-            "diagnosis_scope": None, "ranking": None, "diagnosis": None}
+            "diagnosis_scope": None, "ranking": None, "diagnosis": None, "seconds": {}}
+    clock = [time.perf_counter()]
+
+    def lap(stage: str) -> None:
+        now = time.perf_counter()
+        done["seconds"][stage] = now - clock[0]
+        clock[0] = now
 
     # rule ingest (workflow/scripts/ingest.py)
     runs_dir = out / "runs"
     runs_dir.mkdir(parents=True, exist_ok=True)
     done["ingest_report"] = ingest_dataset(folder, runs_dir, out / "ingest_report.csv")
+    lap("ingest")
 
     # rule average (workflow/scripts/average.py)
     runs = load_runs(runs_dir)
@@ -89,6 +98,7 @@ def analyse_dataset(raw_folder, results_folder, config: Mapping, *, figures: boo
         (fig / "lve").mkdir(parents=True, exist_ok=True)
         plot_all_lve(summary, runs, averages, fig / "lve")
     run_spectrum(out / "averages.nc", out / "spectrum.nc")
+    lap("average")
 
     # rule tts (workflow/scripts/tts.py), for sweeps at >= 2 temperatures
     tts_path = None
@@ -98,6 +108,7 @@ def analyse_dataset(raw_folder, results_folder, config: Mapping, *, figures: boo
                 fig / "tts_mastercurve.png" if figures else None, dataset=name, t_ref_c=tts_config.get("t_ref_c"),
                 vertical=tts_config.get("vertical", False), exclude_flagged=exclude_flagged,
                 held_out=leave_one_temperature_out)
+        lap("tts")
     if not scopes:
         return done
 
@@ -112,6 +123,7 @@ def analyse_dataset(raw_folder, results_folder, config: Mapping, *, figures: boo
         if figures:
             plot_scope_fits(out / "averages.nc", out / "fits" / scope, spec["tests"], fig / "fits" / scope,
                             tts_path=scope_tts)
+    lap("fit")
 
     # rule rank (workflow/scripts/rank.py); no posterior tables (not run here)
     done["ranking"] = collect_scopes([out / "ranking" / f"{s}.csv" for s in scopes], out / "ranking.csv",
@@ -119,6 +131,7 @@ def analyse_dataset(raw_folder, results_folder, config: Mapping, *, figures: boo
     write_fits_table([out / "fits" / s for s in scopes], name, out / "fits.csv", posterior_tables=[])
     if figures:
         plot_cards(out / "cards", out / "ranking.csv", fig / "cards", out / "cards.csv")
+    lap("rank")
 
     # rule diagnose (workflow/scripts/diagnose.py)
     if is_diagnosed(tests, scopes):
@@ -130,4 +143,5 @@ def analyse_dataset(raw_folder, results_folder, config: Mapping, *, figures: boo
         named = [f["effect"] for f in done["diagnosis"].get("findings", []) if f.get("detected")]
         log.info("diagnosis of %s (baseline %s): %s", name, done["diagnosis"].get("model"),
                  ", ".join(named) or "no named cause")
+        lap("diagnose")
     return done
