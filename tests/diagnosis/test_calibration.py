@@ -512,6 +512,14 @@ def test_ci_subset_spans_designs():
     assert {_ci_design(s, {})["family"] for s in CI_NULL_SEEDS} == set(ir.FAMILIES)
 
 
+def _what(row: dict) -> str:
+    """One line on a CI-subset dataset: its design, truth, baseline and what the diagnosis said."""
+    d = row["design"]
+    return (f"{d['family']} {d['kinds']}, {d['n_specimens']} specimens / {d['n_samples']} samples; truth "
+            f"{row['law']}/{row['kernel']}; diagnosed on {row['diagnosis_scope']} with {row['model']}; "
+            f"verdict {row.get('verdict')}; detected {row['detected']}; unexplained {row['unexplained']}")
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", CI_NULL_SEEDS)
 def test_pipeline_path_names_nothing_on_a_null_folder(seed, tmp_path, pipeline_config):
@@ -521,8 +529,7 @@ def test_pipeline_path_names_nothing_on_a_null_folder(seed, tmp_path, pipeline_c
 
     row = one((None, 0.0, seed), tmp_path, pipeline_config)
     assert row["error"] is None, row.get("trace", row["error"])
-    assert row["detected"] == [] and row["unexplained"] == [], (row["design"], row["law"], row["kernel"],
-                                                                row["detected"], row["unexplained"])
+    assert row["detected"] == [] and row["unexplained"] == [], _what(row)
 
 
 @pytest.mark.slow
@@ -534,5 +541,5 @@ def test_pipeline_path_names_the_injected_cause(effect, tmp_path, pipeline_confi
 
     row = one((effect, 1.0, CI_CAUSE_SEEDS[effect]), tmp_path, pipeline_config)
     assert row["error"] is None, row.get("trace", row["error"])
-    assert row["named"], (row["design"], row["verdict"], row["detected"], row["unexplained"])
-    assert [e for e in row["detected"] if e != NAMED_AS[effect]] == [], row["detected"]
+    assert row["named"], _what(row)
+    assert [e for e in row["detected"] if e != NAMED_AS[effect]] == [], _what(row)
