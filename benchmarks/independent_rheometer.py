@@ -444,6 +444,15 @@ def _oscillation(kind, st, truth, kernel, factor, gap, effects, rng):
     return ch
 
 
+def checked_effects(effects: dict | None, known) -> dict:
+    """``effects`` as a dict, every name among ``known`` (``ValueError`` naming the others)."""
+    effects = dict(effects or {})
+    unknown = set(effects) - set(known)
+    if unknown:
+        raise ValueError(f"unknown effects {sorted(unknown)}; known: {tuple(known)}")
+    return effects
+
+
 def generate(seed: int, effects: dict | None = None, dataset: str | None = None):
     """One seeded dataset of canonical runs.
 
@@ -456,10 +465,7 @@ def generate(seed: int, effects: dict | None = None, dataset: str | None = None)
     -------
     (runs, truth) : list of canonical run datasets (``make_run_dataset``) and a JSON-able truth summary
     """
-    effects = dict(effects or {})
-    unknown = set(effects) - set(EFFECTS)
-    if unknown:
-        raise ValueError(f"unknown effects {sorted(unknown)}; known: {EFFECTS}")
+    effects = checked_effects(effects, EFFECTS)
     rng = np.random.default_rng(seed)
     truth = draw_truth(rng)
     truth.effects = effects
@@ -809,10 +815,7 @@ def simulate_folder(seed: int, effects: dict | None = None, dataset: str | None 
     ``records``: one dict per test with ``channels`` (canonical SI arrays: what the instrument measured and
     reports) and ``meta`` (specimen, sample, test, order, nominal condition, gap, nominal and logged temperature,
     preload, ``started_at``); see :func:`write_dataset_folder`."""
-    effects = dict(effects or {})
-    unknown = set(effects) - set(FOLDER_EFFECTS)
-    if unknown:
-        raise ValueError(f"unknown effects {sorted(unknown)}; known: {FOLDER_EFFECTS}")
+    effects = checked_effects(effects, FOLDER_EFFECTS)
     rng = np.random.default_rng(seed)
     truth = draw_truth(rng)
     truth.radius_m = float(rng.choice(PLATE_DIAMETERS_MM)) / 2.0 * 1e-3
