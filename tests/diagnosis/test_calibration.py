@@ -4,7 +4,11 @@
   integral of a linear material, closed-form Prony ramp-and-hold responses, the Mittag-Leffler function at
   alpha = 1 (exp) and alpha = 1/2 (erfcx), the fractional-Zener complex modulus, small-strain slopes;
 * the run contract (canonical variables, required attributes, reproducibility, no package physics imported);
-* a handful of small seeded null datasets on which the diagnosis must name nothing.
+* a handful of small seeded null datasets on which the diagnosis must name nothing;
+* the dataset folders of the pipeline-path calibration: creep through the plate's torque balance against closed
+  forms, the round trip of every export format and unit through the package's ingest, the spread of designs;
+* the CI subset of the pipeline-path calibration (slow): 20 null folders and one folder per cause through
+  ``tissuemech.analysis.analyse_dataset`` (benchmarks/pipeline_calibration.py; docs/calibration.md).
 """
 from __future__ import annotations
 
