@@ -280,15 +280,21 @@ def main(argv=None) -> int:
     text = "\n".join(lines)
     print(text)
     if a.out:
-        old = a.out.read_text(encoding="utf-8") if a.out.exists() else ""
-        marker = f"## {a.title}"
-        if marker in old:   # replace the section of the same title, keep the rest
-            head, rest = old.split(marker, 1)
-            tail = rest[rest.find("\n## "):] if "\n## " in rest else ""
-            write_text(head + text + "\n" + tail.lstrip("\n"), a.out)
-        else:
-            write_text(old.rstrip("\n") + ("\n\n" if old else "") + text + "\n", a.out)
+        write_section(a.out, a.title, text)
     return 0
+
+
+def write_section(path: Path, title: str, text: str) -> None:
+    """Put ``text`` (a section starting ``## <title>``) into the markdown file ``path``: it replaces the section
+    of the same title and keeps the rest, or is appended."""
+    old = path.read_text(encoding="utf-8") if path.exists() else ""
+    marker = f"## {title}"
+    if marker in old:
+        head, rest = old.split(marker, 1)
+        tail = rest[rest.find("\n## "):] if "\n## " in rest else ""
+        write_text(head + text + "\n" + tail.lstrip("\n"), path)
+    else:
+        write_text(old.rstrip("\n") + ("\n\n" if old else "") + text + "\n", path)
 
 
 if __name__ == "__main__":

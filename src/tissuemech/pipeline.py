@@ -1,4 +1,6 @@
-"""Small helpers shared by the Snakemake adapter scripts (``workflow/scripts``): logging, progress, run loading."""
+"""Small helpers shared by the Snakemake adapter scripts (``workflow/scripts``): logging, progress, run loading, and
+the workflow's plan of one dataset read from its sample sheet (which stages run, which scope the diagnosis reads),
+shared by ``workflow/rules/common.smk`` and :func:`tissuemech.analysis.analyse_dataset`."""
 from __future__ import annotations
 
 import logging
@@ -11,9 +13,11 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import NoReturn, TypeVar
 
+import pandas as pd
 import xarray as xr
 
 from .canonical import read_netcdf
+from .curves import distinct_temperatures
 
 
 def job_cost() -> str:
@@ -133,3 +137,54 @@ def progress(items: Iterable[_Item], desc: str, total: int | None = None,
 def load_runs(runs_dir: str | Path) -> list[xr.Dataset]:
     """Every canonical run file ``runs_dir/*.nc`` fully loaded, sorted by file name."""
     return [read_netcdf(path) for path in sorted(Path(runs_dir).glob("*.nc"))]
+
+
+# ---- the plan of one dataset (the DAG's decisions, made from the sample sheet before any run is read) ----------
+#: scopes whose fits the diagnosis examines, best first (the joint viscoelastic fit carries most evidence): the
+#: diagnosis reads the fit records of the first of these a dataset has
+DIAGNOSIS_SCOPES: tuple[str, ...] = (
+    "material", "all_modes", "constant_shear_rate", "stress_relaxation", "creep_recovery",
+    "frequency_sweep", "mastercurve", "amplitude_sweep", "simple_shear", "flow_curve",
+)
+#: test kinds of homogeneous specimens (not parallel-plate data)
+HOMOGENEOUS_TESTS = frozenset({"simple_shear", "uniaxial", "indentation"})
+
+
+def sheet_tests(sheet) -> list[str]:
+    """Test kinds of a sample sheet (a ``pandas.DataFrame`` read with ``dtype=str``), sorted."""
+    return sorted(set(sheet["test"].dropna())) if "test" in sheet else []
+
+
+def sweep_temperatures(sheet) -> list[float]:
+    """Distinct nominal temperatures (column ``temperature_c``) of a sample sheet's frequency sweeps
+    (:func:`tissuemech.curves.distinct_temperatures`); two or more give the dataset the TTS stage and the
+    ``mastercurve`` scope."""
+    if "test" not in sheet or "temperature_c" not in sheet:
+        return []
+    sweeps = sheet[sheet["test"] == "frequency_sweep"]
+    values = sweeps["temperature_c"].astype("string")
+    if sheet.attrs.get("decimal_comma"):  # a sheet of tissuemech.io.samples.read_sheet written with 20,5
+        values = values.str.replace(",", ".", regex=False)
+    return distinct_temperatures(pd.to_numeric(values, errors="coerce"))
+
+
+def diagnosis_scope(scopes: Iterable[str]) -> str | None:
+    """The scope whose fits the diagnosis reads: the first of :data:`DIAGNOSIS_SCOPES` among ``scopes``."""
+    scopes = set(scopes)
+    return next((s for s in DIAGNOSIS_SCOPES if s in scopes), None)
+
+
+def is_rheometer_dataset(tests: Iterable[str]) -> bool:
+    """Parallel-plate data (the plate-level diagnosis applies) as opposed to homogeneous specimens."""
+    return bool(set(tests) - HOMOGENEOUS_TESTS)
+
+
+def is_multimode_dataset(tests: Iterable[str]) -> bool:
+    """Homogeneous specimens tested in simple shear and uniaxially (the cross-mode diagnosis applies)."""
+    return {"simple_shear", "uniaxial"} <= set(tests)
+
+
+def is_diagnosed(tests: Iterable[str], scopes: Iterable[str]) -> bool:
+    """Whether the workflow diagnoses a dataset: it has a diagnosis scope and is rheometer or multi-mode data."""
+    tests = list(tests)
+    return diagnosis_scope(scopes) is not None and (is_rheometer_dataset(tests) or is_multimode_dataset(tests))

@@ -1083,3 +1083,24 @@ __all__ = ["CAUSE_TITLES", "FIT_ABSCISSA", "SECTIONS", "boundary_faces", "build_
            "figure_scope_fit", "figure_timing", "fit_panels", "html_table", "plain_statement", "plot_cards",
            "plot_meshes", "plot_posterior_fit", "plot_scope_fits", "plot_timing", "render_caption",
            "results_datasets", "verdict_card", "verdict_rows"]
+
+
+# ------------------------------------------------------------------------------------------------------
+# the fit and rank jobs (the workflow's scripts and tissuemech.analysis run the same functions)
+# ------------------------------------------------------------------------------------------------------
+def fit_scope_job(averages_path, scope: str, spec: Mapping, target: str, seed: int, multistart: int, fits_dir,
+                  cards_dir, ranking_path, poisson_ratio: float, dataset: str = "", tts_path=None,
+                  figures_dir=None) -> pd.DataFrame:
+    """Rule ``fit_scope``: :func:`tissuemech.stages.run_fit_scope` and, with ``figures_dir``, the fit figures
+    (:func:`plot_scope_fits`; the material scope draws its baseline and recommended model). Returns the ranking."""
+    from .stages import run_fit_scope
+
+    table = run_fit_scope(averages_path, scope, spec, target=target, seed=seed, multistart=multistart,
+                          fits_dir=fits_dir, cards_dir=cards_dir, ranking_path=ranking_path, dataset=dataset,
+                          poisson_ratio=poisson_ratio, tts_path=tts_path)
+    if figures_dir is not None:
+        shown = None
+        if spec.get("material") and not table.empty and "baseline" in table:
+            shown = set(table.loc[table["baseline"].astype(bool) | table["recommended"].astype(bool), "model"])
+        plot_scope_fits(averages_path, fits_dir, spec, figures_dir, tts_path=tts_path, models=shown)
+    return table

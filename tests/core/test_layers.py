@@ -26,7 +26,7 @@ LAYERS: tuple[frozenset[str], ...] = tuple(frozenset(names.split()) for names in
     "fitting io synth plots posterior cards_febio cards_niftysim pipeline scopes",
     "adequacy ranking material cards tts",
     "diagnosis stages fem uq",
-    "summary cli regression",
+    "summary cli regression analysis",
 ))
 
 #: import circles still left (as sorted module tuples) -> what is to be done

@@ -4,7 +4,11 @@
   integral of a linear material, closed-form Prony ramp-and-hold responses, the Mittag-Leffler function at
   alpha = 1 (exp) and alpha = 1/2 (erfcx), the fractional-Zener complex modulus, small-strain slopes;
 * the run contract (canonical variables, required attributes, reproducibility, no package physics imported);
-* a handful of small seeded null datasets on which the diagnosis must name nothing.
+* a handful of small seeded null datasets on which the diagnosis must name nothing;
+* the dataset folders of the pipeline-path calibration: creep through the plate's torque balance against closed
+  forms, the round trip of every export format and unit through the package's ingest, the spread of designs;
+* the CI subset of the pipeline-path calibration (slow): 20 null folders and one folder per cause through
+  ``tissuemech.analysis.analyse_dataset`` (benchmarks/pipeline_calibration.py; docs/calibration.md).
 """
 from __future__ import annotations
 
@@ -320,3 +324,226 @@ def test_cause_injected_in_another_labs_design_is_named_with_its_size(seed, caus
     expected = size(truth)
     rel = tol / expected if cause == "elapsed_time_drift" else tol
     assert f["effect_size"] == pytest.approx(expected, rel=rel), (f["effect_size"], expected)
+
+
+# ------------------------------------------------------------------------------ dataset folders (pipeline input)
+def _linear_truth(g_inf, g, tau, mu=1000.0, radius=0.0125, gap=2e-3, law="neo_hookean", law_params=None):
+    kernel = ir.prony_kernel(g_inf, np.asarray(g, float), np.asarray(tau, float))
+    return ir.Truth(law, law_params or {}, mu, kernel, radius_m=radius, gap_m=[gap], noise_rel=0.01,
+                    torque_floor_nm=1e-9, motor_inertia=2e-5, temperature_c=20.0), kernel
+
+
+def test_creep_of_a_standard_linear_solid_is_its_creep_compliance():
+    """Stress ramped to sigma over 10 ms, then held, on a linear standard linear solid (G0 = mu, G_inf = 0.4 mu,
+    tau = 2 s): the torque balance gives gamma(t) = sigma/r int_0^min(t, r) J(t - s) ds with the closed-form
+    compliance J(t) = 1/G_inf - (1/G_inf - 1/G0) exp(-t/tau_ret), tau_ret = tau G0/G_inf (a linear plate: the
+    apparent stress 2M/(pi R^3) is the rim stress)."""
+    mu, g_inf, tau, rise, sigma = 1000.0, 0.4, 2.0, 0.01, 50.0
+    truth, kernel = _linear_truth(g_inf, [1 - g_inf], [tau], mu=mu)
+    t = np.unique(np.r_[np.linspace(0, rise, 21), rise + np.geomspace(1e-5, 100.0, 400)])
+    torque = sigma * np.pi * truth.radius_m ** 3 / 2 * np.clip(t / rise, 0, 1)
+    strain = ir.creep_response(t, torque, truth, kernel, 1.0, 2e-3, {})
+    g0, g_eq = mu, mu * g_inf
+    t_ret = tau * g0 / g_eq
+    integral = lambda u: u / g_eq + (1 / g_eq - 1 / g0) * t_ret * np.exp(-u / t_ret)  # noqa: E731 (int J du)
+    exact = sigma / rise * (integral(t) - integral(np.maximum(t - rise, 0.0)))
+    np.testing.assert_allclose(strain[1:], exact[1:], rtol=1e-4)
+    assert strain[-1] == pytest.approx(sigma / g_eq, rel=1e-6)
+
+
+def test_creep_ringing_of_an_elastic_sample_is_the_undamped_oscillator():
+    """An elastic sample (no relaxation) under a torque ramped over 2 ms, with rotor inertia I: I theta'' + K theta
+    = M(t), K = G pi R^4/(2h); the ramp response theta = M0/(K r) (t - sin(wt)/w) for t <= r and
+    M0/(K r) (r - (sin wt - sin w(t - r))/w) after, w^2 = K/I (the Newmark rule adds no damping)."""
+    mu, radius, gap, inertia, rise, m0 = 1000.0, 0.0125, 2e-3, 2e-5, 0.002, 1e-4
+    truth, kernel = _linear_truth(1.0, [0.0], [1.0], mu=mu, radius=radius, gap=gap)
+    stiffness = mu * np.pi * radius ** 4 / (2 * gap)
+    w = np.sqrt(stiffness / inertia)
+    t = np.arange(0.0, 0.5, 2 * np.pi / w / 200)
+    strain = ir.creep_response(t, m0 * np.clip(t / rise, 0, 1), truth, kernel, 1.0, gap, {}, inertia=inertia)
+    a = m0 / (stiffness * rise)
+    exact = np.where(t <= rise, a * (t - np.sin(w * t) / w), a * (rise - (np.sin(w * t) - np.sin(w * (t - rise))) / w))
+    assert np.max(np.abs(strain * gap / radius - exact)) < 1e-3 * np.max(exact)
+
+
+def _runs_by_key(runs_dir):
+    from tissuemech.pipeline import load_runs
+
+    return {(r.attrs["specimen"], r.attrs["sample"], r.attrs["test"], int(r.attrs["order"])): r
+            for r in load_runs(runs_dir)}
+
+
+#: seeds whose folders cover the three export formats, the three torque units, Hz and rad/s, strain in % and 1,
+#: and the three places the geometry is stated (sample sheet, dataset.yaml, export)
+ROUND_TRIP_SEEDS = [70, 77, 172, 51, 58]
+
+
+@pytest.mark.parametrize("seed", ROUND_TRIP_SEEDS)
+def test_dataset_folder_round_trips_through_ingest(seed, tmp_path):
+    """The folder is what a user drops in raw/: the package's ingest reads every export (RheoCompass UTF-16 with
+    decimal commas, RheoCompass UTF-8 with the project header, TRIOS text with one step per test) and returns the
+    generated channels in SI (7 printed digits), the plate radius and gap from wherever the design states them."""
+    from tissuemech.io.ingest import ingest_dataset
+
+    records, truth, design = ir.simulate_folder(seed, None, f"rt{seed}")
+    ir.write_dataset_folder(seed, tmp_path / "raw" / f"rt{seed}")
+    assert (tmp_path / "raw" / f"rt{seed}.truth.json").is_file()        # beside the folder, not in it
+    report = ingest_dataset(tmp_path / "raw" / f"rt{seed}", tmp_path / "runs", tmp_path / "report.csv")
+    assert (report["status"] == "ok").all(), report[report["status"] != "ok"].to_dict("records")
+    runs = _runs_by_key(tmp_path / "runs")
+    assert len(runs) == len(records)
+    for rec in records:
+        m = rec["meta"]
+        run = runs[(m["specimen"], m["sample"], m["test"], m["order"])]
+        assert run.attrs["radius_m"] == pytest.approx(truth["radius_mm"] * 1e-3, rel=1e-9)
+        assert run.attrs["gap_m"] == pytest.approx(m["gap_m"], rel=1e-3)
+        for name, values in rec["channels"].items():
+            twin = {"frequency": ("angular_frequency", 2 * np.pi), "angular_frequency": ("frequency", 0.5 / np.pi)}
+            if name not in run and name in twin:      # the export writes one of Hz and rad/s
+                name, values = twin[name][0], values * twin[name][1]
+            got = run[name].values
+            scale = np.max(np.abs(values))
+            np.testing.assert_allclose(got, values, rtol=1e-6, atol=1e-6 * scale, err_msg=f"{name} of {m}")
+    assert {r.attrs["format"] for r in runs.values()} == {
+        {"trios_text": "ta_trios_text"}.get(design["format"], "anton_paar_rheocompass")}
+
+
+def test_folder_designs_vary_every_choice_a_detector_could_key_on():
+    seen = {k: set() for k in ("family", "layout", "days", "order", "format", "torque_unit", "frequency_unit",
+                               "strain_unit", "geometry_source", "n_specimens", "first_test")}
+    for seed in range(120):
+        rng = np.random.default_rng(seed)
+        ir.draw_truth(rng)
+        rng.choice(ir.PLATE_DIAMETERS_MM)
+        d = ir.draw_folder_design(rng, {})
+        for k in seen:
+            if k == "first_test":
+                seen[k].add(ir._sample_tests(d, rng)[0][0])
+            else:
+                seen[k].add(d[k])
+    assert seen["family"] == set(ir.FAMILIES) and seen["layout"] == {"blocks", "interleaved"}
+    assert seen["days"] == {1, 2, 3} and seen["order"] == {"random", "fixed"}
+    assert seen["format"] == set(ir.FORMATS) and seen["torque_unit"] == set(ir.TORQUE_UNITS)
+    assert seen["frequency_unit"] == {"Hz", "rad/s"} and seen["strain_unit"] == {"%", "1"}
+    assert seen["geometry_source"] == {"samples", "yaml", "export"}
+    assert seen["n_specimens"] == set(range(1, 9)) and seen["first_test"] == set(ir.FOLDER_TESTS)
+
+
+@pytest.mark.parametrize("effect", ir.FOLDER_EFFECTS)
+def test_power_designs_hold_a_test_that_shows_the_effect(effect):
+    for seed in range(25):
+        rng = np.random.default_rng(seed)
+        d = ir.draw_folder_design(rng, {effect: 1.0})
+        assert set(d["kinds"]) & set(ir.SHOWN_BY[effect]), (seed, d["kinds"])
+        assert sum(d["samples_per_specimen"]) >= ir.MIN_SAMPLES.get(effect, 1)
+        if effect == "outlier_specimen":
+            assert 4 <= d["n_specimens"] <= 6
+
+
+def test_creep_ringing_makes_the_creep_strain_oscillate():
+    """Seed 20 (creep only): the null creep strain rises monotonically (up to noise) during the hold; with the motor
+    inertia in the torque balance the same creep overshoots and rings (a falling strain beyond the noise)."""
+    def creep_strains(effects):
+        records, truth, _ = ir.simulate_folder(20, effects)
+        rec = next(r for r in records if r["meta"]["test"] == "creep_recovery")
+        return rec["channels"]["shear_strain"], truth
+
+    null, truth = creep_strains(None)
+    ring, _ = creep_strains({"creep_ringing": 2.0})
+    half = null.size // 2
+    noise = 4 * truth["noise_rel"] * np.abs(null[:half])
+    assert np.all(np.diff(null[:half]) > -noise[1:])
+    assert np.any(np.diff(ring[:half]) < -noise[1:])
+
+
+def test_temperature_spread_and_preload_show_only_in_the_logged_channels():
+    """The temperature spread moves the logged temperature (not the sample sheet's nominal one) by up to 4 K at 1x,
+    and the preload scales each sample's moduli as (F / 0.1 N)^0.15 with F its logged normal force; the nulls log
+    the same kind of channels (a preload without effect, a temperature within 0.1 K)."""
+    def by_key(effects):
+        records, _, design = ir.simulate_folder(436, effects)
+        return {(r["meta"]["specimen"], r["meta"]["sample"], r["meta"]["order"]): r for r in records}, design
+
+    null, design = by_key(None)
+    assert design["logs_normal_force"]
+    spread, _ = by_key({"temperature_spread": 1.0})
+    preload, _ = by_key({"normal_force_preload": 1.0})
+    for key, rec in null.items():
+        assert abs(float(np.median(rec["channels"]["temperature"])) - rec["meta"]["temperature_c"]) < 0.15
+        moved = spread[key]
+        assert moved["meta"]["temperature_c"] == rec["meta"]["temperature_c"]
+        assert abs(moved["meta"]["temperature_logged_c"] - rec["meta"]["temperature_c"]) <= 4.0
+        f_n = preload[key]["meta"]["preload_n"]
+        q = "storage_modulus" if "storage_modulus" in rec["channels"] else "shear_stress"
+        ratio = float(np.median(preload[key]["channels"][q] / null[key]["channels"][q]))
+        assert ratio == pytest.approx((f_n / 0.1) ** 0.15, rel=0.02)
+
+
+# ------------------------------------------------------------------- CI subset of the pipeline-path calibration
+# Seeds never used in development (benchmarks/pipeline_calibration.DEVELOPMENT_SEEDS lists them so that no
+# calibration run reuses them): 20 null folders and one folder per cause at 1x, each analysed by the pipeline's path
+# (tissuemech.analysis.analyse_dataset through pipeline_calibration.one) with the repository's configuration but one
+# fit start per model instead of three (the fits are 80-90 % of a dataset's time; multistart 1 saves 25-35 %).
+# Measured 2026-11-28 on the shared 2-core machine (load 5-10): 7-180 s per dataset, median 31 s with multistart 3.
+CI_NULL_SEEDS = [32500000 + i for i in range(20)]
+CI_CAUSE_SEEDS = {e: 32600000 + 1000 * k for k, e in enumerate(ir.FOLDER_EFFECTS)}
+
+
+@pytest.fixture(scope="module")
+def pipeline_config():
+    import yaml
+
+    config = yaml.safe_load((ROOT / "config" / "config.yaml").read_text())
+    config["fit"]["multistart"] = 1
+    return config
+
+
+def _ci_design(seed, effects):
+    rng = np.random.default_rng(seed)
+    ir.draw_truth(rng)
+    rng.choice(ir.PLATE_DIAMETERS_MM)
+    return ir.draw_folder_design(rng, effects)
+
+
+def test_ci_subset_spans_designs():
+    """The CI subset's seeds are outside every seed range a calibration run may use, the cause folders cover at
+    least three test families and the nulls all five."""
+    from pipeline_calibration import DEVELOPMENT_SEEDS
+
+    for s in CI_NULL_SEEDS + list(CI_CAUSE_SEEDS.values()):
+        assert any(a <= s <= b for a, b in DEVELOPMENT_SEEDS)
+    assert len({_ci_design(s, {e: 1.0})["family"] for e, s in CI_CAUSE_SEEDS.items()}) >= 3
+    assert {_ci_design(s, {})["family"] for s in CI_NULL_SEEDS} == set(ir.FAMILIES)
+
+
+def _what(row: dict) -> str:
+    """One line on a CI-subset dataset: its design, truth, baseline and what the diagnosis said."""
+    d = row["design"]
+    return (f"{d['family']} {d['kinds']}, {d['n_specimens']} specimens / {d['n_samples']} samples; truth "
+            f"{row['law']}/{row['kernel']}; diagnosed on {row['diagnosis_scope']} with {row['model']}; "
+            f"verdict {row.get('verdict')}; detected {row['detected']}; unexplained {row['unexplained']}")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", CI_NULL_SEEDS)
+def test_pipeline_path_names_nothing_on_a_null_folder(seed, tmp_path, pipeline_config):
+    """No detected cause, no unexplained entry, no rejected export and no crash on a null dataset folder (the
+    family-wise false-alarm count of the 20 is the number of these cases that fail; the target rate is 1 %)."""
+    from pipeline_calibration import one
+
+    row = one((None, 0.0, seed), tmp_path, pipeline_config)
+    assert row["error"] is None, row.get("trace", row["error"])
+    assert row["detected"] == [] and row["unexplained"] == [], _what(row)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("effect", list(CI_CAUSE_SEEDS))
+def test_pipeline_path_names_the_injected_cause(effect, tmp_path, pipeline_config):
+    """The cause injected at 1x is named (the preload: attributed to the normal-force channel), no other cause is
+    named, nothing crashes."""
+    from pipeline_calibration import NAMED_AS, one
+
+    row = one((effect, 1.0, CI_CAUSE_SEEDS[effect]), tmp_path, pipeline_config)
+    assert row["error"] is None, row.get("trace", row["error"])
+    assert row["named"], _what(row)
+    assert [e for e in row["detected"] if e != NAMED_AS[effect]] == [], _what(row)

@@ -94,8 +94,9 @@ def sample_sheet_of(folder):
 
 
 def dataset_tests(name):
-    sheet = sample_sheet(name)
-    return sorted(set(sheet["test"].dropna())) if "test" in sheet else []
+    from tissuemech.pipeline import sheet_tests
+
+    return sheet_tests(sample_sheet(name))
 
 
 def dataset_scopes_of(name):
@@ -138,41 +139,23 @@ def scope_card_dirs(wildcards):
     ]
 
 
-#: scope whose fits the diagnosis examines, best first (the material model carries every shear test)
-DIAGNOSIS_SCOPES = (
-    "material",
-    "all_modes",
-    "constant_shear_rate",
-    "stress_relaxation",
-    "creep_recovery",
-    "frequency_sweep",
-    "mastercurve",
-    "amplitude_sweep",
-    "simple_shear",
-    "flow_curve",
-)
-
-
 def diagnosis_scope(name):
-    scopes = dataset_scopes_of(name)
-    return next((s for s in DIAGNOSIS_SCOPES if s in scopes), None)
+    """The scope whose fits the diagnosis reads (tissuemech.pipeline.DIAGNOSIS_SCOPES, shared with
+    tissuemech.analysis.analyse_dataset)."""
+    from tissuemech.pipeline import diagnosis_scope as first_diagnosis_scope
+
+    return first_diagnosis_scope(dataset_scopes_of(name))
 
 
 def diagnosis_fits(wildcards):
     return f"results/{wildcards.dataset}/fits/{diagnosis_scope(wildcards.dataset)}"
 
 
-HOMOGENEOUS_TESTS = {"simple_shear", "uniaxial", "indentation"}
+def is_diagnosed(name):
+    """Rheometer or multi-mode data with a diagnosis scope (tissuemech.pipeline.is_diagnosed)."""
+    from tissuemech.pipeline import is_diagnosed as diagnosed
 
-
-def is_rheometer_dataset(name):
-    """Parallel-plate data (the plate-level diagnosis applies) as opposed to homogeneous specimens."""
-    return bool(set(dataset_tests(name)) - HOMOGENEOUS_TESTS)
-
-
-def is_multimode_dataset(name):
-    """Homogeneous specimens tested in simple shear and uniaxially (the cross-mode diagnosis applies)."""
-    return {"simple_shear", "uniaxial"} <= set(dataset_tests(name))
+    return diagnosed(dataset_tests(name), dataset_scopes_of(name))
 
 
 def has_shear_ramps(name):
@@ -181,9 +164,7 @@ def has_shear_ramps(name):
 
 def has_diagnosis(name):
     """The dataset gets diagnosis.json (rule diagnose): a diagnosis scope and plate or multi-mode data."""
-    return bool(diagnosis_scope(name)) and (
-        is_rheometer_dataset(name) or is_multimode_dataset(name)
-    )
+    return is_diagnosed(name)
 
 
 def diagnosis_inputs(wildcards):
@@ -196,21 +177,16 @@ def diagnosis_inputs(wildcards):
 
 def has_fem_replay(name):
     """Parallel-plate data with fitted scopes: the FEM replays its measured tests (rule fem_replay)."""
-    return is_rheometer_dataset(name) and bool(dataset_scopes_of(name))
+    from tissuemech.pipeline import is_rheometer_dataset
+
+    return is_rheometer_dataset(dataset_tests(name)) and bool(dataset_scopes_of(name))
 
 
 def tts_temperatures(name):
     """Distinct nominal temperatures (sample sheet ``temperature_c``) of a dataset's frequency sweeps."""
-    from tissuemech.curves import distinct_temperatures
+    from tissuemech.pipeline import sweep_temperatures
 
-    sheet = sample_sheet(name)
-    if "test" not in sheet or "temperature_c" not in sheet:
-        return []
-    sweeps = sheet[sheet["test"] == "frequency_sweep"]
-    values = sweeps["temperature_c"].astype("string")
-    if sheet.attrs.get("decimal_comma"):
-        values = values.str.replace(",", ".", regex=False)
-    return distinct_temperatures(pd.to_numeric(values, errors="coerce"))
+    return sweep_temperatures(sample_sheet(name))
 
 
 def has_tts(name):
@@ -231,7 +207,7 @@ def all_targets():
             targets.append(f"results/{name}/tts.nc")
         if dataset_scopes_of(name):
             targets += [f"results/{name}/ranking.csv", f"results/{name}/fits.csv"]
-        if has_diagnosis(name):
+        if is_diagnosed(name):
             targets.append(f"results/{name}/diagnosis.json")
         if has_shear_ramps(name):
             targets.append(f"results/{name}/fem/torsion.csv")
