@@ -77,8 +77,9 @@ def _geometry_by_test(avg: xr.Dataset, name: str) -> dict[str, float]:
 
 def scope_curves(averages: xr.Dataset, tests: Sequence[str], relaxation: str = "measured",
                  tts: xr.Dataset | None = None, amplitude: str = "lve",
-                 n_points: int = POINTS_PER_CURVE) -> list[F.Curve]:
-    """Averaged curves of ``tests`` with their plate geometry, thinned to ``n_points`` points.
+                 n_points: int | None = None) -> list[F.Curve]:
+    """Averaged curves of ``tests`` with their plate geometry, thinned to ``n_points`` points (default
+    :data:`POINTS_PER_CURVE`).
 
     With ``tts`` (the dataset's ``tts.nc``; the ``mastercurve`` scope) the frequency sweeps, one per temperature
     and each thinned alone, are replaced by their mastercurve at the reference temperature, one curve
@@ -89,7 +90,7 @@ def scope_curves(averages: xr.Dataset, tests: Sequence[str], relaxation: str = "
     curves = F.curves_from_averages(averages, radius_m=_geometry_by_test(averages, "radius_m"),
                                     gap_m=_geometry_by_test(averages, "gap_m"), relaxation=relaxation, tests=tests,
                                     amplitude=amplitude)
-    curves = [F.thin(c, n_points) for c in curves]
+    curves = [F.thin(c, POINTS_PER_CURVE if n_points is None else n_points) for c in curves]
     if tts is None:
         return curves
     labels = as_str(averages["condition"].values)
@@ -112,7 +113,7 @@ def spec_curves(averages: xr.Dataset, spec: Mapping | Sequence[str], relaxation:
         spec = {"tests": list(spec)}
     if spec.get("material"):
         return scope_curves(averages, spec["tests"], relaxation, tts, amplitude="full",
-                            n_points=int(spec.get("points_per_curve") or POINTS_PER_CURVE))
+                            n_points=spec.get("points_per_curve"))
     return scope_curves(averages, spec["tests"], relaxation, tts)
 
 

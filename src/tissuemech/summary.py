@@ -42,7 +42,7 @@ from .pipeline import progress
 from .plots import all_positive, axis_label, figure_table, new_figure, safe_name, save_figure
 from .ranking import recommended_models
 from .records import Finding, FitRecord, MaterialCard
-from .stages import spec_curves
+from .stages import run_fit_scope, spec_curves
 from .uq import predictive_band
 
 # ------------------------------------------------------------------------------------------------------
@@ -1093,8 +1093,6 @@ def fit_scope_job(averages_path, scope: str, spec: Mapping, target: str, seed: i
                   figures_dir=None) -> pd.DataFrame:
     """Rule ``fit_scope``: :func:`tissuemech.stages.run_fit_scope` and, with ``figures_dir``, the fit figures
     (:func:`plot_scope_fits`; the material scope draws its baseline and recommended model). Returns the ranking."""
-    from .stages import run_fit_scope
-
     table = run_fit_scope(averages_path, scope, spec, target=target, seed=seed, multistart=multistart,
                           fits_dir=fits_dir, cards_dir=cards_dir, ranking_path=ranking_path, dataset=dataset,
                           poisson_ratio=poisson_ratio, tts_path=tts_path)

@@ -12,8 +12,8 @@ from tissuemech.canonical import make_run_dataset
 from tissuemech.diagnosis import report
 from tissuemech.diagnosis.decision import fix_margin
 from tissuemech.diagnosis.noise import relative_noise_level
-from tissuemech.diagnosis.baseline import (baseline_adequacy, ranked_candidates, resolved_window_s, spectrum_model,
-                                           window_taus)
+from tissuemech.diagnosis.baseline import baseline_adequacy, ranked_candidates, resolved_window_s, window_taus
+from tissuemech.models.registry import model_on_times
 
 
 def _table(log_ratio, sigma_rel=0.01):
@@ -82,7 +82,7 @@ def test_window_spans_what_the_tests_resolve():
     taus = window_taus(w)
     assert taus[0] <= w["t_min_s"] and taus[-1] >= w["t_max_s"]
     assert taus[0] == pytest.approx(1e-2) and taus[-1] == pytest.approx(1e4)  # not the fixed 0.1-100 s
-    m = spectrum_model("qlv_linear_prony4", taus)
+    m = model_on_times("qlv_linear_prony4", taus)
     assert m.taus(m.default_params()) == pytest.approx(taus)
     assert window_taus(resolved_window_s([])).size == 0
 

@@ -285,7 +285,7 @@ def test_a_pair_of_neighbouring_active_grid_times_merges_into_one_time():
     """One mode between two grid times shows in NNLS as weight on both neighbours: one time at the
     weight-averaged log time (hand-computed geometric mean); a band of three or more active times (a broad,
     e.g. fractional, spectrum) and isolated times are kept."""
-    from tissuemech.diagnosis.baseline import merged_times
+    from tissuemech.material import merged_times
 
     grid = np.array([0.1, 0.2, 0.4, 1.0, 10.0, 20.0, 40.0, 80.0])
     weights = np.array([0.0, 1.0, 3.0, 0.0, 2.0, 2.0, 1.0, 0.0])

@@ -10,8 +10,9 @@ import pytest
 from constructed import make_design
 from tissuemech import fitting
 from tissuemech.canonical import read_netcdf, write_netcdf
-from tissuemech.diagnosis.baseline import fit_runs, predict_runs, spectrum_model
+from tissuemech.diagnosis.baseline import fit_runs, predict_runs
 from tissuemech.diagnosis.report import run_diagnosis, write_diagnosis_json, write_figures
+from tissuemech.models.registry import model_on_times
 from tissuemech.models.qlv import default_taus
 
 FINDING_KEYS = {"effect", "detected", "statistic", "p_value", "effect_size", "evidence", "fix"}
@@ -78,7 +79,7 @@ def test_run_diagnosis_on_fitted_runs(tmp_path):
     info = out["fit_info"]
     assert "from the data" in info["baseline_order"] and info["taus_s"] != [float(t) for t in default_taus(4)]
     assert set(np.unique(nc["model"].values)) == {"qlv_linear_prony4"}
-    model = spectrum_model("qlv_linear_prony4", info["taus_s"])
+    model = model_on_times("qlv_linear_prony4", info["taus_s"])
     preds = predict_runs(model, info["params"], shear[:1], "torque")
     row = nc["curve"].values == shear[0].attrs["run"]
     assert nc["predicted"].values[row] == pytest.approx(preds[0]["shear_stress"][np.isfinite(preds[0]["shear_stress"])])
@@ -86,5 +87,5 @@ def test_run_diagnosis_on_fitted_runs(tmp_path):
 
 
 def fitting_model():
-    from tissuemech.models.registry import get_model
+    from tissuemech.models.registry import model_on_times, get_model
     return get_model("qlv_linear_prony4")

@@ -308,27 +308,38 @@ def write_card(folder, scope, model, card):
 
 
 def test_replay_cards_baseline_and_named_extensions(tmp_path):
+    """The baseline card (the diagnosis's baseline model in the first replay scope the FEM can run), then the
+    diagnosis's simulation cards (diagnosis/simulation_cards/index.json): the extension fitted to every run, replayed on
+    every test, and per fold the baseline and the extension fitted without the fold's held-out curves, replayed on
+    those curves only; a card the FEM cannot run is kept with its reason."""
     from tissuemech.stages import replay_cards
 
     pd.DataFrame({"scope": ["material", "material", "stress_relaxation"],
-                  "model": ["qlv_nh", "pr_rp3_prony4", "sls_card"], "recommended": [False, True, True]}
+                  "model": ["qlv_nh", "qlv_other", "sls_card"], "recommended": [False, True, True]}
                  ).to_csv(tmp_path / "ranking.csv", index=False)
     cards = tmp_path / "cards"
     write_card(cards, "material", "qlv_nh", LINEAR_CARD)
-    write_card(cards, "material", "pr_rp3_prony4", {"model": "pr_rp3_prony4", "poisson_ratio": 0.49})
-    write_card(cards, "material", "not_named", extension_card())
     write_card(cards, "stress_relaxation", "sls_card", LINEAR_CARD)
-    fix = {"metric": "held_out_nrmse", "before": 0.2, "after": 0.1, "gain": 0.5}
-    diagnosis = {"model": "qlv_nh", "findings": [
-        {"effect": "nonseparable_relaxation", "detected": True, "fix": {**fix, "model": "pr_rp3_prony4"}},
-        {"effect": "amplitude_softening", "detected": True, "fix": {**fix, "model": "Kraus G'(g0) = ..."}},
-        {"effect": "wall_slip", "detected": False, "fix": {**fix, "model": "not_named"}}]}
-    (tmp_path / "diagnosis.json").write_text(json.dumps(diagnosis))
-    chosen = replay_cards(tmp_path / "ranking.csv", cards, tmp_path / "diagnosis.json")
-    assert [(c.name, c.role) for c in chosen] == [("material/qlv_nh", "baseline"),
-                                                  ("material/pr_rp3_prony4", "nonseparable_relaxation")]
-    assert chosen[0].reason == "" and chosen[1].reason == "the FEM has no law 'pr_rp3_prony4'"
-    # without a diagnosis: the recommended card of the first scope the FEM can run (the material one it cannot)
+    (tmp_path / "diagnosis.json").write_text(json.dumps({"model": "qlv_nh", "findings": []}))
+    sim = tmp_path / "simulation_cards"
+    sim.mkdir()
+    (sim / "nonseparable_relaxation.json").write_text(json.dumps(extension_card()))
+    (sim / "nonseparable_relaxation.slow.baseline.json").write_text(json.dumps(LINEAR_CARD))
+    (sim / "nonseparable_relaxation.slow.extension.json").write_text(json.dumps({"model": "pr_x", "poisson_ratio": 0.49}))
+    held = ["constant_shear_rate|shear_rate_1_per_s=0.001"]
+    (sim / "index.json").write_text(json.dumps({"baseline": "qlv_nh", "causes": {"nonseparable_relaxation": {
+        "card": "nonseparable_relaxation.json", "folds": [{
+            "label": "slow", "baseline": "nonseparable_relaxation.slow.baseline.json",
+            "extension": "nonseparable_relaxation.slow.extension.json", "held_out": held}]}}}))
+    chosen = replay_cards(tmp_path / "ranking.csv", cards, tmp_path / "diagnosis.json", sim)
+    assert [(c.name, c.role) for c in chosen] == [
+        ("material/qlv_nh", "baseline"), ("extension/nonseparable_relaxation", "nonseparable_relaxation"),
+        ("extension/nonseparable_relaxation.slow.baseline", "nonseparable_relaxation:baseline"),
+        ("extension/nonseparable_relaxation.slow.extension", "nonseparable_relaxation")]
+    assert [c.only for c in chosen] == [None, None, frozenset(held), frozenset(held)]
+    assert [bool(c.reason) for c in chosen] == [False, False, False, True] and "no law" in chosen[3].reason
+    # without a diagnosis and its cards: the recommended card of the first scope the FEM can run (the material
+    # scope's recommended card does not exist)
     alone = replay_cards(tmp_path / "ranking.csv", cards)
     assert [(c.name, c.role) for c in alone] == [("stress_relaxation/sls_card", "baseline")]
 

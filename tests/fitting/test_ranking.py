@@ -236,12 +236,14 @@ def test_fit_stage_writes_fits_ranking_cards(tmp_path):
     the one ``fits.csv`` schema; plate geometry from the averages; the generating parameter is recovered."""
     from tissuemech import stages
 
+    scope_test = "constant_shear_rate"
     qlv = get_model("qlv_linear_prony4")
     truth = qlv_params(qlv, {"G0": 200.0}, G_PRONY)
     averages = _write_csr_averages(tmp_path, RATES, truth, qlv)
     config = {"models": {"constant_shear_rate": ["qlv_linear_prony4"], "flow_curve": ["newton"]}}
     scopes = stages.dataset_scopes(["constant_shear_rate"], config)
-    assert list(scopes) == ["constant_shear_rate"]  # flow curves: no data, no scope
+    # flow curves: no data, no scope; the ramps also get the material model (a QLV of every shear test)
+    assert list(scopes) == ["constant_shear_rate", "material"] and scopes["material"]["tests"] == [scope_test]
     with pytest.raises(KeyError, match="no_such_model"):  # a config typo is an error
         stages.dataset_scopes(["constant_shear_rate"], {"models": {"constant_shear_rate": ["no_such_model"]}})
     curves = stages.scope_curves(read_netcdf(averages), ["constant_shear_rate"])

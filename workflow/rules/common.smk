@@ -171,7 +171,9 @@ def diagnosis_inputs(wildcards):
     """Rule diagnosis: the findings, and the replay's fix.simulation where the dataset's tests are replayed."""
     inputs = {"findings": f"results/{wildcards.dataset}/diagnosis/findings.json"}
     if has_fem_replay(wildcards.dataset):
-        inputs["fix_simulation"] = f"results/{wildcards.dataset}/fem/fix_simulation.json"
+        inputs["fix_simulation"] = (
+            f"results/{wildcards.dataset}/fem/fix_simulation.json"
+        )
     return inputs
 
 

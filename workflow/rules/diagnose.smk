@@ -50,6 +50,8 @@ rule diagnosis:
         ),
     log:
         "logs/{dataset}/diagnosis.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/diagnosis.tsv"
     params:
         pkg=script_hash("workflow/scripts/diagnosis.py"),
     script:

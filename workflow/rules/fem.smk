@@ -78,7 +78,9 @@ def fem_replay_inputs(wildcards):
     }
     if has_diagnosis(wildcards.dataset):
         inputs["diagnosis"] = f"results/{wildcards.dataset}/diagnosis/findings.json"
-        inputs["extension_cards"] = f"results/{wildcards.dataset}/diagnosis/simulation_cards"
+        inputs["extension_cards"] = (
+            f"results/{wildcards.dataset}/diagnosis/simulation_cards"
+        )
     return inputs
 
 

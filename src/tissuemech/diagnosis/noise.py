@@ -33,7 +33,8 @@ COMPARED_QUANTITIES = ("shear_stress", "storage_modulus", "loss_modulus", "torqu
                        "shear_strain", "relaxation_modulus", "nominal_stress")
 #: tests whose moduli are a torque over the strain amplitude
 OSCILLATORY_TESTS = ("amplitude_sweep", "frequency_sweep")
-
+#: oscillation quantities that are a torque divided by the strain amplitude (their absolute noise is not constant)
+MODULI = ("storage_modulus", "loss_modulus")
 
 
 def _stress_per_modulus(run: xr.Dataset, test: str, quantity: str) -> np.ndarray | None:

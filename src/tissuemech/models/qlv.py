@@ -327,7 +327,7 @@ class QLVModel(InstantaneousLawModel):
                          structure={"instantaneous": instantaneous.name, "n_prony": n_prony,
                                     "free_taus": bool(free_taus),
                                     "taus_s": None if free_taus else [float(t) for t in taus],
-                                    "fluid": bool(fluid), "weights": weights})
+                                    "weights": weights, **({"fluid": True} if fluid else {})})
         self.instantaneous = instantaneous
         self.n_prony = n_prony
         self.free_taus = bool(free_taus)
