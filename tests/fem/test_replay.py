@@ -351,3 +351,45 @@ def test_nrmse_is_rms_error_over_mean_magnitude():
     assert np.isnan(nrmse([0.0, 0.0], [1.0, 1.0])) and np.isnan(nrmse([], []))
     with pytest.raises(ValueError, match="3 observations but 2 predictions"):
         nrmse([1.0, 2.0, 3.0], [1.0, 2.0])
+
+
+def test_simulation_fix_is_the_folds_held_out_gain_and_lands_in_diagnosis_json(tmp_path):
+    """fix.simulation: per fold the replay NRMSE of the fold's baseline card and of its extension card on the curves
+    both left out (by hand below), averaged over folds; the final diagnosis.json carries it on the named cause."""
+    from tissuemech.diagnosis.simulation_cards import attach_simulation
+    from tissuemech.diagnosis.findings import write_diagnosis_json
+    from tissuemech.stages import simulation_fixes
+
+    sim = tmp_path / "simulation_cards"
+    sim.mkdir()
+    folds = [{"label": lab, "baseline": f"c.{lab}.baseline.json", "extension": f"c.{lab}.extension.json",
+              "held_out": [f"constant_shear_rate|rate={lab}"]} for lab in ("slow", "fast")]
+    (sim / "index.json").write_text(json.dumps({"causes": {"c": {"card": "c.json", "folds": folds}}}))
+    rows = []
+    for lab, before, after in (("slow", 0.10, 0.05), ("fast", 0.20, 0.18)):
+        for role, card, value in (("c:baseline", f"extension/c.{lab}.baseline", before),
+                                  ("c", f"extension/c.{lab}.extension", after)):
+            rows.append({"test": "constant_shear_rate", "condition": f"rate={lab}", "card": card, "role": role,
+                         "held_out": True, "nrmse": value, "status": "ok"})
+    # a row the extension fold card was fitted to, and the full card's rows, never enter the score
+    rows.append({"test": "constant_shear_rate", "condition": "rate=mid", "card": "extension/c.slow.extension",
+                 "role": "c", "held_out": False, "nrmse": 0.0, "status": "ok"})
+    rows.append({"test": "constant_shear_rate", "condition": "rate=slow", "card": "extension/c", "role": "c",
+                 "held_out": False, "nrmse": 0.0, "status": "ok"})
+    fixes = simulation_fixes(pd.DataFrame(rows), sim)
+    before, after = (0.10 + 0.20) / 2, (0.05 + 0.18) / 2
+    assert fixes["c"]["before"] == pytest.approx(before) and fixes["c"]["after"] == pytest.approx(after)
+    assert fixes["c"]["gain"] == pytest.approx((before - after) / before)
+    assert fixes["c"]["held_out_tests"] == ["constant_shear_rate|rate=fast", "constant_shear_rate|rate=slow"]
+    (tmp_path / "fix.json").write_text(json.dumps(fixes))
+    finding = {"effect": "c", "tested": True, "detected": True, "significant": True, "practical": True,
+               "statistic": 1.0, "p_value": 0.001, "p_holm": 0.001, "log10_p": -3.0, "effect_size": 0.1,
+               "evidence": "", "fix": {"model": "ext", "metric": "held_out_nrmse", "before": 0.1, "after": 0.08,
+                                       "gain": 0.2}}
+    write_diagnosis_json({"model": "base", "findings": [finding]}, tmp_path / "findings.json", dataset="d")
+    final = attach_simulation(tmp_path / "findings.json", tmp_path / "fix.json", tmp_path / "diagnosis.json")
+    written = json.loads((tmp_path / "diagnosis.json").read_text())
+    assert written["findings"][0]["fix"]["simulation"]["gain"] == pytest.approx((before - after) / before)
+    assert written["simulation"] == {"replayed_causes": ["c"]} and final["simulation"] == written["simulation"]
+    attach_simulation(tmp_path / "findings.json", None, tmp_path / "none.json")
+    assert "not replayed" in json.loads((tmp_path / "none.json").read_text())["simulation"]
