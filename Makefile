@@ -20,7 +20,7 @@ export NUMBA_CACHE_DIR
 export MPLBACKEND ?= Agg
 export HDF5_USE_FILE_LOCKING ?= FALSE
 
-.PHONY: install install-test run test test-fast lint regression-update lock clean
+.PHONY: install install-test run test test-fast calibration-ci lint regression-update lock clean
 
 install: $(STAMP)
 
@@ -49,7 +49,11 @@ run: install
 	else echo "results/report.html is up to date"; fi
 
 test: install-test
-	$(PY) -m pytest -q -n 2 --dist loadgroup --durations=25
+	$(PY) -m pytest -q -n 2 --dist loadgroup --durations=25 -m "not calibration"
+
+# the pipeline-path calibration subset (docs/calibration.md): fresh seeds through analyse_dataset, ~20 min on 2 cores
+calibration-ci: install-test
+	$(PY) -m pytest -q -n 2 -m calibration tests/diagnosis/test_calibration.py
 
 test-fast: install-test
 	$(PY) -m pytest -q -m "not slow"

@@ -525,6 +525,7 @@ def _what(row: dict) -> str:
 
 
 @pytest.mark.slow
+@pytest.mark.calibration
 @pytest.mark.parametrize("seed", CI_NULL_SEEDS)
 def test_pipeline_path_names_nothing_on_a_null_folder(seed, tmp_path, pipeline_config):
     """No detected cause, no unexplained entry, no rejected export and no crash on a null dataset folder (the
@@ -537,6 +538,7 @@ def test_pipeline_path_names_nothing_on_a_null_folder(seed, tmp_path, pipeline_c
 
 
 @pytest.mark.slow
+@pytest.mark.calibration
 @pytest.mark.parametrize("effect", list(CI_CAUSE_SEEDS))
 def test_pipeline_path_names_the_injected_cause(effect, tmp_path, pipeline_config):
     """The cause injected at 1x is named (the preload: attributed to the normal-force channel), no other cause is
