@@ -704,6 +704,11 @@ def diagnosis_html(path: Path) -> str:
         gain = (f" The fix, {_esc(fix['model'])}, predicts data it was not fitted to better: "
                 f"{_esc(fix['metric'])} {_number(fix.get('before'))} → {_number(fix.get('after'))} "
                 f"(gain {_number(f.fix_gain)})." if fix else "")
+        sim = fix.get("simulation") if isinstance(fix, dict) else None
+        if isinstance(sim, dict) and sim.get("held_out_tests"):
+            gain += (f" In the simulator (TLED replay of the tests neither card was fitted to: "
+                     f"{_esc(', '.join(sim['held_out_tests']))}) the extension's card brings the NRMSE from "
+                     f"{_number(sim.get('before'))} to {_number(sim.get('after'))} (gain {_number(sim.get('gain'))}).")
         out.append(f'<li class="finding"><b>{html.escape(_finding_title(f.data))}</b> '
                    f'(<code>{html.escape(f.effect)}</code>).{gain}{_what_to_do(f.data)}'
                    f"<details><summary>evidence</summary>{_esc(f.evidence)}</details></li>")

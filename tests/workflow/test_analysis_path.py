@@ -79,7 +79,7 @@ def test_the_function_writes_the_rules_files(both):
     # the function also writes diagnosis.json, which the rules write after the FEM replay
     assert {str(p.relative_to(mine)) for p in mine.rglob("*") if p.is_file()} == listed | {"diagnosis.json"}
     assert done["diagnosis_scope"] == "material" and done["scopes"] == [
-        "constant_shear_rate", "material", "stress_relaxation"]
+        "constant_shear_rate", "stress_relaxation", "material"]
 
 
 def test_the_function_and_the_rules_give_the_same_tables_and_diagnosis(both):
