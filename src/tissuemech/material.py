@@ -506,13 +506,16 @@ def cross_test(factory, result: F.FitResult, curves: Sequence[F.Curve], target: 
         try:
             refit = fit_candidate(Candidate(result.model_key, factory, starts=lambda _c: [dict(result.params)]),
                                   train, target, scope="cross_test", n_random=0, seed=seed)
-            model = factory()
-            ev = F.evaluate(model, refit.params, held, target)
-            m = misfit_in_noise_units(model, refit.params, held, target)
+            row.update(held_out_score(factory(), refit.params, held, target))
         except (ValueError, RuntimeError, FloatingPointError) as exc:
             row["status"] = f"failed: {exc}"
-            rows.append(row)
-            continue
-        row.update(nrmse=ev["nrmse"], misfit_noise_units=m["misfit"], skill=m["skill"])
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+def held_out_score(model: ConstitutiveModel, params, curves: Sequence[F.Curve], target: str) -> dict:
+    """How fixed parameters predict curves they were not fitted to: ``nrmse`` (:func:`tissuemech.fitting.evaluate`),
+    ``misfit_noise_units`` and ``skill`` (:func:`tissuemech.adequacy.misfit_in_noise_units`)."""
+    ev = F.evaluate(model, params, curves, target)
+    m = misfit_in_noise_units(model, params, curves, target)
+    return {"nrmse": ev["nrmse"], "misfit_noise_units": m["misfit"], "skill": m["skill"]}

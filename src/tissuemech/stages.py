@@ -36,7 +36,7 @@ import xarray as xr
 from matplotlib.lines import Line2D
 
 from . import cards as cards_mod
-from .adequacy import ADEQUACY_FACTOR, misfit_in_noise_units
+from .adequacy import ADEQUACY_FACTOR
 from . import fitting as F
 from . import ranking as R
 from .canonical import read_netcdf, write_json, write_netcdf, write_text
@@ -46,7 +46,7 @@ from .fem.materials import available_laws
 from .diagnosis.simulation_cards import INDEX
 from .fem.replay import FIX_SIMULATION_METRIC, ReplayCard, ReplaySettings, fix_simulation, replay
 from .fem.tled import DynamicRelaxationError, ElementInversionError
-from .material import MaterialFit, baseline_model, cross_test, fit_material
+from .material import MaterialFit, baseline_model, cross_test, fit_material, held_out_score
 from .models.registry import get_model
 from .plots import new_figure, plot_cross_test, plot_force_depth, plot_torque, save_figure
 from .records import MaterialCard
@@ -212,13 +212,9 @@ def predict_other_tests(model, result: F.FitResult, curves: Sequence[F.Curve], t
             rows.append(row)
             continue
         try:
-            ev = F.evaluate(model, result.params, held, target)
-            m = misfit_in_noise_units(model, result.params, held, target)
+            row.update(held_out_score(model, result.params, held, target))
         except (ValueError, RuntimeError, FloatingPointError) as exc:
             row["status"] = f"failed: {exc}"
-            rows.append(row)
-            continue
-        row.update(nrmse=ev["nrmse"], misfit_noise_units=m["misfit"], skill=m["skill"])
         rows.append(row)
     return pd.DataFrame(rows, columns=list(CROSS_TEST_COLUMNS))
 
