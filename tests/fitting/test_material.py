@@ -14,6 +14,8 @@ The truth is written out here in closed form, independent of the package's model
 """
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -240,3 +242,30 @@ def test_a_flagged_fit_is_never_recommended():
     assert v["recommended"] is None and v["verdict"] == "no_model_supported"
     assert "undetermined parameters (beta_1)" in v["reason"] and "best determined fit, b" in v["reason"]
     assert f"adequate: <= {ADEQUACY_FACTOR:g}" in verdict(table.iloc[[1]])["reason"]
+
+
+def test_the_real_cnf_replicates_support_no_model_and_export_no_recommended_card(shared_real, repo_root, tmp_path):
+    """The ten real CNF relaxations (config/external/rheocompass_cnf_hydrogel, read in place): the relaxation sits at
+    the replicate scatter, so the material scope says no_model_supported with the reason, recommends nothing, and
+    writes no card of a model that predicts worse than the curves' means."""
+    import yaml
+
+    from tissuemech.curves import average_runs, write_averages
+    from tissuemech.io.ingest import ingest_dataset
+    from tissuemech.pipeline import load_runs
+    from tissuemech.stages import dataset_scopes, run_fit_scope
+
+    report = ingest_dataset(repo_root / "config" / "external" / "rheocompass_cnf_hydrogel", tmp_path / "runs",
+                            tmp_path / "ingest_report.csv")
+    assert (report["status"] == "ok").sum() == 10
+    config = yaml.safe_load((repo_root / "config" / "config.yaml").read_text())
+    write_averages(average_runs(load_runs(tmp_path / "runs"), exclude_flagged=True), tmp_path / "averages.nc")
+    spec = dataset_scopes(["stress_relaxation"], config["fit"])["material"]
+    table = run_fit_scope(tmp_path / "averages.nc", "material", spec, target=config["fit"]["plate_target"],
+                          seed=0, multistart=1, fits_dir=tmp_path / "fits", cards_dir=tmp_path / "cards",
+                          ranking_path=tmp_path / "ranking.csv", poisson_ratio=config["fem"]["poisson_ratio"],
+                          dataset="cnf")
+    assert (table["verdict"] == "no_model_supported").all() and not table["recommended"].any()
+    assert "replicate scatter" in table["verdict_reason"].iloc[0]
+    for card in (tmp_path / "cards").glob("*.json"):
+        assert json.loads(card.read_text())["fit_quality"]["skill"] > 0
