@@ -1,7 +1,8 @@
 """Timing of the QLV / beyond-QLV parallel-plate forward model and of a QLV fit on thesis-sized data.
 
 Run: NUMBA_CACHE_DIR=.numba_cache .venv/bin/python benchmarks/bench_qlv_plate.py
-Prints per-evaluation times (8 Gauss radii, every radius with its own history) and the wall time of a
+Prints per-evaluation times (8 Gauss radii, every radius with its own history), QLV's creep and amplitude sweep
+through the plate per radius against one pass of the plate's apparent elastic law, side by side, and the wall time of a
 least-squares fit of QLV (odd-polynomial instantaneous law, 4 fixed Prony times) to noise-free apparent
 rim stress of CSR ramps at 0.001/0.01/0.05/0.1 1/s to 50 % plus ramp-hold relaxation at 1/10/20/40 %.
 """
@@ -90,6 +91,7 @@ def main():
     from tissuemech.models.plate import creep_rim_strain
     print(f"torque-controlled plate creep ({t_cr.size} points, 8 radii): QLV "
           f"{1e3 * timed(lambda: creep_rim_strain(qlv, true, t_cr, s_cr, R), repeat=3):.1f} ms")
+    side_by_side_plate_paths(qlv, true, t_cr, s_cr, amps)
 
     names = qlv.param_names
     scale = np.concatenate([np.full(d.size, 1.0) / (0.05 + 0.01 * np.abs(d)) for d in data])
@@ -106,6 +108,43 @@ def main():
     rel = max(abs(fit.x[i] / true[n] - 1) for i, n in enumerate(names))
     print(f"QLV fit (7 parameters, {n_points} points through the plate integral): {wall:.2f} s, "
           f"{fit.nfev} residual evaluations (+ finite-difference Jacobians), max relative parameter error {rel:.1e}")
+
+
+def side_by_side_plate_paths(qlv, p, t_cr, s_cr, amps):
+    """QLV through the plate two ways, timed in one run: every Gauss radius with its own history (the generic paths:
+    the branch-drive stepper for creep, one history per radius and amplitude for the sweep) against one relaxation
+    pass of the plate's apparent elastic stress (``models.plate.apparent_elastic_stress``, what the fit runs)."""
+    from tissuemech.models.plate import (apparent_rim_stress, creep_rim_strain, first_harmonic_moduli, gauss_radii,
+                                         stress_histories)
+    from tissuemech.models.qlv import stress_controlled_strain
+
+    r, w = gauss_radii(8, R)
+
+    def creep_per_radius():
+        drives, taus = qlv.branch_drives(p)
+        return stress_controlled_strain(drives, taus, t_cr, s_cr, strain_factors=r / R, weights=4 * w * r * r / R ** 3)
+
+    t = np.linspace(0.0, 3.0, 3 * 48 + 1)
+    rim = amps[:, None] * np.sin(2 * np.pi * t)[None, :]
+    sel = t >= 2.0 - 1e-12
+
+    def sweep_per_radius():
+        strain = ((r / R)[None, :, None] * rim[:, None, :]).reshape(-1, t.size)
+        sigma = stress_histories(qlv, p, t, strain).reshape(amps.size, r.size, t.size)
+        stress = apparent_rim_stress(2 * np.pi * np.einsum("j,ajn->an", w * r * r, sigma), R)
+        return first_harmonic_moduli(t[sel][:-1], rim[:, sel][:, :-1], stress[:, sel][:, :-1], 1.0)
+
+    def sweep_apparent():
+        return oscillation_moduli(qlv, p, 1.0, amps, R, n_cycles=3, n_analysed=1, points_per_cycle=48)
+
+    for label, slow, fast in (("plate creep", creep_per_radius, lambda: creep_rim_strain(qlv, p, t_cr, s_cr, R)),
+                              ("amplitude sweep (3 cycles x 48)", sweep_per_radius, sweep_apparent)):
+        a, b = slow(), fast()
+        diff = max(float(np.max(np.abs(np.asarray(x) - np.asarray(y)) / np.maximum(np.abs(np.asarray(x)), 1e-300)))
+                   for x, y in zip(np.atleast_2d(a), np.atleast_2d(b)))
+        ts, tf = timed(slow, repeat=3), timed(fast, repeat=10)
+        print(f"QLV {label}: per radius {1e3 * ts:.2f} ms, apparent elastic law {1e3 * tf:.2f} ms, "
+              f"{ts / tf:.1f}x; largest relative difference {diff:.1e}")
 
 
 if __name__ == "__main__":

@@ -146,6 +146,17 @@ def add_assessment(table: pd.DataFrame, assessed: Mapping[str, Mapping]) -> pd.D
     return table
 
 
+def supported_mask(table: pd.DataFrame) -> np.ndarray:
+    """Fits a scope may recommend: ``recommendable`` (converged, with a covariance, no parameter at a bound) and, in
+    an assessed table (:func:`add_assessment`), determined, adequate and better than the curves' means."""
+    ok = table["recommendable"].fillna(False).astype(bool).to_numpy(copy=True) if "recommendable" in table \
+        else np.ones(len(table), bool)
+    if "determined" in table:
+        ok &= (table["determined"].astype(bool) & table["adequate"].astype(bool)
+               & (table["skill"].astype(float) > 0)).to_numpy()
+    return ok
+
+
 def verdict(table: pd.DataFrame, preferred: Sequence[str] = ()) -> dict:
     """The recommended model and the scope's verdict from an assessed ranking table (:func:`add_assessment`).
 
@@ -161,9 +172,7 @@ def verdict(table: pd.DataFrame, preferred: Sequence[str] = ()) -> dict:
     if table.empty or "model" not in table or "determined" not in table:
         return {"recommended": None, "verdict": "no_model_supported", "reason": "no candidate could be fitted",
                 "misfit_noise_units": np.nan}
-    ok = (table["recommendable"].astype(bool) & table["determined"].astype(bool) & (table["skill"] > 0)
-          & table["adequate"].astype(bool))
-    supported = table[ok]
+    supported = table[supported_mask(table)]
     if not supported.empty:
         names = list(supported["model"])
         chosen = next((m for m in preferred if m in names), names[0])

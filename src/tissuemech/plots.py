@@ -681,9 +681,9 @@ def plot_all_lve(summary: xr.Dataset, runs: Sequence[xr.Dataset], averages: xr.D
 # ----------------------------------------------------------------------------------------------------------------
 # fit one test kind, predict the others
 # ----------------------------------------------------------------------------------------------------------------
-def plot_cross_test(table: pd.DataFrame, path: str | Path) -> list[Path]:
+def plot_cross_test(table: pd.DataFrame, path: str | Path, adequacy_factor: float) -> list[Path]:
     """The dataset's ``cross_test.csv`` as one figure: for each held-out test kind (x), the held-out misfit in noise
-    units (left, log axis; the adequacy limit dashed) and the held-out NRMSE (right) of each model that predicted it
+    units (left, log axis; the adequacy limit ``adequacy_factor`` dashed) and the held-out NRMSE (right) of each model that predicted it
     (one colour per scope/model), unscored kinds left empty."""
     fig, (left, right) = new_figure(ncols=2, width=5.5, height=4.0)
     scored = table[table["status"] == "ok"] if "status" in table else table
@@ -702,7 +702,7 @@ def plot_cross_test(table: pd.DataFrame, path: str | Path) -> list[Path]:
         x = np.array([kinds.index(k) for k in rows["held_out_test"]]) + (j - (len(series) - 1) / 2) * width
         left.bar(x, rows["misfit_noise_units"], width, color=colours(j % 10), label=name)
         right.bar(x, rows["nrmse"], width, color=colours(j % 10))
-    left.axhline(2.0, color="0.3", ls="--", lw=1, label="adequate: <= 2 noise SDs")
+    left.axhline(adequacy_factor, color="0.3", ls="--", lw=1, label=f"adequate: <= {adequacy_factor:g} noise SDs")
     left.set_yscale("log")
     left.set_ylabel("held-out misfit (noise SDs)")
     right.set_ylabel("held-out NRMSE")

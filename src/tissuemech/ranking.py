@@ -32,7 +32,7 @@ import scipy
 from .fitting import (Curve, FitProblem, FitResult, NoiseModel, at_bound_parameters, describes, evaluate, fit,
                       has_covariance,
                       prony_start)
-from .adequacy import add_assessment, assess, verdict
+from .adequacy import add_assessment, assess, supported_mask, verdict
 from .models.base import ConstitutiveModel
 from .models.registry import get_model
 from .plots import save_figure
@@ -358,17 +358,6 @@ def _not_recommendable_reason(row: pd.Series) -> str:
     return ", ".join(reasons) or "flagged"
 
 
-def supported_mask(table: pd.DataFrame) -> np.ndarray:
-    """Fits a scope may recommend: ``recommendable`` and, where the table is assessed
-    (:func:`tissuemech.adequacy.add_assessment`), determined, adequate and better than the curves' means."""
-    ok = table["recommendable"].fillna(False).astype(bool).to_numpy(copy=True) if "recommendable" in table \
-        else np.ones(len(table), bool)
-    if "determined" in table:
-        ok &= (table["determined"].astype(bool) & table["adequate"].astype(bool)
-               & (table["skill"].astype(float) > 0)).to_numpy()
-    return ok
-
-
 def recommend(table: pd.DataFrame, curves: Sequence[Curve], noise: NoiseModel | None = None,
               decisive_cv_ratio: float = 0.8) -> dict:
     """Recommendation for one scope: the thesis rule, the data's ranking, and whether they agree.
@@ -377,8 +366,8 @@ def recommend(table: pd.DataFrame, curves: Sequence[Curve], noise: NoiseModel | 
     tell, a time-dependent model beating every elastic one by ΔAICc > 10); strain-dependent relaxation (a
     beyond-QLV model beating the best QLV by ΔAICc > 10 and not worse in CV).
 
-    Only supported fits (:func:`supported_mask`: ``recommendable`` and, in an assessed table, determined, adequate
-    against the measured noise and better than the curves' means; :mod:`tissuemech.adequacy`) can be recommended;
+    Only supported fits (:func:`tissuemech.adequacy.supported_mask`: ``recommendable`` and, in an assessed table,
+    determined, adequate against the measured noise and better than the curves' means) can be recommended;
     without one the scope's ``verdict`` is ``no_model_supported``. ``recommendable`` (:func:`ranking_table`:
     converged, with a covariance, no parameter at a
     bound) can be recommended; the statement names every fit that is not, and why. Among them the

@@ -326,7 +326,7 @@ def collect_cross_tests(ranking_paths: Sequence, dataset: str, out, figure_out=N
     table.insert(0, "dataset", dataset)
     write_text(table.to_csv(index=False), out)
     if figure_out is not None:
-        plot_cross_test(table, figure_out)
+        plot_cross_test(table, figure_out, ADEQUACY_FACTOR)
     return table
 
 

@@ -146,7 +146,7 @@ def predict(model: ConstitutiveModel, p: Mapping[str, float], curve: Curve, targ
     if r == "amplitude_sweep":
         n_cycles, n_analysed, per_cycle = AMPLITUDE_SWEEP_CYCLES
         g1, g2 = oscillation_moduli(model, p, curve.nominal["frequency_hz"], curve.obs_inputs("shear_strain"),
-                                    curve.radius_m if curve.is_plate else 1.0, n_cycles=n_cycles,
+                                    curve.radius_m, n_cycles=n_cycles,
                                     n_analysed=n_analysed, points_per_cycle=per_cycle,
                                     target="apparent_stress" if curve.is_plate else "corrected_stress")
         return {"storage_modulus": g1, "loss_modulus": g2}
