@@ -387,7 +387,7 @@ def pruned_times(result: F.FitResult, taus_s: Sequence[float], fluid: bool) -> n
 
 def fit_material(curves: Sequence[F.Curve], target: str, laws: Sequence[str] = MATERIAL_LAWS, seed: int = 0,
                  n_random: int = 0, scope: str = "material", dataset: str = "") -> MaterialFit:
-    """Fit the material model of a dataset's shear tests (module docstring, steps 1-5).
+    """Fit the material model of a dataset's shear tests (module docstring, steps 1-4).
 
     Parameters
     ----------

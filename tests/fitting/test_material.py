@@ -269,3 +269,26 @@ def test_the_real_cnf_replicates_support_no_model_and_export_no_recommended_card
     assert "replicate scatter" in table["verdict_reason"].iloc[0]
     for card in (tmp_path / "cards").glob("*.json"):
         assert json.loads(card.read_text())["fit_quality"]["skill"] > 0
+
+
+def test_an_amplitude_sweep_without_a_frequency_is_left_out_and_said(caplog):
+    """No frequency in the sheet or a channel: the material fit cannot predict the sweep's first harmonic, so the
+    curve is left out with a warning naming it (nothing assumed in its place); a sweep with one is kept."""
+    import logging
+
+    from tissuemech.canonical import make_run_dataset
+    from tissuemech.curves import average_runs
+
+    amps = np.geomspace(1e-3, 0.3, 12)
+
+    def sweep(run, **attrs):
+        data = {"shear_strain": amps, "storage_modulus": 200.0 + 0 * amps, "loss_modulus": 20.0 + 0 * amps}
+        return make_run_dataset(data, {"test": "amplitude_sweep", "run": run, "specimen": "s", "sample": run,
+                                       "order": 1, **attrs})
+    averages = average_runs([sweep("a"), sweep("b")])
+    with caplog.at_level(logging.WARNING):
+        assert F.curves_from_averages(averages, tests=["amplitude_sweep"], amplitude="full") == []
+    assert "left out of the fit" in caplog.text and "has no frequency" in caplog.text
+    given = average_runs([sweep("a", frequency_hz=1.0), sweep("b", frequency_hz=1.0)])
+    kept = F.curves_from_averages(given, tests=["amplitude_sweep"], amplitude="full")
+    assert len(kept) == 1 and kept[0].nominal["frequency_hz"] == 1.0

@@ -2,6 +2,7 @@
 :mod:`tissuemech.fitting`, which re-exports every public name)."""
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
@@ -10,6 +11,8 @@ import xarray as xr
 
 from ..curves import as_str, select_average
 from ..lve import lve_limit
+
+logger = logging.getLogger(__name__)
 
 #: response kind of the model that describes each canonical test kind
 TEST_RESPONSE: dict[str, str] = {
@@ -258,7 +261,9 @@ def curves_from_averages(avg: xr.Dataset, radius_m: float | Mapping[str, float] 
         between the plates (response ``amplitude_sweep``: G', G'' of the first harmonic)
 
     Grid points where the mean is missing (fewer samples than needed) are dropped; the time of a CSR curve
-    (grid: strain) is strain / nominal rate when the averaged time is absent.
+    (grid: strain) is strain / nominal rate when the averaged time is absent. A curve the averages do not describe
+    fully (an amplitude sweep whose frequency neither the sheet nor a channel gives) is left out with a logged
+    warning naming it and why; nothing is assumed in its place.
     """
 
     out = []
@@ -302,7 +307,12 @@ def curves_from_averages(avg: xr.Dataset, radius_m: float | Mapping[str, float] 
         rad = radius_m.get(test, np.nan) if isinstance(radius_m, Mapping) else radius_m
         gap = gap_m.get(test, np.nan) if isinstance(gap_m, Mapping) else gap_m
         run.attrs.update({"condition": label, "specimen": "mean", "radius_m": float(rad), "gap_m": float(gap)})
-        curve, rows = curve_and_rows(run, relaxation)
+        try:
+            curve, rows = curve_and_rows(run, relaxation)
+        except ValueError as exc:
+            # a curve the data do not describe fully (an amplitude sweep with no frequency): left out, and said
+            logger.warning("%s|%s left out of the fit: %s", test, label, exc)
+            continue
         sd = {k: sds[k][ok][rows] for k in curve.observed if k in sds}
         out.append(replace(curve, sd=sd))
     return out
