@@ -203,6 +203,9 @@ def test_kernel_choice():
     assert run_explicit(svk, 1e-4, kernel="auto").kernel == "vectorised"
     ogden = _model(make_material("ogden1", {"mu1": 1000.0, "alpha1": -5.0}, poisson_ratio=0.45), cells=(2, 2, 2))
     assert run_explicit(ogden, 1e-4, kernel="auto").kernel == "generic"
-    for model in (svk, ogden):
+    five_terms = _model(make_material("neo_hookean", {"mu": 1000.0}, poisson_ratio=0.45, prony_g=[0.1] * 5,
+                                      prony_tau_s=[0.01, 0.1, 1, 10, 100]), cells=(2, 2, 2))
+    assert run_explicit(five_terms, 1e-4, kernel="auto").kernel == "vectorised"
+    for model in (svk, ogden, five_terms):
         with pytest.raises(ValueError, match="fused kernel needs"):
             run_explicit(model, 1e-4, kernel="fused")

@@ -26,6 +26,11 @@ MATERIALS = {
               {"beta": [0.8, 0.4], "kappa": [1.5, -0.5], "gamma_s": 0.05}),
     "pr_rp3": ("reduced_polynomial3", {"C10": 400.0, "C20": 300.0, "C30": 100.0}, (), (0.002, 0.02, 0.2),
                {"beta": [1.4, 0.5, 0.5], "kappa": [0.5, 0.5, 0.5], "gamma_s": 0.12}),
+    # more terms than one stress pass takes: two blocks (a full one and a partial one)
+    "qlv6_rp3": ("reduced_polynomial3", {"C10": 400.0, "C20": 300.0, "C30": 100.0},
+                 (0.2, 0.15, 0.1, 0.1, 0.05, 0.05), (0.001, 0.003, 0.01, 0.03, 0.1, 1.0)),
+    "pr5_mr": ("mooney_rivlin", {"C10": 300.0, "C01": 200.0}, (), (0.001, 0.003, 0.01, 0.03, 0.3),
+               {"beta": [0.6, 0.4, 0.3, 0.2, 0.5], "kappa": [1.5, -0.5, 0.8, 0.2, 2.0], "gamma_s": 0.05}),
 }
 
 
@@ -59,7 +64,7 @@ def test_explicit_run_equals_generic_kernel(name, anp):
         np.testing.assert_allclose(vec.energy_j[k], gen.energy_j[k], rtol=1e-10, atol=1e-16)
 
 
-@pytest.mark.parametrize("name", ["neo_hookean", "qlv_nh", "qlv_lp2", "pr_rp3"])
+@pytest.mark.parametrize("name", ["neo_hookean", "qlv_nh", "qlv_lp2", "pr_rp3", "qlv6_rp3", "pr5_mr"])
 def test_quasistatic_equals_generic_kernel_and_continues_from_state(name):
     model = _sheared_block(_material(name))
     gen = solve_quasistatic(model, [0.01, 0.02], kernel="generic")
@@ -126,9 +131,14 @@ def test_kernel_choice():
     assert constant_invariant_derivatives(_material("mooney_rivlin")) == (300.0, 200.0)
     assert vectorised_law(_material("rp3"))[:2] == (False, False)  # per-element law evaluation
     ogden = make_material("ogden1", {"mu1": 1000.0, "alpha1": -5.0}, poisson_ratio=0.45)
-    five_terms = make_material("neo_hookean", {"mu": 1e3}, poisson_ratio=0.45, prony_g=[0.1] * 5,
-                               prony_tau_s=[0.01, 0.1, 1, 10, 100])
-    assert vectorised_law(ogden) is None and vectorised_law(five_terms) is None
+    eight_terms = make_material("neo_hookean", {"mu": 1e3}, poisson_ratio=0.45, prony_g=[0.1] * 8,
+                                prony_tau_s=np.logspace(-2, 5, 8))
+    nine_terms = make_material("neo_hookean", {"mu": 1e3}, poisson_ratio=0.45, prony_g=[0.1] * 9,
+                               prony_tau_s=np.logspace(-2, 6, 9))
+    assert vectorised_law(eight_terms) == (False, True, 500.0, 0.0)
+    assert vectorised_law(ogden) is None and vectorised_law(nine_terms) is None
+    assert run_explicit(_sheared_block(nine_terms), 1e-3, kernel="auto").kernel == "generic"
+    assert run_explicit(_sheared_block(_material("pr5_mr")), 1e-3, kernel="auto").kernel == "vectorised"
     model = _sheared_block(ogden)
     assert run_explicit(model, 1e-3, kernel="auto").kernel == "generic"
     assert run_explicit(_sheared_block(_material("rp3")), 1e-3, kernel="auto").kernel == "vectorised"

@@ -53,12 +53,15 @@ from ._kernels import (STATUS_INVERTED, STATUS_NOT_FINITE, STATUS_OK, central_di
 from .kinematics import FASTMATH, cofactor, determinant, left_cauchy_green, push_forward
 from .materials import KIND_INVARIANT, j_minus_two_thirds
 from .mesh import TetMesh
-from .vectorised import (JM23_NEWTON_MAX, JM23_NEWTON_MIN, MAX_PRONY_TERMS, element_pressure,
+from .vectorised import (JM23_NEWTON_MAX, JM23_NEWTON_MIN, PRONY_BLOCK, element_pressure,
                          gathered_deformation_gradient, isochoric_kirchhoff, isochoric_pk2, nodal_forces,
                          prony_update, store_element_kinematics, store_law_derivatives, store_nodal_forces,
                          first_inverted_element_of)
 
 _REGION = dict(parallel=True, cache=True, fastmath=FASTMATH, error_model="numpy")
+
+#: QLV Prony terms of the fused kernel: one block of the vectorised stress pass, written into the region
+MAX_PRONY_TERMS = PRONY_BLOCK
 
 #: the arrays of :func:`fused_explicit_loop` (see :func:`fused_workspace`)
 FusedWorkspace = namedtuple("FusedWorkspace", "conn_g d9_g ebeg emid eend onode olo pnode pptr pinc plo gptr gel "

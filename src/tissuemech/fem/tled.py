@@ -24,7 +24,7 @@ Method (Miller, Joldes, Lance & Wittek 2007; Taylor, Cheng & Ourselin 2008; Nift
 
 Two kernels compute the internal forces (``kernel=`` of :func:`run_explicit` / :func:`solve_quasistatic`):
 the generic one below (any law) and the vectorised structure-of-arrays passes of :mod:`.vectorised` (SVK
-and invariant laws, with up to four Prony terms; chosen by ``"auto"``), which agree to rounding. Explicit runs
+and invariant laws, with up to eight Prony terms; chosen by ``"auto"``), which agree to rounding. Explicit runs
 of invariant laws can run those passes fused into one parallel region per step (:mod:`.fused`, ``"fused"``).
 
 The whole time loop runs inside one compiled function (no Python per step); the compiled passes and loops are
@@ -458,7 +458,7 @@ def vectorised_law(material: Material) -> tuple[bool, bool, float, float] | None
     """``(svk, constant, dW/dI1, dW/dI2)`` when the vectorised kernels (:mod:`.vectorised`) can run this
     material: Saint Venant-Kirchhoff, or any invariant law ``W(I1bar, I2bar)`` (``constant`` with its
     derivatives for laws linear in the invariants, else the law functions are evaluated per element), with
-    or without up to four QLV or Pipkin-Rogers Prony terms. None for stretch-based laws (Ogden: spectral
+    or without up to :data:`.vectorised.MAX_PRONY_TERMS` QLV or Pipkin-Rogers Prony terms. None for stretch-based laws (Ogden: spectral
     decomposition) and more Prony terms (the generic kernel runs those)."""
     if material.prony_g.size > vectorised.MAX_PRONY_TERMS:
         return None
@@ -484,8 +484,9 @@ def _fused_law(model: TLEDModel, kernel: str) -> tuple[bool, bool, float, float]
     if kernel != "fused":
         return None
     law = vectorised_law(model.material)
-    if law is None or law[0] or model.material.pipkin_rogers:
-        raise ValueError(f"the fused kernel needs an invariant law with at most {vectorised.MAX_PRONY_TERMS} QLV Prony "
+    if law is None or law[0] or model.material.pipkin_rogers \
+            or model.material.prony_g.size > fused.MAX_PRONY_TERMS:
+        raise ValueError(f"the fused kernel needs an invariant law with at most {fused.MAX_PRONY_TERMS} QLV Prony "
                          f"terms; {model.material.law_key!r} ({model.material.prony_g.size} terms"
                          f"{', Pipkin-Rogers' if model.material.pipkin_rogers else ''}) runs on the vectorised or "
                          f"generic kernel")
@@ -522,7 +523,8 @@ def _vector_setup(model: TLEDModel, kernel: str, h_state, s_prev, w_prev):
     enabled = law is not None
     el = model.kernel_mesh.elements
     ne, nn = (el.shape[0], model.kernel_mesh.n_nodes) if enabled else (0, 0)
-    nt = vectorised.MAX_PRONY_TERMS if enabled and model.material.prony_g.size else 0
+    # whole blocks of the stress pass (unused terms have zero states and weights)
+    nt = -(-model.material.prony_g.size // vectorised.PRONY_BLOCK) * vectorised.PRONY_BLOCK if enabled else 0
     dt = model.dtype
     nchunk = model.chunk_lo.size - 1
     if enabled:
@@ -673,8 +675,9 @@ def run_explicit(model: TLEDModel, t_end_s: float, *, dt_s: float | None = None,
     track_energy : accumulate the energy balance (``RunResult.energy_j``; a serial pass over the nodes per
         step, a few % of the step time)
     kernel : ``"auto"`` (the vectorised kernels of :mod:`.vectorised` for SVK and invariant laws, with or
-        without up to four QLV terms, except float64 meshes above :data:`AUTO_VECTORISED_MAX_FLOAT64_ELEMENTS`
-        elements; the generic kernel for stretch-based laws and beyond-QLV), ``"fused"`` (opt-in,
+        without up to :data:`.vectorised.MAX_PRONY_TERMS` QLV or Pipkin-Rogers terms, except float64 meshes above
+        :data:`AUTO_VECTORISED_MAX_FLOAT64_ELEMENTS` elements; the generic kernel for stretch-based laws, more terms
+        and the branch-energy law), ``"fused"`` (opt-in,
         :mod:`.fused`: the vectorised passes of an invariant law
         in one parallel region per step over overlapping node parts, one part per thread), ``"vectorised"`` or
         ``"generic"``; all agree to rounding

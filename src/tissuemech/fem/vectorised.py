@@ -1,8 +1,8 @@
 """Internal forces of linear tets in a structure-of-arrays layout that LLVM vectorises across elements.
 
 The CPU fast path of :mod:`.tled` for Saint Venant-Kirchhoff and every invariant law ``W(I1bar, I2bar)``,
-alone or as the instantaneous law of QLV or of Pipkin-Rogers (strain-dependent weights) with up to four Prony terms
-(stretch-based laws and more terms stay on the generic kernel). It computes what the generic per-element kernel
+alone or as the instantaneous law of QLV or of Pipkin-Rogers (strain-dependent weights) with up to eight Prony
+terms, in blocks of four (stretch-based laws and more terms stay on the generic kernel). It computes what the generic per-element kernel
 computes (the
 same formulas: ``F``, average nodal pressure, isochoric Kirchhoff stress, the recursive Prony update of the
 isochoric 2nd Piola-Kirchhoff stress, ``f_a = V0 tau (cof dN_a) / J``), in passes:
@@ -313,22 +313,28 @@ def prony_update(decay, gain, h0, h1, h2, h3, h4, h5, d0, d1, d2, d3, d4, d5):
             decay * h3 + gain * d3, decay * h4 + gain * d4, decay * h5 + gain * d5)
 
 
-#: Prony terms of :func:`qlv_stress_pass` (materials with more run on the generic kernel)
-MAX_PRONY_TERMS = 4
+#: Prony terms of one call of :func:`qlv_stress_pass` / :func:`pipkin_rogers_stress_pass` (written out: see there)
+PRONY_BLOCK = 4
+#: Prony terms of the vectorised kernel: :func:`internal_forces` calls the stress pass once per block of
+#: :data:`PRONY_BLOCK` terms (materials with more run on the generic kernel)
+MAX_PRONY_TERMS = 2 * PRONY_BLOCK
 
 
 @njit(**_PASS)
-def qlv_stress_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a, w1a, w2a, g_inf, commit,
+def qlv_stress_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a, w1a, w2a, g_inf, accumulate,
+                    commit_prev, commit,
                     sp0, sp1, sp2, sp3, sp4, sp5, decay, gain, ha0, ha1, ha2, ha3, ha4, ha5,
                     hb0, hb1, hb2, hb3, hb4, hb5, hc0, hc1, hc2, hc3, hc4, hc5, hd0, hd1, hd2, hd3, hd4, hd5,
                     s0a, s1a, s2a, s3a, s4a, s5a, lo):
-    """QLV with up to four Prony terms (the generic kernel's formulas): the instantaneous isochoric 2nd
+    """QLV with up to four Prony terms per call (the generic kernel's formulas): the instantaneous isochoric 2nd
     Piola-Kirchhoff stress ``S_e = F^-1 tau_iso F^-T`` of an invariant law (derivatives per element in
     ``w1a``, ``w2a``) and the relaxed ``S = g_inf S_e + sum_i h_i`` (into ``s0a``...``s5a``) with the
     recursive update of every term (states
     ``h_i`` = rows ``ha``...``hd``, previous ``S_e`` = ``sp``; unused terms have ``decay = gain = 0``). The
-    states are written only when ``commit``. (Stress and forces in one pass would hold ~70 values per
-    element and spill the vector registers: two passes are faster.)
+    states are written only when ``commit``, the previous ``S_e`` only when ``commit_prev``. With ``accumulate`` the
+    stress is added to what ``s0a``... hold: a material with more than :data:`PRONY_BLOCK` terms runs one call per
+    block, the equilibrium part ``g_inf S_e`` and ``commit_prev`` in the last call only. (Stress and forces in one
+    pass would hold ~70 values per element and spill the vector registers: two passes are faster.)
     """
     da, db, dc, dd = decay[0], decay[1], decay[2], decay[3]
     ga, gb, gc, gd = gain[0], gain[1], gain[2], gain[3]
@@ -344,15 +350,20 @@ def qlv_stress_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a,
             d0, d1, d2 = se0 - sp0[e], se1 - sp1[e], se2 - sp2[e]
             d3, d4, d5 = se3 - sp3[e], se4 - sp4[e], se5 - sp5[e]
             # selects, not branches, so that the loop stays vectorisable
-            sp0[e] = se0 if commit else sp0[e]
-            sp1[e] = se1 if commit else sp1[e]
-            sp2[e] = se2 if commit else sp2[e]
-            sp3[e] = se3 if commit else sp3[e]
-            sp4[e] = se4 if commit else sp4[e]
-            sp5[e] = se5 if commit else sp5[e]
+            sp0[e] = se0 if commit_prev else sp0[e]
+            sp1[e] = se1 if commit_prev else sp1[e]
+            sp2[e] = se2 if commit_prev else sp2[e]
+            sp3[e] = se3 if commit_prev else sp3[e]
+            sp4[e] = se4 if commit_prev else sp4[e]
+            sp5[e] = se5 if commit_prev else sp5[e]
             # the four Prony terms are written out, each with its own six state arrays (ha..hd): one array per stored
             # component keeps the loop vectorisable (module note), so no loop over terms of a 2-D state
-            s0, s1, s2, s3, s4, s5 = g_inf * se0, g_inf * se1, g_inf * se2, g_inf * se3, g_inf * se4, g_inf * se5
+            s0 = g_inf * se0 + (s0a[e] if accumulate else 0.0)
+            s1 = g_inf * se1 + (s1a[e] if accumulate else 0.0)
+            s2 = g_inf * se2 + (s2a[e] if accumulate else 0.0)
+            s3 = g_inf * se3 + (s3a[e] if accumulate else 0.0)
+            s4 = g_inf * se4 + (s4a[e] if accumulate else 0.0)
+            s5 = g_inf * se5 + (s5a[e] if accumulate else 0.0)
             x0, x1, x2, x3, x4, x5 = prony_update(da, ga, ha0[e], ha1[e], ha2[e], ha3[e], ha4[e], ha5[e],
                                                    d0, d1, d2, d3, d4, d5)
             ha0[e], ha1[e], ha2[e] = (x0 if commit else ha0[e]), (x1 if commit else ha1[e]), (x2 if commit else ha2[e])
@@ -387,17 +398,21 @@ def pipkin_rogers_update(decay, fac, wnew, wold, h0, h1, h2, h3, h4, h5, se0, se
 
 
 @njit(**_PASS)
-def pipkin_rogers_stress_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a, w1a, w2a, commit,
+def pipkin_rogers_stress_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a, w1a, w2a, inf_weight,
+                              beta_other, beta_kappa_other, accumulate, commit_prev, commit,
                               sp0, sp1, sp2, sp3, sp4, sp5, decay, fac, beta, kappa, gamma_s2, wpa, wpb, wpc, wpd,
                               ha0, ha1, ha2, ha3, ha4, ha5, hb0, hb1, hb2, hb3, hb4, hb5,
                               hc0, hc1, hc2, hc3, hc4, hc5, hd0, hd1, hd2, hd3, hd4, hd5,
                               s0a, s1a, s2a, s3a, s4a, s5a, lo):
-    """Pipkin-Rogers with up to four Prony terms (the generic kernel's formulas, ``_kernels._element_force_pass``):
+    """Pipkin-Rogers with up to four Prony terms per call (the generic kernel's formulas, ``_kernels._element_force_pass``):
     the weights at ``x = I1bar - 3`` by the fitting code's weight law (``models.beyond_qlv``:
     ``pipkin_rogers_strain_fraction``, ``pipkin_rogers_ratio``; rows ``beta``, ``kappa``, one ``gamma_s^2``),
     ``S = g_inf(x) S_e + sum_i h_i`` with every term driven by the increment of ``g_i(x) S_e`` (previous weights in
     ``wpa``...``wpd``, previous ``S_e`` in ``sp``; unused terms have ``beta = decay = fac = 0``). States written only
-    when ``commit``; the layout and vectorisation notes of :func:`qlv_stress_pass` apply."""
+    when ``commit``; the layout and vectorisation notes of :func:`qlv_stress_pass` apply, and so does its block
+    scheme (``accumulate``, ``commit_prev``; the equilibrium part ``inf_weight = 1`` in the last call only). The
+    ratio sum of the terms outside this block is linear in the strain fraction ``s``:
+    ``sum_j beta_j (1 + kappa_j s) = beta_other + beta_kappa_other s``."""
     da, db, dc, dd = decay[0], decay[1], decay[2], decay[3]
     fa, fb, fc, fd = fac[0], fac[1], fac[2], fac[3]
     ba, bb, bc, bd = beta[0], beta[1], beta[2], beta[3]
@@ -418,17 +433,23 @@ def pipkin_rogers_stress_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f3
             rb = pipkin_rogers_ratio(bb, kb, sfrac)
             rc = pipkin_rogers_ratio(bc, kc, sfrac)
             rd = pipkin_rogers_ratio(bd, kd, sfrac)
-            winf = 1.0 / (1.0 + ra + rb + rc + rd)
+            winf = 1.0 / (1.0 + ra + rb + rc + rd + beta_other + beta_kappa_other * sfrac)
             wa, wb, wc, wd = ra * winf, rb * winf, rc * winf, rd * winf
             p0, p1, p2, p3, p4, p5 = sp0[e], sp1[e], sp2[e], sp3[e], sp4[e], sp5[e]
             # selects, not branches, so that the loop stays vectorisable
-            sp0[e] = se0 if commit else p0
-            sp1[e] = se1 if commit else p1
-            sp2[e] = se2 if commit else p2
-            sp3[e] = se3 if commit else p3
-            sp4[e] = se4 if commit else p4
-            sp5[e] = se5 if commit else p5
-            s0, s1, s2, s3, s4, s5 = winf * se0, winf * se1, winf * se2, winf * se3, winf * se4, winf * se5
+            sp0[e] = se0 if commit_prev else p0
+            sp1[e] = se1 if commit_prev else p1
+            sp2[e] = se2 if commit_prev else p2
+            sp3[e] = se3 if commit_prev else p3
+            sp4[e] = se4 if commit_prev else p4
+            sp5[e] = se5 if commit_prev else p5
+            w_eq = inf_weight * winf
+            s0 = w_eq * se0 + (s0a[e] if accumulate else 0.0)
+            s1 = w_eq * se1 + (s1a[e] if accumulate else 0.0)
+            s2 = w_eq * se2 + (s2a[e] if accumulate else 0.0)
+            s3 = w_eq * se3 + (s3a[e] if accumulate else 0.0)
+            s4 = w_eq * se4 + (s4a[e] if accumulate else 0.0)
+            s5 = w_eq * se5 + (s5a[e] if accumulate else 0.0)
             x0, x1, x2, x3, x4, x5 = pipkin_rogers_update(da, fa, wa, wpa[e], ha0[e], ha1[e], ha2[e], ha3[e], ha4[e],
                                                           ha5[e], se0, se1, se2, se3, se4, se5, p0, p1, p2, p3, p4, p5)
             ha0[e], ha1[e], ha2[e] = (x0 if commit else ha0[e]), (x1 if commit else ha1[e]), (x2 if commit else ha2[e])
@@ -657,31 +678,47 @@ def internal_forces(u, ws, svk, constant, w1, w2, w1fn, w2fn, params, i2_depende
                              w1a, w2a, kappa, anp_weight, fe[0], fe[1], fe[2], fe[3], fe[4], fe[5], fe[6],
                              fe[7], fe[8], fe[9], fe[10], fe[11], elo)
     else:
-        decay = np.zeros(MAX_PRONY_TERMS)
-        gain = np.zeros(MAX_PRONY_TERMS)
-        decay[:nterm] = prony_e
-        ha, hb, hc, hd = hstate[0], hstate[1], hstate[2], hstate[3]
-        if pr_params.shape[0] > 0:
-            gain[:nterm] = prony_f
-            beta = np.zeros(MAX_PRONY_TERMS)
-            kap = np.zeros(MAX_PRONY_TERMS)
-            beta[:nterm] = pr_params[:, 0]
-            kap[:nterm] = pr_params[:, 1]
-            pipkin_rogers_stress_pass(g0, g1, g2, g3, g4, g5, g6, g7, g8, jm23a, w1a, w2a, commit,
-                                      sprev[0], sprev[1], sprev[2], sprev[3], sprev[4], sprev[5], decay, gain, beta,
-                                      kap, pr_params[0, 2], wprev[0], wprev[1], wprev[2], wprev[3],
-                                      ha[0], ha[1], ha[2], ha[3], ha[4], ha[5], hb[0], hb[1], hb[2], hb[3], hb[4],
-                                      hb[5], hc[0], hc[1], hc[2], hc[3], hc[4], hc[5], hd[0], hd[1], hd[2], hd[3],
-                                      hd[4], hd[5],
-                                      s_relaxed[0], s_relaxed[1], s_relaxed[2], s_relaxed[3], s_relaxed[4],
-                                      s_relaxed[5], elo)
-        else:
-            gain[:nterm] = prony_g * prony_f
-            qlv_stress_pass(g0, g1, g2, g3, g4, g5, g6, g7, g8, jm23a, w1a, w2a, 1.0 - prony_g.sum(), commit,
-                            sprev[0], sprev[1], sprev[2], sprev[3], sprev[4], sprev[5], decay, gain,
-                            ha[0], ha[1], ha[2], ha[3], ha[4], ha[5], hb[0], hb[1], hb[2], hb[3], hb[4], hb[5],
-                            hc[0], hc[1], hc[2], hc[3], hc[4], hc[5], hd[0], hd[1], hd[2], hd[3], hd[4], hd[5],
-                            s_relaxed[0], s_relaxed[1], s_relaxed[2], s_relaxed[3], s_relaxed[4], s_relaxed[5], elo)
+        # one stress pass per block of PRONY_BLOCK terms, the last block (with the equilibrium part and the
+        # previous S_e) last
+        n_block = (nterm + PRONY_BLOCK - 1) // PRONY_BLOCK
+        for b in range(n_block - 1, -1, -1):
+            t0 = b * PRONY_BLOCK
+            nb = min(nterm, t0 + PRONY_BLOCK) - t0
+            decay = np.zeros(PRONY_BLOCK)
+            gain = np.zeros(PRONY_BLOCK)
+            decay[:nb] = prony_e[t0:t0 + nb]
+            accumulate = b < n_block - 1
+            last = b == 0
+            inf_weight = 1.0 if last else 0.0
+            commit_prev = commit and last
+            ha, hb, hc, hd = hstate[t0], hstate[t0 + 1], hstate[t0 + 2], hstate[t0 + 3]
+            if pr_params.shape[0] > 0:
+                gain[:nb] = prony_f[t0:t0 + nb]
+                beta = np.zeros(PRONY_BLOCK)
+                kap = np.zeros(PRONY_BLOCK)
+                beta[:nb] = pr_params[t0:t0 + nb, 0]
+                kap[:nb] = pr_params[t0:t0 + nb, 1]
+                beta_other = pr_params[:, 0].sum() - beta.sum()
+                beta_kappa_other = (pr_params[:, 0] * pr_params[:, 1]).sum() - (beta * kap).sum()
+                wa, wb, wc, wd = wprev[t0], wprev[t0 + 1], wprev[t0 + 2], wprev[t0 + 3]
+                pipkin_rogers_stress_pass(g0, g1, g2, g3, g4, g5, g6, g7, g8, jm23a, w1a, w2a, inf_weight,
+                                          beta_other, beta_kappa_other, accumulate, commit_prev, commit,
+                                          sprev[0], sprev[1], sprev[2], sprev[3], sprev[4], sprev[5], decay, gain,
+                                          beta, kap, pr_params[0, 2], wa, wb, wc, wd,
+                                          ha[0], ha[1], ha[2], ha[3], ha[4], ha[5], hb[0], hb[1], hb[2], hb[3], hb[4],
+                                          hb[5], hc[0], hc[1], hc[2], hc[3], hc[4], hc[5], hd[0], hd[1], hd[2], hd[3],
+                                          hd[4], hd[5],
+                                          s_relaxed[0], s_relaxed[1], s_relaxed[2], s_relaxed[3], s_relaxed[4],
+                                          s_relaxed[5], elo)
+            else:
+                gain[:nb] = prony_g[t0:t0 + nb] * prony_f[t0:t0 + nb]
+                qlv_stress_pass(g0, g1, g2, g3, g4, g5, g6, g7, g8, jm23a, w1a, w2a,
+                                inf_weight * (1.0 - prony_g.sum()), accumulate, commit_prev, commit,
+                                sprev[0], sprev[1], sprev[2], sprev[3], sprev[4], sprev[5], decay, gain,
+                                ha[0], ha[1], ha[2], ha[3], ha[4], ha[5], hb[0], hb[1], hb[2], hb[3], hb[4], hb[5],
+                                hc[0], hc[1], hc[2], hc[3], hc[4], hc[5], hd[0], hd[1], hd[2], hd[3], hd[4], hd[5],
+                                s_relaxed[0], s_relaxed[1], s_relaxed[2], s_relaxed[3], s_relaxed[4],
+                                s_relaxed[5], elo)
         pk2_force_pass(g0, g1, g2, g3, g4, g5, g6, g7, g8, s_relaxed[0], s_relaxed[1], s_relaxed[2], s_relaxed[3],
                        s_relaxed[4], s_relaxed[5], conn, d9, vol0, p_node, kappa, anp_weight, fe[0], fe[1], fe[2],
                        fe[3], fe[4], fe[5], fe[6], fe[7], fe[8], fe[9], fe[10], fe[11], elo)
