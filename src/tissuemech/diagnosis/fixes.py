@@ -6,7 +6,7 @@ scorer, :func:`score_model_fixes` runs them and stores each score in ``fit_info[
 finds it when the diagnosis is run again (:func:`tissuemech.diagnosis.report.with_model_fixes`).
 
 * ``nonseparable_relaxation`` -- :func:`nonseparable_fix`: the QLV baseline against its Pipkin-Rogers extension,
-  both refitted leaving out the extreme CSR rates (or the relaxations at the extreme strains);
+  both refitted leaving out the extreme CSR rates and the relaxations at the extreme strains;
 * ``torque_offset`` -- :func:`offset_fix`: the baseline refitted with a torque offset, read from the training
   residuals (:func:`tissuemech.diagnosis.time_domain.offset_intercept`), removed.
 """
@@ -30,9 +30,10 @@ RAMP_AND_RELAXATION = ("constant_shear_rate", "stress_relaxation")
 def nonseparable_fix(runs, baseline_key: str, target: str, taus_s: Sequence[float] | None = None,
                      fits_out: list | None = None) -> dict | None:
     """Pipkin-Rogers counterpart of a QLV baseline, scored on held-out extremes of the design: the lowest and
-    the highest CSR rate when there are >= 3 rates, else the relaxations at the lowest and at the highest
+    the highest CSR rate when there are >= 3 rates, and the relaxations at the lowest and at the highest
     nominal strain when there are >= 2 (non-separability is a strain dependence of the relaxation, so a model
-    trained on the other strains must predict the extreme one). Both models are refitted in every fold on the
+    trained on the other strains must predict the extreme one); a design with both has four folds, so that the
+    simulator scores the extension on held-out ramps and held-out relaxations. Both models are refitted in every fold on the
     baseline's relaxation times ``taus_s`` [s] (the runs-only path's NNLS times), or, when None, on a
     one-per-decade grid spanning the window the tests resolve. None when the design has neither."""
     if not baseline_key.startswith("qlv_"):
@@ -48,15 +49,16 @@ def nonseparable_fix(runs, baseline_key: str, target: str, taus_s: Sequence[floa
     strains = sorted({round(nominal_strain(r), 6) for r in use if r.attrs.get("test") == "stress_relaxation"}
                      - {np.nan})
     strains = [g for g in strains if np.isfinite(g)]
+    folds = []
     if len(rates) >= 3:
-        folds = [(f"CSR {rate:g} 1/s", (lambda r, rate=rate: r.attrs.get("test") == "constant_shear_rate"
-                                        and float(r.attrs.get("shear_rate_1_per_s", -1)) == rate))
-                 for rate in (rates[0], rates[-1])]
-    elif len(strains) >= 2:
-        folds = [(f"relaxation at {100 * g:g} %", (lambda r, g=g: r.attrs.get("test") == "stress_relaxation"
-                                                   and round(nominal_strain(r), 6) == g))
-                 for g in (strains[0], strains[-1])]
-    else:
+        folds += [(f"CSR {rate:g} 1/s", (lambda r, rate=rate: r.attrs.get("test") == "constant_shear_rate"
+                                         and float(r.attrs.get("shear_rate_1_per_s", -1)) == rate))
+                  for rate in (rates[0], rates[-1])]
+    if len(strains) >= 2:
+        folds += [(f"relaxation at {100 * g:g} %", (lambda r, g=g: r.attrs.get("test") == "stress_relaxation"
+                                                    and round(nominal_strain(r), 6) == g))
+                  for g in (strains[0], strains[-1])]
+    if not folds:
         return None
     # both models on the relaxation times these tests resolve (never the registry's fixed 0.1-100 s)
     window = resolved_window_s(use)
