@@ -188,9 +188,15 @@ class SpectrumFactory:
         return model_on_times(self.key, self.taus_s)
 
 
+#: at most this many alternations of NNLS and per-piece levels in :func:`nnls_relaxation_times`
+LEVEL_ITERATIONS = 8
+
+
 def nnls_relaxation_times(curves: Sequence[F.Curve], window: Mapping | None = None, law_tag: str = "neo_hookean",
                           law_params: Mapping[str, float] | None = None,
-                          per_decade: float = NNLS_TIMES_PER_DECADE) -> dict:
+                          per_decade: float = NNLS_TIMES_PER_DECADE, target: str = "apparent_stress",
+                          units: Sequence[str] | None = None,
+                          merge_per_decade: float | None = MATERIAL_TIMES_PER_DECADE) -> dict:
     r"""Relaxation times the data ask for: NNLS on a dense log grid over the resolved window.
 
     For a QLV model with fixed times the plate prediction is linear in the branch moduli: with the instantaneous
@@ -206,37 +212,62 @@ def nnls_relaxation_times(curves: Sequence[F.Curve], window: Mapping | None = No
     frequency sweeps; creep read as strain-controlled, :func:`as_strain_controlled`), scaled by the fit's noise
     model; :func:`scipy.optimize.nnls` selects the times.
 
+    With ``units`` (the loaded piece of every curve, e.g. ``specimen/sample``) each piece *u* gets a modulus level
+    :math:`c_u` (:math:`y_u = c_u [a_\infty B_\infty + \sum_k a_k B_k]`): specimens differ in stiffness, and
+    without it the shape common to all pieces (the spectrum, the law's curvature) would be fitted to whichever
+    piece is stiffest. NNLS and the levels alternate (each level: the median log ratio of its piece's points,
+    geometric mean of all levels 1) until the levels change by < 0.1 %.
+
+    Parameters
+    ----------
+    curves : the curves (creep read as strain-controlled; flow curves are ignored)
+    window : :func:`resolved_window_s` of the curves (computed when None)
+    law_tag, law_params : the instantaneous law driving the basis and its parameters (others ignored)
+    per_decade : grid density (times per decade) of :func:`window_taus`
+    target : plate target of :mod:`tissuemech.fitting` (``apparent_stress`` or ``torque``)
+    units : one loaded-piece label per curve, or None (one level for all)
+    merge_per_decade : ``per_decade`` of :func:`merged_times` (None keeps every time of a band)
+
     Returns
     -------
     ``{"taus_s": active times [s] (pairs merged, :func:`merged_times`; empty without a window or an active mode),
     "grid_s", "weights" (first entry the equilibrium share, relative to the instantaneous modulus), "modulus_pa"
-    (the instantaneous modulus the weights imply), "equilibrium_share", "method"}``
+    (the instantaneous modulus the weights imply), "equilibrium_share", "levels" ({unit: c_u}; empty without
+    ``units``), "method"}``
     """
+    units = list(units) if units is not None else None
+    if units is not None and len(units) != len(curves):
+        raise ValueError(f"units: {len(units)} labels for {len(curves)} curves")
     curves = [as_strain_controlled(c) for c in curves]
     window = resolved_window_s(curves) if window is None else window
     grid = window_taus({**window, "t_min_s": window.get("t_min_s", np.nan) / 10.0 ** NNLS_GRID_BELOW_DECADES},
                        per_decade)
     out = {"taus_s": np.array([]), "grid_s": grid, "weights": np.array([]), "modulus_pa": np.nan,
-           "equilibrium_share": np.nan,
+           "equilibrium_share": np.nan, "levels": {},
            "method": f"NNLS on {per_decade:g} relaxation times per decade from {NNLS_GRID_BELOW_DECADES:g} decade "
-                     f"below the resolved window to its end ({law_tag} instantaneous law)"}
-    curves = [c for c in curves if c.response in ("shear_history", "oscillation", "amplitude_sweep")]
+                     f"below the resolved window to its end ({law_tag} instantaneous law"
+                     + (", one modulus level per loaded piece)" if units is not None else ")")}
+    usable = ("shear_history", "oscillation", "amplitude_sweep")
+    kept = [i for i, c in enumerate(curves) if c.response in usable]
+    curves = [curves[i] for i in kept]
     if grid.size == 0 or not curves:
         return out
     model = model_on_times(f"qlv_{law_tag}_prony{grid.size}", grid)
     noise = F.NoiseModel()
-    observed = [F.target_observations(c, "apparent_stress") for c in curves]
+    observed = [F.target_observations(c, target) for c in curves]
     scales = [{k: noise.sigma(k, y, sd.get(k)) for k, y in obs.items()} for obs, sd in observed]
 
     def column(p: Mapping[str, float]) -> np.ndarray:
         parts = []
         for c, (obs, _), sig in zip(curves, observed, scales):
-            pred = F.predict(model, p, c, "apparent_stress")
+            pred = F.predict(model, p, c, target)
             parts += [np.asarray(pred[k], float) / sig[k] for k in obs]
         return np.concatenate(parts)
 
     rhs = np.concatenate([np.asarray(y, float) / sig[k] for (obs, _), sig in zip(observed, scales)
                           for k, y in obs.items()])
+    row_unit = np.concatenate([np.full(np.size(y), units[i] if units is not None else "", dtype=object)
+                               for i, (obs, _) in zip(kept, observed) for y in obs.values()])
     elastic = dict(model.default_params())
     elastic.update({k: float(v) for k, v in (law_params or {}).items() if k in model.instantaneous.param_names})
     elastic.update({f"beta_{i + 1}": 0.0 for i in range(grid.size)})
@@ -244,18 +275,34 @@ def nnls_relaxation_times(curves: Sequence[F.Curve], window: Mapping | None = No
     cols = [b_inf] + [2.0 * column({**elastic, f"beta_{i + 1}": 1.0}) - b_inf for i in range(grid.size)]
     design = np.column_stack(cols)
     ok = np.isfinite(design).all(axis=1) & np.isfinite(rhs)
-    design, rhs = design[ok], rhs[ok]
+    design, rhs, row_unit = design[ok], rhs[ok], row_unit[ok]
     norm = np.linalg.norm(design, axis=0)
     norm = np.where(norm > 0, norm, 1.0)
-    coef, _ = scipy.optimize.nnls(design / norm, rhs, maxiter=100 * design.shape[1])
+    names = sorted({str(u) for u in row_unit}) if units is not None else []
+    level = {u: 1.0 for u in names}
+    for _ in range(LEVEL_ITERATIONS):
+        c_row = np.array([level[u] for u in row_unit]) if names else np.ones(rhs.size)
+        coef, _ = scipy.optimize.nnls(design * c_row[:, None] / norm, rhs, maxiter=100 * design.shape[1])
+        pred = design @ (coef / norm)
+        if not coef.sum() > 0 or len(names) < 2:
+            break
+        new = {}
+        for u in names:
+            sel = (row_unit == u) & (pred > 0) & (rhs > 0)
+            new[u] = float(np.exp(np.median(np.log(rhs[sel] / pred[sel])))) if sel.any() else 1.0
+        centre = float(np.exp(np.mean(np.log(list(new.values())))))
+        new = {u: v / centre for u, v in new.items()}
+        change = max(abs(new[u] / level[u] - 1.0) for u in names)
+        level = new
+        if change < 1e-3:
+            break
     coef = coef / norm
     total = coef.sum()
     if not total > 0:
         return out
     g0 = initial_shear_modulus(model.instantaneous, model.instantaneous_params(elastic))
-    out.update(taus_s=merged_times(grid, coef[1:], MATERIAL_TIMES_PER_DECADE), weights=coef / total,
-               modulus_pa=float(g0 * total),
-               equilibrium_share=float(coef[0] / total))
+    out.update(taus_s=merged_times(grid, coef[1:], merge_per_decade), weights=coef / total,
+               modulus_pa=float(g0 * total), equilibrium_share=float(coef[0] / total), levels=level)
     return out
 
 

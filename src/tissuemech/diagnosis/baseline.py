@@ -26,14 +26,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import xarray as xr
-import scipy
 
 from .. import fitting
 from ..models.base import ConstitutiveModel, ResponseNotSupported
 from ..models.plate import oscillation_moduli
 from ..models.registry import get_model, model_on_times
 from .. import material
-from ..material import NNLS_GRID_BELOW_DECADES, NNLS_TIMES_PER_DECADE, merged_times, window_taus
+from ..material import NNLS_TIMES_PER_DECADE, window_taus
 from ..ranking import recommended_mask
 
 
@@ -217,37 +216,21 @@ def loading_unit(run: xr.Dataset) -> str:
     return f"{run.attrs.get('specimen', '')}/{run.attrs.get('sample', '')}"
 
 
-#: at most this many alternations of NNLS and per-unit levels in :func:`nnls_relaxation_times`
-LEVEL_ITERATIONS = 8
-
-
 def nnls_relaxation_times(runs: Sequence[xr.Dataset], target: str, relaxation: str = "measured",
                           window: Mapping | None = None, model_key: str = "qlv_linear_prony4",
                           per_decade: float = NNLS_TIMES_PER_DECADE, n_points: int = 40,
                           law_params: Mapping[str, float] | None = None) -> dict:
-    r"""Relaxation times the data ask for, and the level of every loaded piece: NNLS on a dense log grid.
+    """Relaxation times the runs ask for, and the modulus level of every loaded piece: the material model's NNLS
+    (:func:`tissuemech.material.nnls_relaxation_times`, one level per :func:`loading_unit`) on the runs' curves.
 
-    For a QLV model with fixed times the plate prediction is linear in the branch weights: with the
-    instantaneous law at fixed parameters (``law_params``, e.g. a first fit's; the law's defaults when None),
-
-    .. math:: y_u(t) = c_u \Big[a_\infty B_\infty(t) + \sum_k a_k B_k(t)\Big],\qquad a \ge 0,
-
-    where :math:`B_\infty` is the elastic response (all branch ratios 0) and :math:`B_k` the response of a
-    reduced relaxation function that is the single mode :math:`e^{-t/\tau_k}` (from the prediction with
-    :math:`\beta_k = 1`: :math:`B_k = 2 y_{\beta_k=1} - B_\infty`). Every column is the package's own
-    forward model (:func:`tissuemech.fitting.predict`: torque integral over the radius, measured strain
-    history), weighted by the fit's noise model; :func:`scipy.optimize.nnls` selects the times. NNLS
-    solutions are sparse, so the active times (weight > 0) are the spectrum's support on the grid, not a
-    fixed number of modes; a mode between grid times shows as its neighbours.
-
-    :math:`c_u` is the modulus level of loaded piece *u* (:func:`loading_unit`): specimens differ in
-    stiffness, and without it the shape common to all pieces (the spectrum, the law's curvature) would be
-    fitted to whichever piece is stiffest. NNLS and the levels alternate (each level: the median log ratio of
-    its piece's points, geometric mean of all levels 1) until the levels change by < 0.1 %.
+    Every curve a QLV prediction is linear in takes part: ramps and relaxations (measured strain history),
+    frequency and amplitude sweeps, and creep read as strain-controlled
+    (:func:`tissuemech.material.as_strain_controlled`), so that a creep or sweep piece gets its level and the
+    times see its time scales.
 
     Parameters
     ----------
-    runs : the ramps and relaxations the baseline is fitted to (other tests are ignored)
+    runs : the runs the baseline is fitted to
     target : plate target of :mod:`tissuemech.fitting`
     window : :func:`resolved_window_s` of ``runs`` (computed when None)
     model_key : fixed-time QLV key whose instantaneous law drives the basis
@@ -257,82 +240,30 @@ def nnls_relaxation_times(runs: Sequence[xr.Dataset], target: str, relaxation: s
 
     Returns
     -------
-    ``{"taus_s": active times [s], a pair of neighbouring active grid times merged (:func:`merged_times`; empty
-    when there is no window, no shear-history curve or no active mode), "grid_s", "weights" (relative to the
-    instantaneous modulus; first entry the equilibrium share),
-    "levels": {unit: c_u}, "method"}``
+    The material function's record (``taus_s``: every active time, a pair of neighbouring ones merged;
+    ``levels``: {unit: c_u}).
     """
     window = resolved_window_s(runs) if window is None else window
-    grid = window_taus({**window, "t_min_s": window.get("t_min_s", np.nan) / 10.0 ** NNLS_GRID_BELOW_DECADES},
-                       per_decade)
-    out = {"taus_s": np.array([]), "grid_s": grid, "weights": np.array([]), "levels": {},
-           "method": f"NNLS on {per_decade:g} relaxation times per decade from {NNLS_GRID_BELOW_DECADES:g} "
-                     "decade below the resolved window to its end, with one modulus level per loaded piece"}
     curves, units = [], []
     for r in runs:
         for c in curves_of_runs([r], relaxation, n_points):
-            if c.response == "shear_history":
-                curves.append(c)
-                units.append(loading_unit(r))
-    if grid.size == 0 or not curves:
-        return out
-    model = model_on_times(model_key, grid)
-    noise = fitting.NoiseModel()
-    observed = [fitting.target_observations(c, target) for c in curves]
-    scales = [{k: noise.sigma(k, y, sd.get(k)) for k, y in obs.items()} for obs, sd in observed]
+            curves.append(c)
+            units.append(loading_unit(r))
+    return material.nnls_relaxation_times(curves, window, law_tag=material.law_tag(model_key),
+                                          law_params=law_params, per_decade=per_decade, target=target,
+                                          units=units, merge_per_decade=None)
 
-    def column(p: Mapping[str, float]) -> np.ndarray:
-        parts = []
-        for c, (obs, _), sig in zip(curves, observed, scales):
-            pred = fitting.predict(model, p, c, target)
-            parts += [np.asarray(pred[k], float) / sig[k] for k in obs]
-        return np.concatenate(parts)
 
-    rhs = np.concatenate([np.asarray(y, float) / sig[k] for (obs, _), sig in zip(observed, scales)
-                          for k, y in obs.items()])
-    row_unit = np.concatenate([np.full(np.size(y), u) for u, (obs, _) in zip(units, observed)
-                               for y in obs.values()])
-    elastic = dict(model.default_params())
-    law = model.instantaneous.param_names
-    elastic.update({k: float(v) for k, v in (law_params or {}).items() if k in law})
-    elastic.update({f"beta_{i + 1}": 0.0 for i in range(grid.size)})
-    b_inf = column(elastic)
-    cols = [b_inf] + [2.0 * column({**elastic, f"beta_{i + 1}": 1.0}) - b_inf for i in range(grid.size)]
-    design = np.column_stack(cols)
-    ok = np.isfinite(design).all(axis=1) & np.isfinite(rhs)
-    design, rhs, row_unit = design[ok], rhs[ok], row_unit[ok]
-    norm = np.linalg.norm(design, axis=0)
-    norm = np.where(norm > 0, norm, 1.0)
-    names = sorted({str(u) for u in row_unit})
-    level = {u: 1.0 for u in names}
-    for _ in range(LEVEL_ITERATIONS):
-        c_row = np.array([level[u] for u in row_unit])
-        coef, _ = scipy.optimize.nnls(design * c_row[:, None] / norm, rhs, maxiter=100 * design.shape[1])
-        pred = design @ (coef / norm)
-        if not coef.sum() > 0 or len(names) < 2:
-            break
-        new = {}
-        for u in names:
-            sel = (row_unit == u) & (pred > 0) & (rhs > 0)
-            new[u] = float(np.exp(np.median(np.log(rhs[sel] / pred[sel])))) if sel.any() else 1.0
-        centre = float(np.exp(np.mean(np.log(list(new.values())))))
-        new = {u: v / centre for u, v in new.items()}
-        change = max(abs(new[u] / level[u] - 1.0) for u in names)
-        level = new
-        if change < 1e-3:
-            break
-    coef = coef / norm
-    total = coef.sum()
-    if not total > 0:
-        return out
-    out.update(taus_s=merged_times(grid, coef[1:]), weights=coef / total, levels=level)
-    return out
+#: run variables that scale with a loaded piece's modulus level (divided by it) and inversely (multiplied)
+LEVEL_SCALED = ("shear_stress", "torque", "relaxation_modulus", "storage_modulus", "loss_modulus")
+LEVEL_INVERSE = ("creep_compliance",)
 
 
 def level_normalised(runs: Sequence[xr.Dataset], levels: Mapping[str, float]) -> list[xr.Dataset]:
-    """Copies of ``runs`` with the measured stress and torque divided by their loaded piece's level
-    (:func:`nnls_relaxation_times`), for fitting the shape common to all pieces; runs of a piece without a
-    level are returned unchanged."""
+    """Copies of ``runs`` as the piece of level 1 would give them (:func:`nnls_relaxation_times`), for fitting the
+    shape common to all pieces: stresses, torques and moduli divided by their loaded piece's level and
+    compliances multiplied (a piece ``c`` times stiffer answers a stress as the level-1 piece answers ``1/c`` of
+    it, so a creep's imposed stress is divided too); runs of a piece without a level are returned unchanged."""
     out = []
     for r in runs:
         c = levels.get(loading_unit(r))
@@ -340,9 +271,12 @@ def level_normalised(runs: Sequence[xr.Dataset], levels: Mapping[str, float]) ->
             out.append(r)
             continue
         r = r.copy()
-        for name in ("shear_stress", "torque"):
+        for name in LEVEL_SCALED:
             if name in r:
                 r[name] = r[name] / c
+        for name in LEVEL_INVERSE:
+            if name in r:
+                r[name] = r[name] * c
         out.append(r)
     return out
 
