@@ -687,6 +687,26 @@ def _what_to_do(finding: Mapping) -> str:
     return "".join(f'<div class="todo">What to do: {_esc(t)}</div>' for t in items)
 
 
+def _extension_indentation(path: Path) -> dict[str, str]:
+    """Per cause, the sentence on what its extension changes in the flat-punch force
+    (:func:`tissuemech.uq.extension_indentation`); empty without the table."""
+    if not path.is_file():
+        return {}
+    out = {}
+    for r in pd.read_csv(path).to_dict("records"):
+        if r.get("status") != "ok":
+            out[r["cause"]] = f" Flat-punch indentation with the extension's card: {_esc(str(r.get('status')))}."
+            continue
+        where = ("outside" if r["outside_measurement_band"] else "inside") + " the baseline's posterior 5-95 % band"
+        spread = ("outside" if r["outside_specimen_band"] else "inside") + " the spread between specimens"
+        out[r["cause"]] = (f" In a {_number(1e3 * r['depth_m'])} mm flat-punch indentation the extension's card "
+                           f"changes the force from {_number(1e3 * r['baseline_force_n'])} to "
+                           f"{_number(1e3 * r['extension_force_n'])} mN ({_number(100 * r['relative_difference'])} %), "
+                           f"{where} ({_number(1e3 * r['measurement_q05_n'])}-{_number(1e3 * r['measurement_q95_n'])} "
+                           f"mN) and {spread}.")
+    return out
+
+
 def diagnosis_html(path: Path) -> str:
     """The diagnosis of ``diagnosis.json`` in plain words: each named cause with its fix, the held-out gain of the
     fix and, where the finding carries one, what to do next; then what the data cannot identify.
@@ -696,6 +716,7 @@ def diagnosis_html(path: Path) -> str:
     if not path.is_file():
         return ""
     d = json.loads(path.read_text())
+    felt = _extension_indentation(path.parent / "uq" / "extension_indentation.csv")
     out = []
     for f in (Finding.from_dict(x) for x in d.get("findings", [])):
         if not f.detected:
@@ -709,6 +730,7 @@ def diagnosis_html(path: Path) -> str:
             gain += (f" In the simulator (TLED replay of the tests neither card was fitted to: "
                      f"{_esc(', '.join(sim['held_out_tests']))}) the extension's card brings the NRMSE from "
                      f"{_number(sim.get('before'))} to {_number(sim.get('after'))} (gain {_number(sim.get('gain'))}).")
+        gain += felt.get(f.effect, "")
         out.append(f'<li class="finding"><b>{html.escape(_finding_title(f.data))}</b> '
                    f'(<code>{html.escape(f.effect)}</code>).{gain}{_what_to_do(f.data)}'
                    f"<details><summary>evidence</summary>{_esc(f.evidence)}</details></li>")

@@ -69,6 +69,7 @@ from .cards import (family_material, fitted_strain_max, is_pipkin_rogers, materi
                     prony_from_step_response)
 from .canonical import NETCDF_ENGINE, atomic_write, read_netcdf, write_json, write_netcdf, write_text
 from .curves import drop_flagged, select_average
+from .diagnosis.simulation_cards import INDEX
 from .models.base import initial_shear_modulus
 from .fem.experiments import flat_punch_indentation, rheometer_torsion
 from .fem.tled import DynamicRelaxationError, ElementInversionError
@@ -563,7 +564,8 @@ def run_uq_indentation(posterior_ncs, population_json, fits_dir, out_nc, figure_
                        {"experiment": "flat-punch indentation", "model": record.model_key,
                         "elastic_law": elastic_card(card, record, record.params)["elastic_law"],
                         "punch_diameter_m": punch_diameter_m, "max_depth_m": max_depth_m, "speed_m_s": speed_m_s,
-                        "element_size_m": element_size_m, "n_draws": n_draws, "seed": seed})
+                        "element_size_m": element_size_m, "n_increments": n_increments, "n_draws": n_draws,
+                        "seed": seed})
     write_netcdf(ds, out_nc)
     plot_bands(ds, figure_path, "depth", "force", 1e3, 1e3, "indentation depth [mm]", "force [mN]",
                f"{record.model_key}: {punch_diameter_m * 1e3:g} mm punch")
@@ -623,3 +625,60 @@ __all__ = ["problem_for_record", "internal_covariance", "sample_record_posterior
            "reference_shear_modulus", "piece_levels", "run_population", "elastic_card", "band",
            "run_uq_indentation", "run_uq_torsion", "propagate", "recommended_posterior",
            "bands_dataset", "plot_bands", "SOURCES", "predictive_draws", "predictive_band", "N_PREDICTIVE"]
+
+
+#: columns of :func:`extension_indentation`'s table
+EXTENSION_INDENTATION_COLUMNS = (
+    "cause", "extension_model", "baseline_model", "depth_m", "baseline_force_n", "extension_force_n", "difference_n",
+    "relative_difference", "measurement_q05_n", "measurement_q95_n", "specimen_q05_n", "specimen_q95_n",
+    "outside_measurement_band", "outside_specimen_band", "status")
+
+
+def extension_indentation(bands_nc, simulation_cards_dir, out_csv, n_threads: int = 1) -> pd.DataFrame:
+    """The flat-punch indentation of :func:`run_uq_indentation` with each named extension's card beside its baseline:
+    what the extension changes in the force a surgeon would feel, against the baseline's posterior and specimen bands.
+
+    For every cause in the simulation cards' index (:mod:`tissuemech.diagnosis.simulation_cards`) with both
+    full-data cards (the extension and the baseline fitted to the same runs by the same path, so that the difference
+    is the extension's and not a different fit's), both are pressed to the bands' depth with the bands' punch,
+    speed, mesh and increments (read from ``bands_nc``). The baseline's 5-95 % bands at that depth are taken relative
+    to the fit optimum they were drawn around and applied to the baseline card's force: the extension's force
+    outside the measurement band is a difference the parameter uncertainty of the data cannot produce; outside the
+    specimen band, one larger than the spread between specimens. A card that fails to run gives a row with its
+    status. Writes ``out_csv`` (columns :data:`EXTENSION_INDENTATION_COLUMNS`; no rows when nothing was named).
+    """
+    bands = read_netcdf(bands_nc)
+    a = bands.attrs
+    settings = dict(punch_diameter_m=float(a["punch_diameter_m"]), max_depth_m=float(a["max_depth_m"]),
+                    speed_m_s=float(a["speed_m_s"]))
+    options = dict(element_size_m=float(a["element_size_m"]), n_increments=int(a.get("n_increments", 6)),
+                   n_threads=n_threads)
+    optimum = float(bands["force_optimum"].values[-1])
+    rel = {f"{src}_{q}": float(bands[f"{src}_{q}"].values[-1]) / optimum
+           for src in ("measurement", "specimen") for q in ("q05", "q95")}
+    folder = Path(simulation_cards_dir)
+    index = json.loads((folder / INDEX).read_text()) if (folder / INDEX).is_file() else {}
+    rows = []
+    for cause, entry in (index.get("causes") or {}).items():
+        if not entry.get("card") or not entry.get("baseline_card"):
+            continue
+        row = {"cause": cause, "extension_model": entry.get("extension_model"),
+               "baseline_model": entry.get("baseline_model"), "depth_m": settings["max_depth_m"]}
+        try:
+            force = {}
+            for role, file in (("baseline", entry["baseline_card"]), ("extension", entry["card"])):
+                ds = flat_punch_indentation(MaterialCard.from_json(folder / file).for_fem(), **settings, **options)
+                force[role] = float(ds["force"].values[-1])
+        except (ElementInversionError, DynamicRelaxationError, ValueError) as exc:
+            rows.append({**row, "status": f"not run: {exc}"})
+            continue
+        base, ext = force["baseline"], force["extension"]
+        row.update(baseline_force_n=base, extension_force_n=ext, difference_n=ext - base,
+                   relative_difference=(ext - base) / base,
+                   **{f"{k}_n": base * v for k, v in rel.items()}, status="ok")
+        row["outside_measurement_band"] = bool(not row["measurement_q05_n"] <= ext <= row["measurement_q95_n"])
+        row["outside_specimen_band"] = bool(not row["specimen_q05_n"] <= ext <= row["specimen_q95_n"])
+        rows.append(row)
+    table = pd.DataFrame(rows, columns=list(EXTENSION_INDENTATION_COLUMNS))
+    write_text(table.to_csv(index=False), out_csv)
+    return table

@@ -132,3 +132,22 @@ rule uq_torsion:
         pkg=script_hash("workflow/scripts/uq_fem.py"),
     script:
         "../scripts/uq_fem.py"
+
+
+rule uq_extension_indentation:
+    # the named extensions' full-data cards beside their baseline on the flat punch of the bands above
+    input:
+        bands="results/{dataset}/uq/indentation_material.nc",
+        cards="results/{dataset}/diagnosis/simulation_cards",
+        compiled=NUMBA_COMPILED,
+    output:
+        table="results/{dataset}/uq/extension_indentation.csv",
+    log:
+        "logs/{dataset}/uq_extension_indentation.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/uq_extension_indentation.tsv"
+    threads: FEM_THREADS
+    params:
+        pkg=script_hash("workflow/scripts/uq_extension.py"),
+    script:
+        "../scripts/uq_extension.py"

@@ -5,11 +5,14 @@ Pipkin-Rogers) is scored by refitting the baseline and the extension on the trai
 (:func:`tissuemech.diagnosis.baseline.extension_gain`). Those fits become cards here, so that the FEM replay
 (:mod:`tissuemech.fem.replay`, rule ``fem_replay``) runs the same comparison in the simulator:
 
-* ``<cause>.json`` -- the extension fitted to every run (the card a simulation of the material would use);
+* ``<cause>.json`` -- the extension fitted to every run (the card a simulation of the material would use), and
+  ``<cause>.baseline.json`` -- the baseline fitted to the same runs by the same path (the pair the simulator
+  compares on a new experiment, e.g. :func:`tissuemech.uq.extension_indentation`);
 * ``<cause>.<fold>.baseline.json`` / ``<cause>.<fold>.extension.json`` -- both models fitted without the fold's
   held-out runs; their ``valid_range.tests``/``conditions`` list the averaged curves (``test|condition``, the
   labels of ``averages.nc``) the fits saw, so the replay marks every other curve ``held_out``;
-* ``index.json`` -- what was written: per cause the full card, and per fold the two cards and the held-out curves.
+* ``index.json`` -- what was written: per cause the two full-data cards (``card``, ``baseline_card``), and per fold
+  the two cards and the held-out curves.
 
 Nothing is written for a cause that was not named (``detected``), whose fix was not scored, or whose fix kept no
 fits (a fix that is not a refit: an offset, a shift, a correction of the data). The folder itself is always
@@ -90,6 +93,9 @@ def write_simulation_cards(result: Mapping, simulation_fits: Mapping[str, Sequen
                 card = _card(f["extension"], fix["model"], taus, f["train"], poisson_ratio, dataset, cause)
                 write_card_files(card, out, stem=cause)
                 entry["card"] = f"{cause}.json"
+                write_card_files(_card(f["baseline"], str(result.get("model")), taus, f["train"], poisson_ratio,
+                                       dataset, f"{cause}:baseline"), out, stem=f"{cause}.baseline")
+                entry["baseline_card"] = f"{cause}.baseline.json"
                 continue
             stem = fold_stem(cause, f["label"])
             write_card_files(_card(f["baseline"], str(result.get("model")), taus, f["train"], poisson_ratio, dataset,
