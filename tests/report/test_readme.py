@@ -122,7 +122,13 @@ def test_brain_figures_are_those_of_the_shipped_results(text):
     nonsep = named["nonseparable_relaxation"]["fix"]
     assert f"with gain {nonsep['gain']:.2g};" in text
     sim = nonsep["simulation"]
-    assert (f"the NRMSE falls from {sim['before']:.2g} to {sim['after']:.2g}, gain {sim['gain']:.2g})") in text
+    assert (f"the NRMSE falls from {sim['before']:.2g} to {sim['after']:.2g}, gain {sim['gain']:.2g};") in text
+    felt = pd.read_csv(_results("porcine_brain_thesis", "uq/extension_indentation.csv")).set_index("cause")
+    felt = felt.loc["nonseparable_relaxation"]
+    band = "outside" if felt["outside_measurement_band"] else "inside"
+    change = f"{100 * felt['relative_difference']:.2g}".replace("-", "−")
+    assert (f"in a {1e3 * felt['depth_m']:.2g} mm flat-punch indentation its card changes the force by "
+            f"{change} %, {band} the baseline's posterior band") in text
     assert f"`amplitude_softening` (gain {named['amplitude_softening']['fix']['gain']:.2g})" in text
     inertia = named["instrument_inertia"]
     assert f"dI = {_sci(inertia['effect_size'])} kg m², gain {inertia['fix']['gain']:.2g})" in text
