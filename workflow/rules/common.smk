@@ -288,7 +288,11 @@ def uq_targets():
                 targets.append(f"results/{name}/population/{scope}.card.json")
                 if POSTERIOR.get("fem_draws", 0):
                     targets.append(f"results/{name}/uq/indentation_{scope}.nc")
-                    if scope == "material" and is_diagnosed(name) and has_fem_replay(name):
+                    if (
+                        scope == "material"
+                        and is_diagnosed(name)
+                        and has_fem_replay(name)
+                    ):
                         # the diagnosis's named extensions pressed beside their baseline (rule
                         # uq_extension_indentation)
                         targets.append(f"results/{name}/uq/extension_indentation.csv")
