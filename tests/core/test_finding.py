@@ -59,3 +59,17 @@ def test_the_report_prints_detected_findings_with_their_fix(tmp_path):
     text = diagnosis_html(path)
     assert "<code>torque_offset</code>" in text and "gain 0.25" in text and "qlv_rp3_prony4+offset" in text
     assert "elapsed_time_drift" not in text
+
+
+def test_the_report_says_what_the_named_extension_changes_in_the_indentation(tmp_path):
+    path = write_diagnosis_json({"findings": [_named_finding()]}, tmp_path / "diagnosis.json")
+    (tmp_path / "uq").mkdir()
+    (tmp_path / "uq" / "extension_indentation.csv").write_text(
+        "cause,extension_model,baseline_model,depth_m,baseline_force_n,extension_force_n,difference_n,"
+        "relative_difference,measurement_q05_n,measurement_q95_n,specimen_q05_n,specimen_q95_n,"
+        "outside_measurement_band,outside_specimen_band,status\n"
+        "torque_offset,ext,base,0.0015,0.012,0.015,0.003,0.25,0.0118,0.0122,0.009,0.0148,True,True,ok\n")
+    text = diagnosis_html(path)
+    assert ("1.5 mm flat-punch indentation the extension's card changes the force from 12 to 15 mN (25 %), "
+            "outside the baseline's posterior 5-95 % band (11.8-12.2 mN) and outside the spread between "
+            "specimens") in text
