@@ -313,6 +313,15 @@ def prony_update(decay, gain, h0, h1, h2, h3, h4, h5, d0, d1, d2, d3, d4, d5):
             decay * h3 + gain * d3, decay * h4 + gain * d4, decay * h5 + gain * d5)
 
 
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def equilibrium_start(weight, accumulate, se0, se1, se2, se3, se4, se5, a0, a1, a2, a3, a4, a5):
+    """The start of a stress pass's sum: ``weight S_e`` (the equilibrium part), plus with ``accumulate`` the stress
+    ``a`` that the passes of the other Prony blocks left (a select, not a branch: the loop stays vectorisable)."""
+    return (weight * se0 + (a0 if accumulate else 0.0), weight * se1 + (a1 if accumulate else 0.0),
+            weight * se2 + (a2 if accumulate else 0.0), weight * se3 + (a3 if accumulate else 0.0),
+            weight * se4 + (a4 if accumulate else 0.0), weight * se5 + (a5 if accumulate else 0.0))
+
+
 #: Prony terms of one call of :func:`qlv_stress_pass` / :func:`pipkin_rogers_stress_pass` (written out: see there)
 PRONY_BLOCK = 4
 #: Prony terms of the vectorised kernel: :func:`internal_forces` calls the stress pass once per block of
@@ -358,12 +367,8 @@ def qlv_stress_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f33a, jm23a,
             sp5[e] = se5 if commit_prev else sp5[e]
             # the four Prony terms are written out, each with its own six state arrays (ha..hd): one array per stored
             # component keeps the loop vectorisable (module note), so no loop over terms of a 2-D state
-            s0 = g_inf * se0 + (s0a[e] if accumulate else 0.0)
-            s1 = g_inf * se1 + (s1a[e] if accumulate else 0.0)
-            s2 = g_inf * se2 + (s2a[e] if accumulate else 0.0)
-            s3 = g_inf * se3 + (s3a[e] if accumulate else 0.0)
-            s4 = g_inf * se4 + (s4a[e] if accumulate else 0.0)
-            s5 = g_inf * se5 + (s5a[e] if accumulate else 0.0)
+            s0, s1, s2, s3, s4, s5 = equilibrium_start(g_inf, accumulate, se0, se1, se2, se3, se4, se5,
+                                                       s0a[e], s1a[e], s2a[e], s3a[e], s4a[e], s5a[e])
             x0, x1, x2, x3, x4, x5 = prony_update(da, ga, ha0[e], ha1[e], ha2[e], ha3[e], ha4[e], ha5[e],
                                                    d0, d1, d2, d3, d4, d5)
             ha0[e], ha1[e], ha2[e] = (x0 if commit else ha0[e]), (x1 if commit else ha1[e]), (x2 if commit else ha2[e])
@@ -443,13 +448,8 @@ def pipkin_rogers_stress_pass(f11a, f12a, f13a, f21a, f22a, f23a, f31a, f32a, f3
             sp3[e] = se3 if commit_prev else p3
             sp4[e] = se4 if commit_prev else p4
             sp5[e] = se5 if commit_prev else p5
-            w_eq = inf_weight * winf
-            s0 = w_eq * se0 + (s0a[e] if accumulate else 0.0)
-            s1 = w_eq * se1 + (s1a[e] if accumulate else 0.0)
-            s2 = w_eq * se2 + (s2a[e] if accumulate else 0.0)
-            s3 = w_eq * se3 + (s3a[e] if accumulate else 0.0)
-            s4 = w_eq * se4 + (s4a[e] if accumulate else 0.0)
-            s5 = w_eq * se5 + (s5a[e] if accumulate else 0.0)
+            s0, s1, s2, s3, s4, s5 = equilibrium_start(inf_weight * winf, accumulate, se0, se1, se2, se3, se4, se5,
+                                                       s0a[e], s1a[e], s2a[e], s3a[e], s4a[e], s5a[e])
             x0, x1, x2, x3, x4, x5 = pipkin_rogers_update(da, fa, wa, wpa[e], ha0[e], ha1[e], ha2[e], ha3[e], ha4[e],
                                                           ha5[e], se0, se1, se2, se3, se4, se5, p0, p1, p2, p3, p4, p5)
             ha0[e], ha1[e], ha2[e] = (x0 if commit else ha0[e]), (x1 if commit else ha1[e]), (x2 if commit else ha2[e])
