@@ -43,6 +43,9 @@ FIT_RECORD_SCHEMA_VERSION = "1.0"
 #: 1.0: ``schema_version`` itself, the Pipkin-Rogers block ``pipkin_rogers``, ``abaqus_reason`` and the MARLOW table
 #: in the card (``abaqus_marlow_table``), so that every format is written from the card alone
 CARD_SCHEMA_VERSION = "1.0"
+#: the index file of a dataset's simulation cards (:mod:`tissuemech.diagnosis.simulation_cards` writes it, the FEM
+#: replay and the uncertainty stage read it)
+SIMULATION_CARDS_INDEX = "index.json"
 
 
 class SchemaVersionError(ValueError):

@@ -43,13 +43,12 @@ from .canonical import read_netcdf, write_json, write_netcdf, write_text
 from .curves import as_str, select_average
 from .fem.experiments import flat_punch_indentation, rheometer_torsion
 from .fem.materials import available_laws
-from .diagnosis.simulation_cards import INDEX
 from .fem.replay import FIX_SIMULATION_METRIC, ReplayCard, ReplaySettings, fix_simulation, replay
 from .fem.tled import DynamicRelaxationError, ElementInversionError
 from .material import MaterialFit, baseline_model, cross_test, fit_material, held_out_score
 from .models.registry import get_model
 from .plots import new_figure, plot_cross_test, plot_force_depth, plot_torque, save_figure
-from .records import MaterialCard
+from .records import SIMULATION_CARDS_INDEX, MaterialCard
 from .scopes import (ALL_MODES_SCOPE, MASTERCURVE_SCOPE, MATERIAL_LAWS, MATERIAL_SCOPE,  # noqa: F401 (re-exported)
                      MATERIAL_TESTS, dataset_scopes)
 from .stats import nrmse
@@ -528,7 +527,7 @@ def replay_cards(ranking_csv, cards_root, diagnosis_json=None, extension_cards_d
 def extension_replay_cards(extension_cards_dir) -> list[ReplayCard]:
     """The replay cards of the diagnosis's simulation cards (``index.json`` of
     :func:`tissuemech.diagnosis.simulation_cards.write_simulation_cards`); none without the folder or its index."""
-    index_path = Path(extension_cards_dir) / INDEX if extension_cards_dir else None
+    index_path = Path(extension_cards_dir) / SIMULATION_CARDS_INDEX if extension_cards_dir else None
     if index_path is None or not index_path.is_file():
         return []
     index = json.loads(index_path.read_text())
@@ -551,7 +550,7 @@ def simulation_fixes(table: pd.DataFrame, extension_cards_dir) -> dict:
     """``fix.simulation`` of every named cause with simulation cards: per fold the replay's held-out NRMSE of the
     fold's baseline card and of its extension card (:func:`tissuemech.fem.replay.fix_simulation`), averaged over the
     folds (``before``, ``after``, ``gain``, ``held_out_tests``, ``folds``)."""
-    index_path = Path(extension_cards_dir) / INDEX if extension_cards_dir else None
+    index_path = Path(extension_cards_dir) / SIMULATION_CARDS_INDEX if extension_cards_dir else None
     if index_path is None or not index_path.is_file():
         return {}
     out = {}
@@ -625,29 +624,57 @@ def figure_replay(points: pd.DataFrame, table: pd.DataFrame):
     return fig
 
 
-def run_fem_replay(cards: Sequence[ReplayCard], averages_path, out_csv, points_csv, figure_path,
-                   element_size_m: float, n_threads: int = 1, extension_cards_dir=None,
-                   fix_json=None) -> pd.DataFrame:
+def read_replay_table(path) -> pd.DataFrame:
+    """A ``replay.csv`` as :func:`tissuemech.fem.replay.replay` returned it: text columns as text (an empty card
+    name stays ``""``), ``held_out`` as a nullable boolean."""
+    table = pd.read_csv(path)
+    for name in ("test", "condition", "card", "role", "status"):
+        table[name] = table[name].fillna("").astype(str)
+    table["held_out"] = table["held_out"].astype("boolean")
+    return table
+
+
+def run_fem_replay(cards: Sequence[ReplayCard], averages_path, out_csv, points_csv, figure_path=None,
+                   element_size_m: float = float("nan"), n_threads: int = 1, extension_cards_dir=None,
+                   fix_json=None, replayed=None) -> pd.DataFrame:
     """The FEM replay of a dataset's measured tests (:func:`tissuemech.fem.replay.replay`) with ``cards``
     (:func:`replay_cards`): ``replay.csv`` (one row per test x condition x card), the measured and simulated points
-    (``points_csv``) and their figure. Without any card the table still lists every test, ``not replayed``. With
-    ``fix_json``: the ``fix.simulation`` of every named cause whose simulation cards were replayed
-    (:func:`simulation_fixes`), for the final ``diagnosis.json``."""
+    (``points_csv``) and, with ``figure_path``, their figure. Without any card the table still lists every test,
+    ``not replayed``. With ``fix_json``: the ``fix.simulation`` of every named cause whose simulation cards were
+    replayed (:func:`simulation_fixes`), for the final ``diagnosis.json``.
+
+    ``replayed``: ``(table_csv, points_csv)`` of a replay already run (rule ``fem_replay_baseline``: the baseline
+    card, which needs no diagnosis, runs beside the diagnosis); its rows are kept, and a card it already ran (same
+    name) is not run again.
+    """
     settings = ReplaySettings(element_size_m=float(element_size_m), n_threads=n_threads)
 
     def progress(row):
         logger.info("replay %s %s %s: %s, NRMSE %.4g, %d elements, %.2f s", row["card"], row["test"],
                     row["condition"], row["status"], row["nrmse"], row["n_elements"], row["wall_s"])
 
+    done_table = done_points = None
+    if replayed is not None:
+        done_table = read_replay_table(replayed[0])
+        done_points = pd.read_csv(replayed[1])
+        done = set(done_table["card"].dropna().astype(str))
+        cards = [c for c in cards if c.name not in done]
     # without a card the FEM can run, every test still gets its row, saying so
-    cards = list(cards) or [ReplayCard("", "baseline", None, "no card the FEM can run in the replay scopes "
-                                                              f"{', '.join(REPLAY_SCOPES)}")]
+    elif not cards:
+        cards = [ReplayCard("", "baseline", None, "no card the FEM can run in the replay scopes "
+                                                  f"{', '.join(REPLAY_SCOPES)}")]
     table, points = replay(read_netcdf(averages_path), cards, settings, on_row=progress)
+    if done_table is not None:
+        table = pd.concat([done_table, table], ignore_index=True) if len(table) else done_table
+        table["held_out"] = table["held_out"].astype("boolean")
+        points = pd.concat([done_points, points], ignore_index=True) if len(points) else done_points
     write_text(table.to_csv(index=False), out_csv)
     write_text(points.to_csv(index=False), points_csv)
-    # the figure: the baseline and the full-data extension cards over every test (fold cards are scores, not curves)
-    full = ~table["role"].str.endswith(":baseline") & ~table["card"].str.contains(r"\.extension$", regex=True)
-    save_figure(figure_replay(points[points["card"].isin(set(table.loc[full, "card"]))], table[full]), figure_path)
+    if figure_path is not None:
+        # the baseline and the full-data extension cards over every test (fold cards are scores, not curves)
+        full = ~table["role"].str.endswith(":baseline") & ~table["card"].str.contains(r"\.extension$", regex=True)
+        save_figure(figure_replay(points[points["card"].isin(set(table.loc[full, "card"]))], table[full]),
+                    figure_path)
     if fix_json is not None:
         write_json(simulation_fixes(table, extension_cards_dir), fix_json)
     return table

@@ -69,14 +69,13 @@ from .cards import (family_material, fitted_strain_max, is_pipkin_rogers, materi
                     prony_from_step_response)
 from .canonical import NETCDF_ENGINE, atomic_write, read_netcdf, write_json, write_netcdf, write_text
 from .curves import drop_flagged, select_average
-from .diagnosis.simulation_cards import INDEX
 from .models.base import initial_shear_modulus
 from .fem.experiments import flat_punch_indentation, rheometer_torsion
 from .fem.tled import DynamicRelaxationError, ElementInversionError
 from .models.registry import build_model, get_model
 from .pipeline import load_runs
 from .plots import new_figure, save_figure
-from .records import MaterialCard
+from .records import SIMULATION_CARDS_INDEX, MaterialCard
 from .stats import mixed_effects
 from .stages import spec_curves
 
@@ -657,7 +656,8 @@ def extension_indentation(bands_nc, simulation_cards_dir, out_csv, n_threads: in
     rel = {f"{src}_{q}": float(bands[f"{src}_{q}"].values[-1]) / optimum
            for src in ("measurement", "specimen") for q in ("q05", "q95")}
     folder = Path(simulation_cards_dir)
-    index = json.loads((folder / INDEX).read_text()) if (folder / INDEX).is_file() else {}
+    index_path = folder / SIMULATION_CARDS_INDEX
+    index = json.loads(index_path.read_text()) if index_path.is_file() else {}
     rows = []
     for cause, entry in (index.get("causes") or {}).items():
         if not entry.get("card") or not entry.get("baseline_card"):

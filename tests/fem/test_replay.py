@@ -280,6 +280,34 @@ def test_replay_csv_contract(tmp_path):
     assert none.set_index("test").loc["creep_recovery", "status"].startswith("not replayed: no card the FEM can run")
 
 
+
+def test_replay_in_two_stages_equals_one(tmp_path):
+    """Rule fem_replay_baseline replays the baseline card beside the diagnosis; rule fem_replay adds the extension
+    cards to its table: the same rows and points as one replay of every card, and the baseline is not run twice."""
+    from tissuemech.stages import read_replay_table, run_fem_replay
+
+    runs = [r for r in linear_runs() if r.attrs["test"] == "stress_relaxation"]
+    averages = write_averages(average_runs(runs), tmp_path / "averages.nc")
+    base = ReplayCard("s/base", "baseline", MaterialCard.from_dict(LINEAR_CARD))
+    ext = ReplayCard("s/ext", "nonseparable_relaxation", MaterialCard.from_dict(extension_card()))
+    one = run_fem_replay([base, ext], averages, tmp_path / "one.csv", tmp_path / "one_points.csv",
+                         element_size_m=3e-3)
+    run_fem_replay([base], averages, tmp_path / "b.csv", tmp_path / "b_points.csv", element_size_m=3e-3)
+    two = run_fem_replay([base, ext], averages, tmp_path / "two.csv", tmp_path / "two_points.csv",
+                         tmp_path / "two.png", element_size_m=3e-3,
+                         replayed=(tmp_path / "b.csv", tmp_path / "b_points.csv"))
+    assert (tmp_path / "two.png").is_file()
+    read = read_replay_table(tmp_path / "two.csv")
+    assert list(read["card"]) == list(one["card"]) and set(one["card"]) == {"s/base", "s/ext"}
+    assert (one["status"] == "ok").all()
+    timing = ["wall_s"]
+    pd.testing.assert_frame_equal(read.drop(columns=timing), one.drop(columns=timing), check_dtype=False)
+    pd.testing.assert_frame_equal(two.drop(columns=timing), one.drop(columns=timing), check_dtype=False)
+    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "two_points.csv"), pd.read_csv(tmp_path / "one_points.csv"))
+    # the baseline rows were read, not run again: their timings are the first stage's
+    first = read_replay_table(tmp_path / "b.csv")
+    assert list(read["wall_s"][:len(first)]) == pytest.approx(list(first["wall_s"]))
+
 def test_fix_simulation_averages_the_curves_neither_card_was_fitted_to():
     rows = [  # test, condition, card, role, held_out, nrmse, status
         ("creep_recovery", "a", "j/qlv", "baseline", True, 0.20, "ok"),

@@ -228,6 +228,17 @@ def all_targets():
 POSTERIOR = config.get("posterior", {})
 
 
+def critical_chain_priority(wildcards):
+    """Scheduling priority of a dataset's chain (ingest -> fits -> posterior -> rank -> diagnosis -> replay): the
+    datasets with posteriors (posterior.datasets) have the longest chain, so theirs start first, and on few cores
+    the run does not end on one long job alone."""
+    return (
+        10
+        if getattr(wildcards, "dataset", None) in POSTERIOR.get("datasets", [])
+        else 0
+    )
+
+
 def posterior_scopes_of(name):
     """Scopes of a dataset whose fits get posteriors (config posterior.datasets / .scopes).
 

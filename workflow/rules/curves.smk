@@ -42,6 +42,7 @@ rule average:
         "logs/{dataset}/average.log",
     benchmark:
         "benchmarks/runs/{dataset}/average.tsv"
+    priority: critical_chain_priority
     params:
         exclude_flagged=config["fit"].get("exclude_flagged", True),
         pkg=script_hash("workflow/scripts/average.py"),

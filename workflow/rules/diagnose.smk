@@ -28,6 +28,7 @@ rule diagnose:
         "logs/{dataset}/diagnose.log",
     benchmark:
         "benchmarks/runs/{dataset}/diagnose.tsv"
+    priority: critical_chain_priority
     params:
         alpha=config["diagnosis"]["alpha"],
         poisson_ratio=config["fem"]["poisson_ratio"],
@@ -52,6 +53,7 @@ rule diagnosis:
         "logs/{dataset}/diagnosis.log",
     benchmark:
         "benchmarks/runs/{dataset}/diagnosis.tsv"
+    priority: critical_chain_priority
     params:
         pkg=script_hash("workflow/scripts/diagnosis.py"),
     script:

@@ -67,14 +67,41 @@ rule fem_torsion:
         "../scripts/fem_torsion.py"
 
 
+rule fem_replay_baseline:
+    # the baseline card needs no diagnosis: it is replayed while the diagnosis runs (rule fem_replay adds the
+    # extension cards the diagnosis names)
+    input:
+        compiled=NUMBA_COMPILED,
+        ranking="results/{dataset}/ranking.csv",
+        averages="results/{dataset}/averages.nc",
+    output:
+        table="results/{dataset}/fem/replay_baseline.csv",
+        points="results/{dataset}/fem/replay_baseline_points.csv",
+    log:
+        "logs/{dataset}/fem_replay_baseline.log",
+    benchmark:
+        "benchmarks/runs/{dataset}/fem_replay_baseline.tsv"
+    priority: critical_chain_priority
+    threads: FEM_THREADS
+    params:
+        cards_root="results/{dataset}/cards",
+        element_size_m=config["fem"]["cylinder_element_size_m"],
+        pkg=script_hash("workflow/scripts/fem_replay.py"),
+    script:
+        "../scripts/fem_replay.py"
+
+
 def fem_replay_inputs(wildcards):
-    """The replay's inputs: its cards (through ranking.csv), the averages, and diagnosis.json where the dataset has
-    one (the named causes whose extension cards are replayed beside the baseline card).
+    """The replay's inputs: its cards (through ranking.csv), the averages, the baseline card's replay, and
+    diagnosis.json where the dataset has one (the named causes whose extension cards are replayed beside the
+    baseline card).
     """
     inputs = {
         "compiled": NUMBA_COMPILED,
         "ranking": f"results/{wildcards.dataset}/ranking.csv",
         "averages": f"results/{wildcards.dataset}/averages.nc",
+        "replayed_table": f"results/{wildcards.dataset}/fem/replay_baseline.csv",
+        "replayed_points": f"results/{wildcards.dataset}/fem/replay_baseline_points.csv",
     }
     if has_diagnosis(wildcards.dataset):
         inputs["diagnosis"] = f"results/{wildcards.dataset}/diagnosis/findings.json"
@@ -108,6 +135,7 @@ rule fem_replay:
         "logs/{dataset}/fem_replay.log",
     benchmark:
         "benchmarks/runs/{dataset}/fem_replay.tsv"
+    priority: critical_chain_priority
     threads: FEM_THREADS
     params:
         cards_root="results/{dataset}/cards",

@@ -22,6 +22,7 @@ rule fit_scope:
         "logs/{dataset}/fit_{scope}.log",
     benchmark:
         "benchmarks/runs/{dataset}/fit_{scope}.tsv"
+    priority: critical_chain_priority
     group:
         "fits"
     params:
@@ -92,6 +93,7 @@ rule rank:
         "logs/{dataset}/rank.log",
     benchmark:
         "benchmarks/runs/{dataset}/rank.tsv"
+    priority: critical_chain_priority
     params:
         cards_root="results/{dataset}/cards",
         pkg=script_hash("workflow/scripts/rank.py"),

@@ -17,6 +17,7 @@ rule ingest:
         "logs/{dataset}/ingest.log",
     benchmark:
         "benchmarks/runs/{dataset}/ingest.tsv"
+    priority: critical_chain_priority
     params:
         folder=dataset_dir,
         pkg=script_hash("workflow/scripts/ingest.py"),

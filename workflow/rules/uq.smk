@@ -34,6 +34,7 @@ rule posterior:
         "logs/{dataset}/posterior_{scope}_{model}.log",
     benchmark:
         "benchmarks/runs/{dataset}/posterior_{scope}_{model}.tsv"
+    priority: critical_chain_priority
     params:
         spec=scope_spec,
         walkers=POSTERIOR.get("walkers"),

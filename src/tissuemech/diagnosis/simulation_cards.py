@@ -31,10 +31,9 @@ from ..canonical import write_json
 from ..cards import make_card, write_card_files
 from ..curves import condition_label, condition_of
 from ..models.registry import model_on_times
+from ..records import SIMULATION_CARDS_INDEX
 from .findings import write_diagnosis_json
 
-#: the index of a dataset's simulation cards
-INDEX = "index.json"
 
 
 def curve_key(run: xr.Dataset) -> str:
@@ -106,7 +105,7 @@ def write_simulation_cards(result: Mapping, simulation_fits: Mapping[str, Sequen
                                    "extension": f"{stem}.extension.json",
                                    "held_out": sorted({curve_key(r) for r in f["held_out"]})})
         index["causes"][cause] = entry
-    write_json(index, out / INDEX)
+    write_json(index, out / SIMULATION_CARDS_INDEX)
     return index
 
 
