@@ -43,7 +43,7 @@ from .plots import all_positive, axis_label, figure_table, new_figure, safe_name
 from .ranking import recommended_models
 from .records import Finding, FitRecord, MaterialCard
 from .stages import run_fit_scope, spec_curves
-from .uq import predictive_band
+from .uq import BRAIN_GEOMETRY, predictive_band
 
 # ------------------------------------------------------------------------------------------------------
 # fits over their data
@@ -688,22 +688,33 @@ def _what_to_do(finding: Mapping) -> str:
 
 
 def _extension_indentation(path: Path) -> dict[str, str]:
-    """Per cause, the sentence on what its extension changes in the flat-punch force
+    """Per cause, the sentences on what its extension changes in the indentation force: the flat punch on a tissue
+    block against the baseline's bands, and the MNI brain where it was pressed
     (:func:`tissuemech.uq.extension_indentation`); empty without the table."""
     if not path.is_file():
         return {}
-    out = {}
+    out: dict[str, str] = {}
     for r in pd.read_csv(path).to_dict("records"):
+        brain = r.get("geometry") == BRAIN_GEOMETRY
+        where_run = "MNI brain indentation" if brain else "flat-punch indentation"
         if r.get("status") != "ok":
-            out[r["cause"]] = f" Flat-punch indentation with the extension's card: {_esc(str(r.get('status')))}."
-            continue
-        where = ("outside" if r["outside_measurement_band"] else "inside") + " the baseline's posterior 5-95 % band"
-        spread = ("outside" if r["outside_specimen_band"] else "inside") + " the spread between specimens"
-        out[r["cause"]] = (f" In a {_number(1e3 * r['depth_m'])} mm flat-punch indentation the extension's card "
-                           f"changes the force from {_number(1e3 * r['baseline_force_n'])} to "
-                           f"{_number(1e3 * r['extension_force_n'])} mN ({_number(100 * r['relative_difference'])} %), "
-                           f"{where} ({_number(1e3 * r['measurement_q05_n'])}-{_number(1e3 * r['measurement_q95_n'])} "
-                           f"mN) and {spread}.")
+            text = f" {where_run.capitalize()} with the extension's card: {_esc(str(r.get('status')))}."
+        else:
+            band = ("outside" if r["outside_measurement_band"] else "inside") + " the baseline's posterior 5-95 % band"
+            spread = ("outside" if r["outside_specimen_band"] else "inside") + " the spread between specimens"
+            change = (f"changes the force from {_number(1e3 * r['baseline_force_n'])} to "
+                      f"{_number(1e3 * r['extension_force_n'])} mN ({_number(100 * r['relative_difference'])} %)")
+            if brain:
+                nodes = r.get("punch_nodes")
+                resolved = (f"; the mesh puts {int(nodes)} surface node{'s' if int(nodes) != 1 else ''} on the "
+                            "punch face, so the force is a mesh-level estimate" if np.isfinite(nodes) else "")
+                text = (f" Pressed {_number(1e3 * r['depth_m'])} mm into the MNI brain, it {change}: {band} taken "
+                        f"relative, {spread}{resolved}.")
+            else:
+                text = (f" In a {_number(1e3 * r['depth_m'])} mm flat-punch indentation the extension's card {change}, "
+                        f"{band} ({_number(1e3 * r['measurement_q05_n'])}-{_number(1e3 * r['measurement_q95_n'])} "
+                        f"mN) and {spread}.")
+        out[r["cause"]] = out.get(r["cause"], "") + text
     return out
 
 

@@ -70,7 +70,7 @@ from .cards import (family_material, fitted_strain_max, is_pipkin_rogers, materi
 from .canonical import NETCDF_ENGINE, atomic_write, read_netcdf, write_json, write_netcdf, write_text
 from .curves import drop_flagged, select_average
 from .models.base import initial_shear_modulus
-from .fem.experiments import flat_punch_indentation, rheometer_torsion
+from .fem.experiments import brain_indentation, flat_punch_indentation, rheometer_torsion
 from .fem.tled import DynamicRelaxationError, ElementInversionError
 from .models.registry import build_model, get_model
 from .pipeline import load_runs
@@ -628,12 +628,15 @@ __all__ = ["problem_for_record", "internal_covariance", "sample_record_posterior
 
 #: columns of :func:`extension_indentation`'s table
 EXTENSION_INDENTATION_COLUMNS = (
-    "cause", "extension_model", "baseline_model", "depth_m", "baseline_force_n", "extension_force_n", "difference_n",
-    "relative_difference", "measurement_q05_n", "measurement_q95_n", "specimen_q05_n", "specimen_q95_n",
-    "outside_measurement_band", "outside_specimen_band", "status")
+    "cause", "geometry", "extension_model", "baseline_model", "depth_m", "baseline_force_n", "extension_force_n",
+    "difference_n", "relative_difference", "measurement_q05_n", "measurement_q95_n", "specimen_q05_n",
+    "specimen_q95_n", "outside_measurement_band", "outside_specimen_band", "punch_nodes", "status")
+#: ``geometry`` of the rows of :func:`extension_indentation`
+FLAT_PUNCH_GEOMETRY, BRAIN_GEOMETRY = "flat punch on a tissue block", "MNI brain"
 
 
-def extension_indentation(bands_nc, simulation_cards_dir, out_csv, n_threads: int = 1) -> pd.DataFrame:
+def extension_indentation(bands_nc, simulation_cards_dir, out_csv, n_threads: int = 1,
+                          brain_mesh=None) -> pd.DataFrame:
     """The flat-punch indentation of :func:`run_uq_indentation` with each named extension's card beside its baseline:
     what the extension changes in the force a surgeon would feel, against the baseline's posterior and specimen bands.
 
@@ -643,18 +646,31 @@ def extension_indentation(bands_nc, simulation_cards_dir, out_csv, n_threads: in
     speed, mesh and increments (read from ``bands_nc``). The baseline's 5-95 % bands at that depth are taken relative
     to the fit optimum they were drawn around and applied to the baseline card's force: the extension's force
     outside the measurement band is a difference the parameter uncertainty of the data cannot produce; outside the
-    specimen band, one larger than the spread between specimens. A card that fails to run gives a row with its
-    status. Writes ``out_csv`` (columns :data:`EXTENSION_INDENTATION_COLUMNS`; no rows when nothing was named).
+    specimen band, one larger than the spread between specimens.
+
+    With ``brain_mesh`` (a :class:`tissuemech.fem.mesh.TetMesh` in m) both cards are also pressed into the top of
+    the MNI brain (:func:`tissuemech.fem.experiments.brain_indentation`) with the same punch, depth, speed and
+    increments. The posterior draws are not run on the brain (32 brain solves); its band columns are the flat
+    punch's bands relative to their optimum, applied to the brain's baseline force: the relative parameter
+    uncertainty, not a band drawn on that geometry. ``punch_nodes``: the brain's surface nodes on the punch face at
+    the final depth (how finely the mesh resolves the punch; NaN on the block).
+
+    A card that fails to run gives a row with its status. Writes ``out_csv`` (columns
+    :data:`EXTENSION_INDENTATION_COLUMNS`; no rows when nothing was named).
     """
     bands = read_netcdf(bands_nc)
     a = bands.attrs
     settings = dict(punch_diameter_m=float(a["punch_diameter_m"]), max_depth_m=float(a["max_depth_m"]),
                     speed_m_s=float(a["speed_m_s"]))
-    options = dict(element_size_m=float(a["element_size_m"]), n_increments=int(a.get("n_increments", 6)),
-                   n_threads=n_threads)
+    n_increments = int(a.get("n_increments", 6))
     optimum = float(bands["force_optimum"].values[-1])
     rel = {f"{src}_{q}": float(bands[f"{src}_{q}"].values[-1]) / optimum
            for src in ("measurement", "specimen") for q in ("q05", "q95")}
+    geometries = {FLAT_PUNCH_GEOMETRY: lambda card: flat_punch_indentation(
+        card, **settings, element_size_m=float(a["element_size_m"]), n_increments=n_increments, n_threads=n_threads)}
+    if brain_mesh is not None:
+        geometries[BRAIN_GEOMETRY] = lambda card: brain_indentation(
+            card, **settings, mesh=brain_mesh, n_increments=n_increments, n_threads=n_threads)
     folder = Path(simulation_cards_dir)
     index_path = folder / SIMULATION_CARDS_INDEX
     index = json.loads(index_path.read_text()) if index_path.is_file() else {}
@@ -662,23 +678,24 @@ def extension_indentation(bands_nc, simulation_cards_dir, out_csv, n_threads: in
     for cause, entry in (index.get("causes") or {}).items():
         if not entry.get("card") or not entry.get("baseline_card"):
             continue
-        row = {"cause": cause, "extension_model": entry.get("extension_model"),
-               "baseline_model": entry.get("baseline_model"), "depth_m": settings["max_depth_m"]}
-        try:
-            force = {}
-            for role, file in (("baseline", entry["baseline_card"]), ("extension", entry["card"])):
-                ds = flat_punch_indentation(MaterialCard.from_json(folder / file).for_fem(), **settings, **options)
-                force[role] = float(ds["force"].values[-1])
-        except (ElementInversionError, DynamicRelaxationError, ValueError) as exc:
-            rows.append({**row, "status": f"not run: {exc}"})
-            continue
-        base, ext = force["baseline"], force["extension"]
-        row.update(baseline_force_n=base, extension_force_n=ext, difference_n=ext - base,
-                   relative_difference=(ext - base) / base,
-                   **{f"{k}_n": base * v for k, v in rel.items()}, status="ok")
-        row["outside_measurement_band"] = bool(not row["measurement_q05_n"] <= ext <= row["measurement_q95_n"])
-        row["outside_specimen_band"] = bool(not row["specimen_q05_n"] <= ext <= row["specimen_q95_n"])
-        rows.append(row)
+        cards = {role: MaterialCard.from_json(folder / entry[key]).for_fem()
+                 for role, key in (("baseline", "baseline_card"), ("extension", "card"))}
+        for geometry, press in geometries.items():
+            row = {"cause": cause, "geometry": geometry, "extension_model": entry.get("extension_model"),
+                   "baseline_model": entry.get("baseline_model"), "depth_m": settings["max_depth_m"]}
+            try:
+                runs = {role: press(card) for role, card in cards.items()}
+            except (ElementInversionError, DynamicRelaxationError, ValueError) as exc:
+                rows.append({**row, "status": f"not run: {exc}"})
+                continue
+            base, ext = (float(runs[r]["force"].values[-1]) for r in ("baseline", "extension"))
+            row.update(baseline_force_n=base, extension_force_n=ext, difference_n=ext - base,
+                       relative_difference=(ext - base) / base,
+                       punch_nodes=runs["baseline"].attrs.get("punch_nodes_at_max_depth", float("nan")),
+                       **{f"{k}_n": base * v for k, v in rel.items()}, status="ok")
+            row["outside_measurement_band"] = bool(not row["measurement_q05_n"] <= ext <= row["measurement_q95_n"])
+            row["outside_specimen_band"] = bool(not row["specimen_q05_n"] <= ext <= row["specimen_q95_n"])
+            rows.append(row)
     table = pd.DataFrame(rows, columns=list(EXTENSION_INDENTATION_COLUMNS))
     write_text(table.to_csv(index=False), out_csv)
     return table

@@ -74,3 +74,22 @@ def test_nothing_named_writes_an_empty_table(tmp_path):
     _bands(tmp_path / "bands.nc", 0.01, (0.95, 1.05), (0.5, 1.6))
     table = extension_indentation(tmp_path / "bands.nc", folder, tmp_path / "out.csv")
     assert table.empty and list(table.columns) == list(EXTENSION_INDENTATION_COLUMNS)
+
+
+def test_the_extension_in_the_brain_geometry_scales_too(tmp_path, cards):
+    """With a mesh for the brain, both cards are also pressed into it: the same scaling oracle, the flat punch's
+    bands taken relative, and the contact resolution reported."""
+    from tissuemech.fem.mesh import block_mesh
+    from tissuemech.uq import BRAIN_GEOMETRY, FLAT_PUNCH_GEOMETRY
+
+    # a stand-in for the brain, taller than the supported 25 mm base
+    mesh = block_mesh((0.03, 0.03, 0.04), (3, 3, 4))
+    _bands(tmp_path / "bands.nc", 0.01, measurement=(0.95, 1.05), specimen=(0.5, 1.6))
+    table = extension_indentation(tmp_path / "bands.nc", cards, tmp_path / "out.csv", brain_mesh=mesh)
+    assert table["geometry"].tolist() == [FLAT_PUNCH_GEOMETRY, BRAIN_GEOMETRY]
+    brain = table.set_index("geometry").loc[BRAIN_GEOMETRY]
+    assert brain["status"] == "ok" and brain["baseline_force_n"] > 0
+    assert brain["relative_difference"] == pytest.approx(0.3, rel=1e-6)
+    assert brain["specimen_q05_n"] == pytest.approx(0.5 * brain["baseline_force_n"])
+    assert brain["punch_nodes"] >= 1
+    assert np.isnan(table.set_index("geometry").loc[FLAT_PUNCH_GEOMETRY, "punch_nodes"])

@@ -135,12 +135,24 @@ rule uq_torsion:
         "../scripts/uq_fem.py"
 
 
+def extension_indentation_inputs(wildcards):
+    """The bands, the simulation cards and, for the brain-indentation dataset, the MNI brain mesh (both cards
+    are pressed into it too)."""
+    inputs = {
+        "bands": f"results/{wildcards.dataset}/uq/indentation_material.nc",
+        "cards": f"results/{wildcards.dataset}/diagnosis/simulation_cards",
+        "compiled": NUMBA_COMPILED,
+    }
+    if BRAIN_INDENTATION and wildcards.dataset == BRAIN_DATASET:
+        inputs["brain_mesh"] = BRAIN_FILES["brain_mesh"]
+    return inputs
+
+
 rule uq_extension_indentation:
-    # the named extensions' full-data cards beside their baseline on the flat punch of the bands above
+    # the named extensions' full-data cards beside their baseline on the flat punch of the bands above (and in the
+    # MNI brain)
     input:
-        bands="results/{dataset}/uq/indentation_material.nc",
-        cards="results/{dataset}/diagnosis/simulation_cards",
-        compiled=NUMBA_COMPILED,
+        unpack(extension_indentation_inputs),
     output:
         table="results/{dataset}/uq/extension_indentation.csv",
     log:
