@@ -123,12 +123,19 @@ def test_brain_figures_are_those_of_the_shipped_results(text):
     assert f"with gain {nonsep['gain']:.2g};" in text
     sim = nonsep["simulation"]
     assert (f"the NRMSE falls from {sim['before']:.2g} to {sim['after']:.2g}, gain {sim['gain']:.2g};") in text
-    felt = pd.read_csv(_results("porcine_brain_thesis", "uq/extension_indentation.csv")).set_index("cause")
-    felt = felt.loc["nonseparable_relaxation"]
-    band = "outside" if felt["outside_measurement_band"] else "inside"
-    change = f"{100 * felt['relative_difference']:.2g}".replace("-", "−")
-    assert (f"in a {1e3 * felt['depth_m']:.2g} mm flat-punch indentation its card changes the force by "
+    felt = pd.read_csv(_results("porcine_brain_thesis", "uq/extension_indentation.csv"))
+    felt = felt[felt["cause"] == "nonseparable_relaxation"].set_index("geometry")
+    flat, brain = felt.loc["flat punch on a tissue block"], felt.loc["MNI brain"]
+    band = "outside" if flat["outside_measurement_band"] else "inside"
+    change = f"{100 * flat['relative_difference']:.2g}".replace("-", "−")
+    assert (f"in a {1e3 * flat['depth_m']:.2g} mm flat-punch indentation its card changes the force by "
             f"{change} %, {band} the baseline's posterior band") in text
+    band = "outside" if brain["outside_measurement_band"] else "inside"
+    spread = "outside" if brain["outside_specimen_band"] else "inside"
+    change = f"{100 * brain['relative_difference']:.2g}".replace("-", "−")
+    assert (f"pressed {1e3 * brain['depth_m']:.2g} mm into the MNI brain it changes the force by {change} %, "
+            f"{band} the posterior band taken relative, {spread} the specimen spread, with "
+            f"{int(brain['punch_nodes'])} surface node") in text
     assert f"`amplitude_softening` (gain {named['amplitude_softening']['fix']['gain']:.2g})" in text
     inertia = named["instrument_inertia"]
     assert f"dI = {_sci(inertia['effect_size'])} kg m², gain {inertia['fix']['gain']:.2g})" in text
