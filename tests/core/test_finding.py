@@ -61,24 +61,29 @@ def test_the_report_prints_detected_findings_with_their_fix(tmp_path):
     assert "elapsed_time_drift" not in text
 
 
-def test_the_report_says_what_the_named_extension_changes_in_the_indentation(tmp_path):
+def _page_with_extension_table(tmp_path, table_csv: str) -> str:
+    """The diagnosis text of a page whose dataset has ``uq/extension_indentation.csv`` with ``table_csv``."""
     path = write_diagnosis_json({"findings": [_named_finding()]}, tmp_path / "diagnosis.json")
     (tmp_path / "uq").mkdir()
-    (tmp_path / "uq" / "extension_indentation.csv").write_text(
+    (tmp_path / "uq" / "extension_indentation.csv").write_text(table_csv)
+    return diagnosis_html(path)
+
+
+def test_the_report_says_what_the_named_extension_changes_in_the_indentation(tmp_path):
+    text = _page_with_extension_table(
+        tmp_path,
         "cause,extension_model,baseline_model,depth_m,baseline_force_n,extension_force_n,difference_n,"
         "relative_difference,measurement_q05_n,measurement_q95_n,specimen_q05_n,specimen_q95_n,"
         "outside_measurement_band,outside_specimen_band,status\n"
         "torque_offset,ext,base,0.0015,0.012,0.015,0.003,0.25,0.0118,0.0122,0.009,0.0148,True,True,ok\n")
-    text = diagnosis_html(path)
     assert ("1.5 mm flat-punch indentation the extension's card changes the force from 12 to 15 mN (25 %), "
             "outside the baseline's posterior 5-95 % band (11.8-12.2 mN) and outside the spread between "
             "specimens") in text
 
 
 def test_the_report_says_what_the_extension_changes_in_the_brain(tmp_path):
-    path = write_diagnosis_json({"findings": [_named_finding()]}, tmp_path / "diagnosis.json")
-    (tmp_path / "uq").mkdir()
-    (tmp_path / "uq" / "extension_indentation.csv").write_text(
+    text = _page_with_extension_table(
+        tmp_path,
         "cause,geometry,extension_model,baseline_model,depth_m,baseline_force_n,extension_force_n,difference_n,"
         "relative_difference,measurement_q05_n,measurement_q95_n,specimen_q05_n,specimen_q95_n,"
         "outside_measurement_band,outside_specimen_band,punch_nodes,status\n"
@@ -86,7 +91,6 @@ def test_the_report_says_what_the_extension_changes_in_the_brain(tmp_path):
         "0.0148,True,True,,ok\n"
         "torque_offset,MNI brain,ext,base,0.0015,0.004,0.0039,-0.0001,-0.025,0.0039,0.0041,0.003,0.005,False,False,"
         "1,ok\n")
-    text = diagnosis_html(path)
     flat = text.index("1.5 mm flat-punch indentation the extension's card changes the force from 12 to 15 mN")
     brain = text.index("Pressed 1.5 mm into the MNI brain, it changes the force from 4 to 3.9 mN (-2.5 %): inside "
                        "the baseline's posterior 5-95 % band taken relative, inside the spread between specimens; the "
