@@ -705,7 +705,7 @@ def _extension_indentation(path: Path) -> dict[str, str]:
             change = (f"changes the force from {_number(1e3 * r['baseline_force_n'])} to "
                       f"{_number(1e3 * r['extension_force_n'])} mN ({_number(100 * r['relative_difference'])} %)")
             if brain:
-                nodes = r.get("punch_nodes")
+                nodes = r.get("punch_nodes", np.nan)
                 resolved = (f"; the mesh puts {int(nodes)} surface node{'s' if int(nodes) != 1 else ''} on the "
                             "punch face, so the force is a mesh-level estimate" if np.isfinite(nodes) else "")
                 text = (f" Pressed {_number(1e3 * r['depth_m'])} mm into the MNI brain, it {change}: {band} taken "

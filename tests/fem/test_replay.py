@@ -280,7 +280,6 @@ def test_replay_csv_contract(tmp_path):
     assert none.set_index("test").loc["creep_recovery", "status"].startswith("not replayed: no card the FEM can run")
 
 
-
 def test_replay_in_two_stages_equals_one(tmp_path):
     """Rule fem_replay_baseline replays the baseline card beside the diagnosis; rule fem_replay adds the extension
     cards to its table: the same rows and points as one replay of every card, and the baseline is not run twice."""
@@ -307,6 +306,7 @@ def test_replay_in_two_stages_equals_one(tmp_path):
     # the baseline rows were read, not run again: their timings are the first stage's
     first = read_replay_table(tmp_path / "b.csv")
     assert list(read["wall_s"][:len(first)]) == pytest.approx(list(first["wall_s"]))
+
 
 def test_fix_simulation_averages_the_curves_neither_card_was_fitted_to():
     rows = [  # test, condition, card, role, held_out, nrmse, status
