@@ -20,7 +20,7 @@ from tissuemech.canonical import make_run_dataset
 from tissuemech.diagnosis.decision import apply_rule
 from tissuemech.diagnosis.evidence import residual_table
 from tissuemech.diagnosis.findings import DiagnosisContext
-from tissuemech.diagnosis.inertia import creep_fall_sds, detect_inertial_ringing
+from tissuemech.diagnosis.inertia import creep_fall_sds, creep_hold_mask, detect_inertial_ringing
 from tissuemech.diagnosis.report import diagnose, diagnose_runs
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
@@ -30,11 +30,12 @@ import independent_rheometer as ir  # noqa: E402
 # ------------------------------------------------------------------------------------------------
 # creep: inertial ringing after a torque step
 # ------------------------------------------------------------------------------------------------
-def creep_runs(ring: float, n: int = 4, seed: int = 0) -> list:
+def creep_runs(ring: float, n: int = 4, seed: int = 0, unloading_s: float = 0.0) -> list:
     """Creep-recovery curves of a Burgers-like gel, J(t) = J0 + J1 (1 - e^{-t/tau}) + t/eta under 10 Pa for 60 s,
     then recovery; sampled every 2 ms for the first 0.5 s, then log-spaced. ``ring``: amplitude, relative to the
     instantaneous strain, of the damped oscillation of motor and sample after the torque step (period 50 ms,
-    decay 0.1 s; the same instrument, so the same for every curve up to 2 %)."""
+    decay 0.1 s; the same instrument, so the same for every curve up to 2 %). ``unloading_s``: duration of a
+    linear unloading ramp sampled every 0.5 ms at the end of the creep (0: a sudden unloading)."""
     rng = np.random.default_rng(seed)
     runs = []
     for k in range(n):
@@ -48,6 +49,13 @@ def creep_runs(ring: float, n: int = 4, seed: int = 0) -> list:
         strain = strain + np.where(t <= 60.0, ring * 10.0 * j0 * np.exp(-t / 0.1) * np.sin(2 * np.pi * t / period), 0.0)
         rec = t > 60.0
         strain[rec] = strain[~rec][-1] - 10.0 * (j0 + j1 * (1 - np.exp(-(t[rec] - 60.0) / tau)))
+        if unloading_s > 0:
+            # the controller takes the torque down over unloading_s: the strain follows elastically
+            t_un = 60.0 + np.arange(0.0005, unloading_s, 0.0005)
+            s_un = 10.0 * (1.0 - (t_un - 60.0) / unloading_s)
+            g_un = strain[~rec][-1] - (10.0 - s_un) * j0
+            t, stress, strain = np.r_[t[~rec], t_un, t[rec] + unloading_s], np.r_[stress[~rec], s_un, stress[rec]], \
+                np.r_[strain[~rec], g_un, strain[rec]]
         strain = strain * (1 + 0.003 * rng.normal(size=t.size))
         runs.append(make_run_dataset({"time": t, "shear_strain": strain, "shear_stress": stress},
                                      {"dataset": "creep", "run": f"cr{k}", "test": "creep_recovery",
@@ -75,6 +83,19 @@ def test_creep_ringing_after_a_torque_step_is_named():
 def test_creep_without_a_ring_names_nothing():
     f = _ringing(creep_runs(ring=0.0))
     assert not f["detected"] and f["hold_rise_share"] == 0.0
+
+
+def test_the_unloading_ramp_of_a_creep_is_not_read_as_a_ring():
+    """A controller that takes the torque down over 10 ms: the strain falls with the stress, beyond its noise, at
+    the points where the stress is still above 90 % of the hold. Those points are unloading, not creep."""
+    runs = creep_runs(ring=0.0, unloading_s=0.01)
+    stress = runs[0]["shear_stress"].values
+    hold = creep_hold_mask(stress)
+    assert hold.sum() == (stress == 10.0).sum() and not hold[stress < 10.0].any()
+    assert (stress[~hold] > 9.0).sum() >= 1            # the ramp does reach above 90 % of the hold
+    f = _ringing(runs)
+    assert not f["detected"] and f["hold_rise_share"] == 0.0, f["evidence"]
+    assert _ringing(creep_runs(ring=0.2, unloading_s=0.01))["detected"]
 
 
 # ------------------------------------------------------------------------------------------------

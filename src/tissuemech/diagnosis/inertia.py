@@ -49,7 +49,8 @@ against the trend alone, on the odd points within 3 decay times of the window st
 
 The same test runs on creep curves (a torque step: the motor's inertia and the sample's compliance ring, so the
 strain overshoots and oscillates, Ewoldt et al. 2015), on the measured strain of each creep phase's early window
-(the smooth trend in log t is projected out by the test, so no baseline is needed); practical when the strain
+(the points at which the torque step is held, :func:`creep_hold_mask`: the loading and unloading ramps are not
+creep; the smooth trend in log t is projected out by the test, so no baseline is needed); practical when the strain
 falls back during the creep (:func:`creep_fall_sds`; a creeping strain never decreases) in at least half of the
 curves. The finding reports the stronger of the relaxation and creep tests with a Bonferroni factor 2.
 
@@ -422,10 +423,14 @@ def _best_pair(coefs: np.ndarray, grid, full: bool = False):
     return best if full else best[:2]
 
 
-def _refine(curves, start: tuple[float, float]) -> tuple[float, float]:
+def _refine(curves, start: tuple[float, float], period_range_s: tuple[float, float]) -> tuple[float, float]:
     """(period, decay) minimising the pooled residual sum of squares of trend + damped sine over ``curves``
-    (variable projection, Nelder-Mead in log P, log tau from the grid's pick). Used for the fix only: the
-    p-value stays the grid's (Bonferroni)."""
+    (variable projection, bounded Nelder-Mead in log P and log(tau / P) from the grid's pick). Used for the fix
+    only: the p-value stays the grid's (Bonferroni).
+
+    The refinement stays inside the scanned box: P in ``period_range_s`` and tau / P within
+    :data:`DAMPING_IN_PERIODS`. Outside it the "ring" is no ring: a period far beyond the window turns the damped
+    sine into a smooth exponential transient, which any misfit near the step can take."""
     t = np.concatenate([c[1] for c in curves])
     y = np.concatenate([c[2] / max(c[3], 1e-300) for c in curves])
     # trend and ring amplitudes are per curve: the trends are projected out with one block-diagonal basis,
@@ -437,7 +442,8 @@ def _refine(curves, start: tuple[float, float]) -> tuple[float, float]:
     total = float(yr @ yr)
 
     def cost(x):
-        period, decay = np.exp(x)
+        period = np.exp(x[0])
+        decay = period * np.exp(x[1])
         env = np.exp(-(t - t0) / decay)
         ring = np.column_stack([env * np.sin(2 * np.pi / period * t), env * np.cos(2 * np.pi / period * t)])
         ring -= q @ (q.T @ ring)
@@ -449,8 +455,13 @@ def _refine(curves, start: tuple[float, float]) -> tuple[float, float]:
         explained = np.where(ok, (a22 * b1 ** 2 - 2 * a12 * b1 * b2 + a11 * b2 ** 2) / np.where(ok, det, 1.0), 0.0)
         return total - float(explained.sum())
 
-    res = scipy.optimize.minimize(cost, np.log(start), method="Nelder-Mead", options={"xatol": 1e-3, "fatol": 1e-12})
-    return tuple(np.exp(res.x)) if res.success and cost(res.x) <= cost(np.log(start)) else start
+    x0 = np.log([start[0], start[1] / start[0]])
+    bounds = [tuple(np.log(period_range_s)), (np.log(min(DAMPING_IN_PERIODS)), np.log(max(DAMPING_IN_PERIODS)))]
+    res = scipy.optimize.minimize(cost, x0, method="Nelder-Mead", bounds=bounds,
+                                  options={"xatol": 1e-3, "fatol": 1e-12})
+    if not (res.success and cost(res.x) <= cost(x0)):
+        return start
+    return float(np.exp(res.x[0])), float(np.exp(res.x[0] + res.x[1]))
 
 
 def hold_rise_sds(e: pd.DataFrame) -> tuple[float, int]:
@@ -510,6 +521,39 @@ def _relaxation_curves(ctx: DiagnosisContext):
     return curves, rises
 
 
+#: relative tolerance of the held torque step of a creep phase (:func:`creep_hold_mask`): a stress controller
+#: holds its set point far closer than this; the unloading ramp leaves it at once
+HOLD_TOLERANCE = 1e-3
+
+
+def creep_hold_mask(stress_pa: np.ndarray) -> np.ndarray:
+    """Points of a creep test at which the torque step is held: from the first point that reaches the held
+    stress to the last one before the stress leaves it.
+
+    The held level is the median |stress| of the points above 90 % of the largest; a point is held when its
+    |stress| is within ``max(3 robust SD, HOLD_TOLERANCE x level)`` of it. The loading and unloading ramps are not
+    part of the hold (during the unloading the strain falls back with the stress, which is no ring).
+    """
+    s = np.abs(np.asarray(stress_pa, float))
+    mask = np.zeros(s.size, bool)
+    if not np.isfinite(s).any() or np.nanmax(s) <= 0:
+        return mask
+    upper = np.isfinite(s) & (s >= 0.9 * np.nanmax(s))
+    level = float(np.median(s[upper]))
+    sd = robust_noise_sd(s[upper]) if upper.sum() >= 3 else 0.0
+    held = np.isfinite(s) & (np.abs(s - level) <= max(3.0 * (sd if np.isfinite(sd) else 0.0),
+                                                      HOLD_TOLERANCE * level))
+    if not held.any():
+        return mask
+    first = int(np.argmax(held))
+    # the hold ends where the stress first drops out of it for good: the first point after `first` that is
+    # neither held nor followed by held points is the start of the unloading
+    left = np.flatnonzero(~held[first:] & (s[first:] < level))
+    last = first + int(left[0]) - 1 if left.size else s.size - 1
+    mask[first:last + 1] = held[first:last + 1]
+    return mask
+
+
 def _creep_curves(ctx: DiagnosisContext):
     """(curves, falls) of the creep tests: the measured strain of each creep phase's early window (the smooth
     trend in log time is projected out by the test itself, so no baseline is needed)."""
@@ -521,9 +565,7 @@ def _creep_curves(ctx: DiagnosisContext):
         g = np.asarray(r["shear_strain"].values, float)
         keep = np.isfinite(t) & np.isfinite(g)
         if "shear_stress" in r:
-            s = np.abs(np.asarray(r["shear_stress"].values, float))
-            if np.isfinite(s).any() and np.nanmax(s) > 0:
-                keep &= s >= 0.9 * np.nanmax(s)         # the creep phase: the torque step held
+            keep &= creep_hold_mask(r["shear_stress"].values)
         if keep.sum() < MIN_EARLY_POINTS:
             continue
         t, g = t[keep], g[keep]
@@ -564,7 +606,7 @@ def _ringing_test(curves, rises, kind: str):
     pairs = np.asarray(grid, float)
     rss = np.sum([_ring_fits(c[1], c[2], pairs)[1] / max(c[3], 1e-300) ** 2 for c in curves], axis=0)
     start = tuple(pairs[int(np.nanargmin(rss))])
-    p, tau = _refine(curves, start)
+    p, tau = _refine(curves, start, (periods[0], periods[-1]))
     amps = []
     for cid, tt, y, level in curves:
         _, coef = _rss(y, np.column_stack([_trend(tt), _ring(tt, p, tau)]))
@@ -611,14 +653,14 @@ def detect_inertial_ringing(ctx: DiagnosisContext) -> dict:
     practical = bool(size >= 0.05 and share >= 0.5)
     # the held-out fix (a leave-one-curve-out refit of period and decay per curve) is scored only for a ring that
     # could be named: one that is not practical is neither named nor listed as significant without a fix
-    fix = _ringing_fix(curves, coefs, grid, p, tau) if practical else None
+    fix = _ringing_fix(curves, coefs, grid, p, tau, (grid[0][0], grid[-1][0])) if practical else None
     if not practical:
         evidence += " Held-out fix not scored (not practical)."
     return make_finding(RINGING, test, "F", size, "first ring amplitude / level", practical, evidence,
                         fix, period_s=p, decay_s=tau, hold_rise_share=share, ringing_in=kind)
 
 
-def _ringing_fix(curves, coefs: np.ndarray, grid, p: float, tau: float) -> dict:
+def _ringing_fix(curves, coefs: np.ndarray, grid, p: float, tau: float, period_range_s: tuple[float, float]) -> dict:
     """Held-out score of the ring: period and decay from the other curves (their grid pick, refined), the
     amplitudes fitted on the even points of the held-out curve and scored on its odd points within 3 decay
     times; before = the trend only."""
@@ -626,7 +668,7 @@ def _ringing_fix(curves, coefs: np.ndarray, grid, p: float, tau: float) -> dict:
     for i, (cid, tt, y, level) in enumerate(curves):
         others = [c for j, c in enumerate(curves) if j != i]
         start = _best_pair(np.delete(coefs, i, axis=0), grid) if len(others) >= MIN_RINGING_CURVES else None
-        pick = _refine(others, start or (p, tau))
+        pick = _refine(others, start or (p, tau), period_range_s)
         ev = np.arange(tt.size) % 2 == 0
         od = ~ev & (tt - tt.min() <= 3 * pick[1])      # scored where the ringing is: 3 decay times
         Xb, Xa = _trend(tt), np.column_stack([_trend(tt), _ring(tt, *pick)])
