@@ -7,8 +7,16 @@ evaluated separately on G', G'' and |G*| (|G*| computed from G' and G'' when the
 *the* LVE limit (``lve_strain``), as in ISO 6721-10 / Mezger's practice, and the one used for the yield stress
 and the frequency-sweep check.
 
-Plateau reference. The lowest-amplitude points are often the noisiest (torque near the resolution floor), so
-neither the first point nor the maximum is a safe reference. The plateau is an *expanding-window median*:
+Noise. The lowest-amplitude points are often the noisiest: the instrument's torque noise is a constant, so the
+noise of a modulus grows as the strain amplitude falls. Where the per-point noise SD of the modulus is known
+(``modulus_sd``; :func:`lve_summary` and the ingest's flags take it from :func:`tissuemech.noise.estimate_noise` of
+the dataset's amplitude sweeps, the within-curve scatter, with a declared torque resolution as a floor), points
+whose modulus does not stand :data:`~tissuemech.noise.ABOVE_NOISE_SIGMAS` SDs above zero are torque noise and
+left out (``points_below_noise``), and a point departs from the plateau only when it leaves the band *and* lies
+more than :data:`DEPARTURE_SIGMAS` noise SDs from the plateau: a 5 % band means nothing where one point's noise
+is 30 %. Without ``modulus_sd`` the band alone decides (ISO 6721-10 as written).
+
+Plateau reference. Neither the first point nor the maximum is a safe reference. The plateau is an *expanding-window median*:
 starting from the first ``min_plateau_points`` (3) points, the window grows one point at a time while the next
 point lies inside ``median(window) * (1 ± tolerance)``. The first point outside the band ends the plateau if the
 departure persists, i.e. the following ``persist - 1`` points (default 1) are outside on the same side (a single
@@ -51,6 +59,7 @@ import xarray as xr
 
 from .canonical import atomic_write, write_netcdf
 from .curves import as_str, select_average
+from .noise import ABOVE_NOISE_SIGMAS, estimate_noise, noise_sd
 
 _log = logging.getLogger(__name__)
 
@@ -80,6 +89,7 @@ SWEEP_FIELDS: dict[str, tuple[str, str]] = {
     "tan_delta_plateau": ("1", "median loss factor over the G' plateau"),
     "loss_factor_class": ("", "'gel' (tan delta < 1 at plateau), 'liquid', or 'unknown' (no G'' data)"),
     "max_strain": ("1", "largest strain amplitude of the sweep"),
+    "points_below_noise": ("1", "points whose G' does not stand 5 noise SDs above zero (left out)"),
     "tolerance": ("1", "relative band of the LVE rule"),
     "note": ("", "why a sweep could not be analysed (empty when it was)"),
 }
@@ -95,9 +105,13 @@ FREQUENCY_SWEEP_FIELDS: dict[str, tuple[str, str]] = {
     "outside_lve": ("1", "1 when the sweep's amplitude exceeds the LVE limit"),
 }
 
+#: a departure from the plateau must also exceed this many noise SDs of the point (with ``persist`` = 2
+#: consecutive points on one side, noise alone does it with probability ~ (1.35e-3)^2 per pair of points)
+DEPARTURE_SIGMAS = 3.0
+
 _STRING_FIELDS = {"source", "name", "specimen", "sample", "loss_factor_class", "run", "reference", "note"}
 _INT_FIELDS = {"lve_reached", "direction_storage", "direction_loss", "direction_complex", "plateau_points",
-               "n_samples", "outside_lve"}
+               "n_samples", "outside_lve", "points_below_noise"}
 
 
 @dataclass(frozen=True)
@@ -110,12 +124,14 @@ class LveLimit:
     plateau : plateau reference modulus [Pa].
     plateau_points : number of points in the plateau window.
     direction : -1 (fell below the band), +1 (rose above), 0 (not reached).
+    points_below_noise : points left out because their modulus is noise (0 without a noise SD).
     """
 
     strain: float
     plateau: float
     plateau_points: int
     direction: int
+    points_below_noise: int = 0
 
 
 def _clean_curve(strain: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -135,6 +151,7 @@ def lve_limit(
     tolerance: float = 0.05,
     min_plateau_points: int = 3,
     persist: int = 2,
+    modulus_sd: np.ndarray | None = None,
 ) -> LveLimit:
     """LVE limit of one modulus curve by the tolerance-band rule (see the module docstring).
 
@@ -145,36 +162,71 @@ def lve_limit(
     tolerance : relative band half-width (ISO 6721-10: 0.05).
     min_plateau_points : smallest plateau window.
     persist : number of consecutive points that must lie outside the band on the same side.
+    modulus_sd : per-point noise SD of ``modulus`` [Pa], or None (the band alone decides). Points whose modulus
+        is below :data:`~tissuemech.noise.ABOVE_NOISE_SIGMAS` SDs are left out; a departure must also exceed
+        :data:`DEPARTURE_SIGMAS` SDs.
 
     Raises
     ------
     ValueError
         with fewer than ``min_plateau_points + 1`` usable points or a non-positive modulus.
     """
-    strain, modulus = _clean_curve(strain, modulus)
+    sd_given = modulus_sd is not None
+    sd_in = np.asarray(modulus_sd, float) if sd_given else np.zeros(np.shape(modulus))
+    strain, modulus, sd = _clean_curve(strain, modulus, np.where(np.isfinite(sd_in), sd_in, 0.0))
+    below = 0
+    if sd_given:
+        resolved = modulus > ABOVE_NOISE_SIGMAS * sd
+        below = int((~resolved).sum())
+        strain, modulus, sd = strain[resolved], modulus[resolved], sd[resolved]
     if strain.size < min_plateau_points + 1:
         raise ValueError(
-            f"LVE limit needs at least {min_plateau_points + 1} finite points with strain > 0; got {strain.size}"
+            f"LVE limit needs at least {min_plateau_points + 1} finite points with strain > 0"
+            + (f" whose modulus stands {ABOVE_NOISE_SIGMAS:g} noise SDs above zero" if sd_given else "")
+            + f"; got {strain.size}"
         )
     if np.any(modulus <= 0):
         raise ValueError("LVE limit needs a positive modulus curve (log interpolation)")
     n = modulus.size
+
+    def departs(index, plateau: float, side: int) -> np.ndarray:
+        gap = side * (modulus[index] - plateau)
+        return (gap > tolerance * plateau) & (gap > DEPARTURE_SIGMAS * sd[index])
+
     for end in range(min_plateau_points, n):
         plateau = float(np.median(modulus[:end]))
-        deviation = modulus[end] / plateau - 1.0
-        if abs(deviation) <= tolerance:
-            continue
-        side = int(np.sign(deviation))
-        following = modulus[end : min(end + persist, n)] / plateau - 1.0
-        if not np.all(side * following > tolerance):
+        side = int(np.sign(modulus[end] - plateau))
+        following = np.arange(end, min(end + persist, n))
+        if side == 0 or not np.all(departs(following, plateau, side)):
             continue
         level = plateau * (1.0 + side * tolerance)
         # crossing between the last plateau point and the first departed one, linear in log-log
         y0, y1 = math.log(modulus[end - 1]), math.log(modulus[end])
         x0, x1 = math.log(strain[end - 1]), math.log(strain[end])
         fraction = float(np.clip((math.log(level) - y0) / (y1 - y0), 0.0, 1.0)) if y1 != y0 else 0.0
-        return LveLimit(math.exp(x0 + fraction * (x1 - x0)), plateau, end, side)
-    return LveLimit(math.nan, float(np.median(modulus)), n, 0)
+        return LveLimit(math.exp(x0 + fraction * (x1 - x0)), plateau, end, side, below)
+    return LveLimit(math.nan, float(np.median(modulus)), n, 0, below)
+
+
+def amplitude_sweep_noise(noise: dict | None, strain: np.ndarray, storage: np.ndarray, loss: np.ndarray,
+                          radius_m: float = math.nan, torque_resolution_nm: float = math.nan
+                          ) -> dict[str, np.ndarray | None]:
+    """Per-point noise SDs [Pa] of G' and G'' of one amplitude sweep under a dataset's noise model.
+
+    ``noise``: :func:`tissuemech.noise.estimate_noise` of the dataset's amplitude sweeps (None: no SDs). A modulus
+    is a torque over the strain amplitude, so its noise floor grows as the amplitude falls
+    (:func:`tissuemech.noise.noise_sd`). Returns ``{"storage_sd": ..., "loss_sd": ...}``; an entry is None where
+    the model has no estimate for that modulus.
+    """
+    out: dict[str, np.ndarray | None] = {"storage_sd": None, "loss_sd": None}
+    if noise is None:
+        return out
+    for key, quantity, values in (("storage_sd", "storage_modulus", storage), ("loss_sd", "loss_modulus", loss)):
+        if values is None:
+            continue
+        sd = noise_sd(noise, "amplitude_sweep", quantity, values, strain, radius_m, torque_resolution_nm)
+        out[key] = sd if np.isfinite(sd).any() else None
+    return out
 
 
 def _interp_loglog(x_at: float, x: np.ndarray, y: np.ndarray) -> float:
@@ -211,6 +263,8 @@ def analyse_amplitude_sweep(
     tolerance: float = 0.05,
     min_plateau_points: int = 3,
     persist: int = 2,
+    storage_sd: np.ndarray | None = None,
+    loss_sd: np.ndarray | None = None,
 ) -> dict[str, float | int | str]:
     """LVE limits on G', G'', |G*|, yield stress, flow point and loss-factor class of one sweep.
 
@@ -220,6 +274,8 @@ def analyse_amplitude_sweep(
     storage, loss : G', G'' [Pa].
     stress : shear-stress amplitudes [Pa]; |G*|·γ is used when None.
     complex_modulus : |G*| [Pa]; sqrt(G'^2 + G''^2) when None.
+    storage_sd, loss_sd : per-point noise SDs of G' and G'' [Pa] (:func:`lve_limit`), or None; the SD of |G*|
+        follows from both (first-order propagation).
 
     Returns
     -------
@@ -235,10 +291,15 @@ def analyse_amplitude_sweep(
         stress = complex_modulus * strain
     stress = np.asarray(stress, dtype=float)
     kw = {"tolerance": tolerance, "min_plateau_points": min_plateau_points, "persist": persist}
+    sds = {"storage": storage_sd, "loss": loss_sd, "complex": None}
+    if storage_sd is not None and loss_sd is not None:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sds["complex"] = np.hypot(storage * np.asarray(storage_sd, float),
+                                      loss * np.asarray(loss_sd, float)) / complex_modulus
     limits = {}
     for key, modulus in (("storage", storage), ("loss", loss), ("complex", complex_modulus)):
         try:
-            limits[key] = lve_limit(strain, modulus, **kw)
+            limits[key] = lve_limit(strain, modulus, modulus_sd=sds[key], **kw)
         except ValueError:
             # G'' of a nearly elastic gel may dip to zero or below resolution: no limit from it
             limits[key] = LveLimit(math.nan, math.nan, 0, 0)
@@ -247,9 +308,11 @@ def analyse_amplitude_sweep(
     yield_stress = _interp_loglog(main.strain, s_sorted, stress_sorted)
     flow_strain = flow_point(strain, storage, loss)
     flow_stress = _interp_loglog(flow_strain, s_sorted, stress_sorted)
-    # tan δ over the strain range of the G' plateau window
-    s_storage, _ = _clean_curve(strain, storage)
-    plateau_end = s_storage[max(main.plateau_points, 1) - 1] if s_storage.size else math.nan
+    # tan δ over the strain range of the G' plateau window (among the points above the noise, when known)
+    s_storage, g_storage, g_sd = _clean_curve(strain, storage, np.zeros(storage.shape) if storage_sd is None
+                                              else np.where(np.isfinite(storage_sd), storage_sd, 0.0))
+    s_resolved = s_storage[g_storage > ABOVE_NOISE_SIGMAS * g_sd] if storage_sd is not None else s_storage
+    plateau_end = s_resolved[max(main.plateau_points, 1) - 1] if s_resolved.size else math.nan
     s_both, g1, g2 = _clean_curve(strain, storage, loss)
     in_plateau = s_both <= plateau_end
     tan_delta = float(np.median(g2[in_plateau] / g1[in_plateau])) if in_plateau.any() else math.nan
@@ -266,13 +329,15 @@ def analyse_amplitude_sweep(
         "tan_delta_plateau": tan_delta,
         "loss_factor_class": "gel" if tan_delta < 1.0 else ("liquid" if tan_delta >= 1.0 else "unknown"),
         "max_strain": float(s_storage[-1]) if s_storage.size else math.nan,
+        "points_below_noise": main.points_below_noise,
     }
 
 
 #: result of a sweep that could not be analysed (the analysis fields of SWEEP_FIELDS, empty values)
 _EMPTY_RESULT: dict[str, float | int | str] = {
     name: (0 if name in _INT_FIELDS else "unknown" if name == "loss_factor_class" else math.nan)
-    for name in list(SWEEP_FIELDS)[list(SWEEP_FIELDS).index("lve_strain"): list(SWEEP_FIELDS).index("max_strain") + 1]
+    for name in list(SWEEP_FIELDS)[list(SWEEP_FIELDS).index("lve_strain"):
+                                 list(SWEEP_FIELDS).index("points_below_noise") + 1]
 }
 
 
@@ -326,16 +391,27 @@ def lve_summary(
     averages : output of :func:`tissuemech.curves.average_runs` for the same runs (its amplitude-sweep curves
         are analysed too), or None.
 
+    The noise SDs of G' and G'' come from :func:`amplitude_sweep_noise` of the runs' amplitude sweeps; an averaged
+    curve's are those of one run over the square root of its samples.
+
     Returns
     -------
     xarray.Dataset with dims ``sweep`` and ``frequency_sweep`` (layout in the module docstring).
     """
     kw = {"tolerance": tolerance, "min_plateau_points": min_plateau_points, "persist": persist}
+    sweeps = [r for r in runs if r.attrs.get("test") == "amplitude_sweep"]
+    noise = estimate_noise(sweeps) if sweeps else None
 
     def analysed(ds: xr.Dataset, suffix: str, name: str) -> dict:
         # one unusable sweep (missing moduli, too few points) must not stop the dataset's analysis
         try:
-            return {**analyse_amplitude_sweep(**_sweep_arrays(ds, suffix), **kw), "note": ""}
+            arrays = _sweep_arrays(ds, suffix)
+            n_samples = int(ds.attrs.get("n_samples", 1)) if suffix else 1
+            sds = amplitude_sweep_noise(noise, arrays["strain"], arrays["storage"], arrays["loss"],
+                                        float(ds.attrs.get("radius_m", np.nan) or np.nan),
+                                        float(ds.attrs.get("torque_resolution_nm", np.nan)))
+            sds = {k: v / math.sqrt(max(n_samples, 1)) if v is not None else None for k, v in sds.items()}
+            return {**analyse_amplitude_sweep(**arrays, **sds, **kw), "note": ""}
         except ValueError as err:
             _log.warning("amplitude sweep %s not analysed: %s", name, err)
             return {**_EMPTY_RESULT, "note": str(err)}

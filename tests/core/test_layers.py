@@ -20,7 +20,7 @@ PACKAGE = "tissuemech"
 #: bottom to top; a module may import modules of its own layer or below. Keyed by the first name under
 #: ``tissuemech`` (a subpackage counts as one).
 LAYERS: tuple[frozenset[str], ...] = tuple(frozenset(names.split()) for names in (
-    "canonical units stats sourcehash numba_cache",
+    "canonical units stats sourcehash numba_cache noise",
     "records",
     "models spectra curves lve",
     "fitting io synth plots posterior cards_febio cards_niftysim pipeline scopes",

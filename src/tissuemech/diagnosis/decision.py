@@ -64,7 +64,7 @@ def apply_rule(findings: Sequence[dict], structure: Sequence[dict], alpha: float
                n_default: float = np.nan, usable: bool = True) -> list[dict]:
     """Apply :data:`DECISION_RULE` in place to the findings of the detectors and to the structure tests.
 
-    ``eps``: the relative noise level of the data (:func:`tissuemech.diagnosis.noise.relative_noise_level`);
+    ``eps``: the relative noise level of the data (:func:`tissuemech.noise.relative_noise_level`);
     ``n_default``: the count of held-out values of a fix that does not report one (the number of curves);
     ``usable``: False when no adequate baseline is left (only ``baseline_free`` causes may then be named).
     Sets ``p_holm``, ``significant``, ``detected``, ``decision`` and ``what_to_do`` on every finding (and

@@ -39,7 +39,7 @@ accounts for, e.g. a higher-order law would be needed). A cause is named by the 
 :mod:`.decision` (:data:`~tissuemech.diagnosis.decision.DECISION_RULE`, as for parallel-plate data): Holm at
 ``alpha/2`` within the named causes and within the structure tests, practical relevance, and a fix whose
 leave-one-mode-out improvement beats the noise margin (eps: the relative noise of the runs, from their own
-scatter, :func:`tissuemech.diagnosis.noise.relative_noise_level`); a significant, relevant cause without a scored
+scatter, :func:`tissuemech.noise.relative_noise_level`); a significant, relevant cause without a scored
 fix goes to ``significant_fix_not_evaluated``. The JSON carries ``decision_rule`` and ``noise_model`` as the
 parallel-plate diagnosis does.
 

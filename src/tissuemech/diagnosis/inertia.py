@@ -491,7 +491,7 @@ def hold_rise_sds(e: pd.DataFrame) -> tuple[float, int]:
 
 def creep_fall_sds(t: np.ndarray, strain: np.ndarray) -> tuple[float, int]:
     """Largest fall of the measured |strain| during the creep phase of one creep curve, in noise SDs (the noise:
-    :func:`tissuemech.diagnosis.noise.robust_noise_sd` of the strain). Under a constant stress the strain of a
+    :func:`tissuemech.noise.robust_noise_sd` of the strain). Under a constant stress the strain of a
     viscoelastic material never decreases (its creep compliance is monotone), so only a ring makes it fall."""
     s = np.abs(np.asarray(strain, float)[np.argsort(t)])
     s = s[np.isfinite(s)]

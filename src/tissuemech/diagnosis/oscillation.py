@@ -300,7 +300,7 @@ def _sweep_points(ctx: DiagnosisContext, noise: dict) -> tuple[pd.DataFrame, lis
     y = ln(G'/prediction) where the baseline predicts the sweep (its law's own amplitude dependence is then not a
     softening), else ln G' (a linear-viscoelastic material has one G' at one frequency, whatever the amplitude).
     Points whose stress amplitude is not above the noise floor (the data's scatter, or the declared torque
-    resolution: :func:`tissuemech.diagnosis.noise.points_above_floor`; never a fixed torque) are left out, and so
+    resolution: :func:`tissuemech.noise.points_above_floor`; never a fixed torque) are left out, and so
     are points beyond a raw phase of 90 deg (inertia-dominated or yielded, :func:`classify_raw_phase`)."""
     rows, sources = [], []
     pred = ctx.table[(ctx.table["test"] == "amplitude_sweep") & (ctx.table["quantity"] == "storage_modulus")] \

@@ -35,7 +35,7 @@ dataset=None, alpha=ALPHA, ranking=None) -> dict``
 Output JSON (``diagnosis.json``)
 --------------------------------
 ``decision_rule`` (the sentence of :data:`~tissuemech.diagnosis.decision.DECISION_RULE`); ``noise_model``
-(:func:`~tissuemech.diagnosis.noise.estimate_noise` plus ``relative_level`` eps); ``baseline`` {``model``, ``adequate``, ``tried``: adequacy of every candidate,
+(:func:`~tissuemech.noise.estimate_noise` plus ``relative_level`` eps); ``baseline`` {``model``, ``adequate``, ``tried``: adequacy of every candidate,
 ``cross_test_shape``: the misfit shape shared by every frequency sweep the baseline predicted without being
 fitted to it (:func:`tissuemech.diagnosis.generic.shared_shape`: ``range_log``, ``degree``, ``wald_p``,
 ``evidence``), removed before the covariate scan of those curves};
@@ -113,7 +113,7 @@ def diagnose(runs: Sequence[xr.Dataset], table: pd.DataFrame, model: str = "mode
     """Named findings, unexplained structure and the covariates table of one baseline model (module docstring).
 
     ``runs``: every run of the dataset (the baseline-free detectors read them; the residual ``table`` covers the
-    runs the baseline predicts). ``noise``: the :func:`tissuemech.diagnosis.noise.estimate_noise` model of
+    runs the baseline predicts). ``noise``: the :func:`tissuemech.noise.estimate_noise` model of
     ``runs`` (estimated when None); ``adequacy``: :func:`tissuemech.diagnosis.baseline.baseline_adequacy` of every
     model tried before and including this one; an inadequate entry becomes the ``baseline_inadequate`` finding,
     and when the last entry (this model) is inadequate only baseline-free causes may be named.

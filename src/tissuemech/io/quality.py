@@ -9,7 +9,8 @@ bit    meaning                    rule
 1      ``inertia_dominated``      |raw phase| (``raw_phase``, rad) above :data:`RAW_PHASE_LIMIT_RAD` (90 deg)
 2      ``torque_below_resolution`` ``|torque|`` below the instrument's declared torque resolution [N m]
 4      ``outside_lve``            frequency-sweep point whose strain amplitude exceeds the G' LVE limit of the
-                                  amplitude sweep(s) of the same specimen and sample (:func:`tissuemech.lve.lve_limit`)
+                                  amplitude sweep(s) of the same specimen and sample (:func:`tissuemech.lve.lve_limit`,
+                                  with the noise of the dataset's amplitude sweeps)
 =====  =========================  ==================================================================================
 
 Inertia. On a combined motor-transducer rheometer the measured (raw) phase is the phase of the total torque,
@@ -58,7 +59,8 @@ import xarray as xr
 
 from ..canonical import read_netcdf, write_netcdf
 from ..curves import QUALITY_FLAG_VARIABLE
-from ..lve import lve_limit
+from ..lve import amplitude_sweep_noise, lve_limit
+from ..noise import estimate_noise
 
 log = logging.getLogger(__name__)
 
@@ -132,8 +134,13 @@ def strain_amplitude(run: xr.Dataset) -> np.ndarray | None:
     return None
 
 
-def amplitude_sweep_lve_strain(run: xr.Dataset) -> tuple[float, str]:
+def amplitude_sweep_lve_strain(run: xr.Dataset, noise: Mapping | None = None,
+                               torque_resolution_n_m: float | None = None) -> tuple[float, str]:
     """G' LVE limit [1] of one amplitude-sweep run by :func:`tissuemech.lve.lve_limit` (ISO 6721-10 5 % rule).
+
+    ``noise``: :func:`tissuemech.noise.estimate_noise` of the dataset's amplitude sweeps; with it, points whose G'
+    is torque noise are left out and a departure must stand out of the noise (:mod:`tissuemech.lve`); a declared
+    ``torque_resolution_n_m`` [N m] (else the run's ``torque_resolution_nm`` attribute) is the floor where larger.
 
     Returns
     -------
@@ -142,8 +149,14 @@ def amplitude_sweep_lve_strain(run: xr.Dataset) -> tuple[float, str]:
     """
     if "shear_strain" not in run or "storage_modulus" not in run:
         return math.nan, f"amplitude sweep {run.attrs.get('run', '?')} has no strain or G' column"
+    strain, storage = run["shear_strain"].values, run["storage_modulus"].values
+    loss = run["loss_modulus"].values if "loss_modulus" in run else None
+    resolution = run.attrs.get("torque_resolution_nm", np.nan) if torque_resolution_n_m is None \
+        else torque_resolution_n_m
+    sd = amplitude_sweep_noise(noise, strain, storage, loss, float(run.attrs.get("radius_m", np.nan) or np.nan),
+                               float(resolution))["storage_sd"]
     try:
-        return lve_limit(run["shear_strain"].values, run["storage_modulus"].values).strain, ""
+        return lve_limit(strain, storage, modulus_sd=sd).strain, ""
     except ValueError as exc:
         return math.nan, f"amplitude sweep {run.attrs.get('run', '?')}: {exc}"
 
@@ -256,11 +269,12 @@ def flag_runs(runs: Iterable[xr.Dataset], meta: Mapping | None = None) -> list[x
     resolution, problem = declared_torque_resolution(meta)
     limits: dict[tuple[str, str], list[float]] = defaultdict(list)
     reasons: dict[tuple[str, str], list[str]] = defaultdict(list)
-    for run in runs:
-        if run.attrs.get("test") == "amplitude_sweep":
-            key = (str(run.attrs.get("specimen")), str(run.attrs.get("sample")))
-            limit, reason = amplitude_sweep_lve_strain(run)
-            (reasons[key] if reason else limits[key]).append(reason or limit)
+    sweeps = [run for run in runs if run.attrs.get("test") == "amplitude_sweep"]
+    noise = estimate_noise(sweeps) if sweeps else None
+    for run in sweeps:
+        key = (str(run.attrs.get("specimen")), str(run.attrs.get("sample")))
+        limit, reason = amplitude_sweep_lve_strain(run, noise, resolution)
+        (reasons[key] if reason else limits[key]).append(reason or limit)
     out = []
     for run in runs:
         key = (str(run.attrs.get("specimen")), str(run.attrs.get("sample")))
