@@ -16,8 +16,8 @@ left out (``points_below_noise``), and a point departs from the plateau only whe
 more than :data:`DEPARTURE_SIGMAS` noise SDs from the plateau: a 5 % band means nothing where one point's noise
 is 30 %. Without ``modulus_sd`` the band alone decides (ISO 6721-10 as written).
 
-Plateau reference. Neither the first point nor the maximum is a safe reference. The plateau is an *expanding-window median*:
-starting from the first ``min_plateau_points`` (3) points, the window grows one point at a time while the next
+Plateau reference. Neither the first point nor the maximum is a safe reference. The plateau is an
+*expanding-window median*: starting from the first ``min_plateau_points`` (3) points, the window grows one point at a time while the next
 point lies inside ``median(window) * (1 ± tolerance)``. The first point outside the band ends the plateau if the
 departure persists, i.e. the following ``persist - 1`` points (default 1) are outside on the same side (a single
 noisy point does not end it; at the end of the sweep the points that exist must all be outside). The plateau value is the median of the window at that moment, and the LVE limit is

@@ -176,7 +176,8 @@ def test_torque_noise_at_the_smallest_amplitudes_is_not_an_lve_limit():
     band_only = [lve.lve_limit(r["shear_strain"].values, r["storage_modulus"].values) for r in runs]
     assert sum(lim.direction != 0 for lim in band_only) >= 4       # the failure this guards against
     runs.append(make_run_dataset(
-        {"frequency": np.geomspace(0.01, 6, 9), "shear_strain": np.full(9, 0.0024), "storage_modulus": np.full(9, 150.0)},
+        {"frequency": np.geomspace(0.01, 6, 9), "shear_strain": np.full(9, 0.0024),
+         "storage_modulus": np.full(9, 150.0)},
         {"test": "frequency_sweep", "specimen": "B1", "sample": "s0", "run": "fs-s0"}))
     summary = lve.lve_summary(runs)
     runs_only = summary["source"].values == "run"
