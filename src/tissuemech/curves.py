@@ -49,7 +49,10 @@ Dimensions ``curve`` (one per test + condition), ``grid`` (padded to the longest
   ``rise_time_s``) (float, NaN when unset).
 * on ``(curve, grid)``: ``grid_value`` (x, in the units of ``grid_variable``) and, for every canonical
   variable ``v`` present in the runs, ``v_mean``, ``v_sd`` (units of ``v``) and ``v_n`` (int count of samples);
-  a variable a test does not have is all-NaN for that curve.
+  a variable a test does not have is all-NaN for that curve. The moduli of sweeps also get ``v_noise``: the
+  measurement noise SD of the mean, :func:`tissuemech.noise.noise_sd` of the dataset's sweeps of that test over
+  sqrt(``v_n``) (a modulus is a torque over the strain amplitude, so it is largest at the smallest amplitudes).
+  ``v_sd`` is the scatter between samples (specimen levels included), ``v_noise`` that of the measurement.
 * per member: ``member_curve`` (int index into ``curve``), ``member_run``, ``member_specimen``,
   ``member_sample`` (str), ``member_n_points`` (points used), ``member_x_min``, ``member_x_max`` (float),
   ``member_flag`` (str, ``""`` when the member passed the count check).
@@ -78,6 +81,7 @@ import numpy as np
 import xarray as xr
 
 from .canonical import CANONICAL_VARIABLES, read_netcdf, write_netcdf
+from .noise import MODULI, OSCILLATORY_TESTS, estimate_noise, noise_sd
 
 _log = logging.getLogger(__name__)
 
@@ -513,6 +517,7 @@ def average_runs(
         )
         for m in curve_members:
             m["curve"] = len(curves)
+        curve["noise"] = _noise_of_mean(curve, groups, key[0])
         curves.append(curve)
         members.extend(curve_members)
     _mark_missing_samples(curves)
@@ -520,6 +525,23 @@ def average_runs(
     averages.attrs["exclude_flagged"] = int(exclude_flagged)
     averages.attrs["n_flagged_points_excluded"] = n_excluded
     return averages
+
+
+def _noise_of_mean(curve: dict, groups: Mapping[tuple[str, str], list[xr.Dataset]], test: str) -> dict:
+    """Noise SD of the averaged moduli of a sweep curve (module docstring, ``v_noise``): the noise model of every run
+    of the test (all conditions: one instrument) at the curve's mean and strain amplitude, over sqrt(n)."""
+    if test not in OSCILLATORY_TESTS:
+        return {}
+    noise = estimate_noise([r for (t, _), members in groups.items() if t == test for r in members])
+    strain = curve["grid"] if curve["grid_variable"] == "shear_strain" else curve["mean"].get("shear_strain")
+    out = {}
+    for name in MODULI:
+        mean, n = curve["mean"].get(name), curve["n"].get(name)
+        if mean is None or strain is None:
+            continue
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out[name] = noise_sd(noise, test, name, mean, np.asarray(strain, float)) / np.sqrt(np.maximum(n, 1))
+    return out
 
 
 def _mark_missing_samples(curves: list[dict]) -> None:
@@ -574,6 +596,10 @@ def _to_dataset(curves: list[dict], members: list[dict]) -> xr.Dataset:
                                    {"units": units, "long_name": f"sample SD (ddof=1) of {long_name}"})
         data_vars[f"{name}_n"] = (("curve", "grid"), padded(lambda c: c["n"].get(name), np.int64, 0),
                                   {"long_name": f"number of samples contributing to {name}"})
+        if any(name in c["noise"] for c in curves):
+            data_vars[f"{name}_noise"] = (("curve", "grid"), padded(lambda c: c["noise"].get(name)),
+                                          {"units": units, "long_name": f"measurement noise SD of the mean of "
+                                                                        f"{long_name}"})
     data_vars.update({
         "member_curve": ("member", np.array([m["curve"] for m in members], dtype=np.int64)),
         "member_run": ("member", _str_array([m["run"] for m in members])),
@@ -623,7 +649,8 @@ def select_average(averages: xr.Dataset, test: str, condition: Mapping[str, floa
     Returns
     -------
     xarray.Dataset whose dimension and coordinate is the grid variable (e.g. ``time``), with
-    ``<v>_mean``, ``<v>_sd``, ``<v>_n`` for every variable present in that curve, attrs ``test``,
+    ``<v>_mean``, ``<v>_sd``, ``<v>_n`` for every variable present in that curve (and ``<v>_noise`` where the
+    averages have it), attrs ``test``,
     ``condition``, ``grid_scale``, ``n_samples``, ``n_specimens``, ``count_check``, the nominal condition
     and settings (finite ones only), and member lists ``runs``, ``specimens``, ``samples`` (comma-separated).
     """
@@ -638,7 +665,10 @@ def select_average(averages: xr.Dataset, test: str, condition: Mapping[str, floa
         if not np.isfinite(averages[name].values[i, :length]).any():
             continue  # variable absent from this curve's test
         base = name[: -len("_mean")]
-        for suffix in ("_mean", "_sd", "_n"):
+        for suffix in ("_mean", "_sd", "_n", "_noise"):
+            if suffix == "_noise" and (base + suffix not in averages
+                                       or not np.isfinite(averages[base + suffix].values[i, :length]).any()):
+                continue
             var = averages[base + suffix]
             data_vars[base + suffix] = (grid_name, var.values[i, :length], dict(var.attrs))
     units = CANONICAL_VARIABLES.get(grid_name, ("", ""))[0]

@@ -9,8 +9,9 @@ and the frequency-sweep check.
 
 Noise. The lowest-amplitude points are often the noisiest: the instrument's torque noise is a constant, so the
 noise of a modulus grows as the strain amplitude falls. Where the per-point noise SD of the modulus is known
-(``modulus_sd``; :func:`lve_summary` and the ingest's flags take it from :func:`tissuemech.noise.estimate_noise` of
-the dataset's amplitude sweeps, the within-curve scatter, with a declared torque resolution as a floor), points
+(``modulus_sd``; :func:`lve_summary` and the ingest's flags take it, :func:`amplitude_sweep_noise`, from
+:func:`tissuemech.noise.estimate_noise` of the dataset's amplitude sweeps, the within-curve scatter, with a declared
+torque resolution as a floor), points
 whose modulus does not stand :data:`~tissuemech.noise.ABOVE_NOISE_SIGMAS` SDs above zero are torque noise and
 left out (``points_below_noise``), and a point departs from the plateau only when it leaves the band *and* lies
 more than :data:`DEPARTURE_SIGMAS` noise SDs from the plateau: a 5 % band means nothing where one point's noise
@@ -215,7 +216,10 @@ def amplitude_sweep_noise(noise: dict | None, strain: np.ndarray, storage: np.nd
 
     ``noise``: :func:`tissuemech.noise.estimate_noise` of the dataset's amplitude sweeps (None: no SDs). A modulus
     is a torque over the strain amplitude, so its noise floor grows as the amplitude falls
-    (:func:`tissuemech.noise.noise_sd`). Returns ``{"storage_sd": ..., "loss_sd": ...}``; an entry is None where
+    (:func:`tissuemech.noise.noise_sd`). Where low-torque points are present, the model's relative part takes up
+    some of the floor (a linear gel through a pure torque noise: relative parts of 2-14 % against a true 0, the
+    floor 0.6-1.0 times the truth); an inflated relative part makes a departure harder to call, so a limit may be
+    found late, never early. Returns ``{"storage_sd": ..., "loss_sd": ...}``; an entry is None where
     the model has no estimate for that modulus.
     """
     out: dict[str, np.ndarray | None] = {"storage_sd": None, "loss_sd": None}
@@ -392,7 +396,8 @@ def lve_summary(
         are analysed too), or None.
 
     The noise SDs of G' and G'' come from :func:`amplitude_sweep_noise` of the runs' amplitude sweeps; an averaged
-    curve's are those of one run over the square root of its samples.
+    curve's are its ``<modulus>_noise`` (:func:`tissuemech.curves.average_runs`: the same model over the square root
+    of its samples), which the fit stage's LVE selection reads too.
 
     Returns
     -------
@@ -406,11 +411,13 @@ def lve_summary(
         # one unusable sweep (missing moduli, too few points) must not stop the dataset's analysis
         try:
             arrays = _sweep_arrays(ds, suffix)
-            n_samples = int(ds.attrs.get("n_samples", 1)) if suffix else 1
-            sds = amplitude_sweep_noise(noise, arrays["strain"], arrays["storage"], arrays["loss"],
-                                        float(ds.attrs.get("radius_m", np.nan) or np.nan),
-                                        float(ds.attrs.get("torque_resolution_nm", np.nan)))
-            sds = {k: v / math.sqrt(max(n_samples, 1)) if v is not None else None for k, v in sds.items()}
+            if suffix:
+                sds = {f"{k}_sd": (np.asarray(ds[f"{k}_modulus_noise"].values, float)
+                                   if f"{k}_modulus_noise" in ds else None) for k in ("storage", "loss")}
+            else:
+                sds = amplitude_sweep_noise(noise, arrays["strain"], arrays["storage"], arrays["loss"],
+                                            float(ds.attrs.get("radius_m", np.nan) or np.nan),
+                                            float(ds.attrs.get("torque_resolution_nm", np.nan)))
             return {**analyse_amplitude_sweep(**arrays, **sds, **kw), "note": ""}
         except ValueError as err:
             _log.warning("amplitude sweep %s not analysed: %s", name, err)

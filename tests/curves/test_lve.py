@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tissuemech import curves, lve
+from tissuemech import curves, fitting, lve
 from tissuemech.canonical import make_run_dataset, read_netcdf
 
 from ._real import read_trios_fungi_amplitude_sweep, read_trios_fungi_frequency_sweep
@@ -194,3 +194,22 @@ def test_kraus_softening_is_found_through_torque_noise():
         summary = lve.lve_summary(runs)
         limits = summary["lve_strain"].values[summary["source"].values == "run"]
         np.testing.assert_allclose(limits, kraus_strain_at(0.95 * G0, gamma_c=0.004, m=1.5), rtol=0.12)
+
+
+def test_the_fit_stage_and_lve_csv_read_one_limit_of_an_averaged_sweep_through_torque_noise():
+    """Eight sweeps of a linear gel (G' = 1000 Pa) through a stress-amplitude noise of 0.04 Pa: the averages carry the
+    noise SD of the mean, at the smallest amplitudes within 40 % of the injected one (0.04 Pa / strain / sqrt(8));
+    the averaged sweep's limit in
+    lve.csv and the fit stage's selection of the sweep's linear part are the same rule on the same floor, and both
+    keep the whole sweep (the band alone cut one of these averages at 0.06 %)."""
+    for seed in range(3):
+        strain, runs = _torque_noise_sweeps(lambda g: np.full(g.size, 1000.0), stress_noise_pa=0.04, seed=seed)
+        averages = curves.average_runs(runs)
+        sweep = curves.select_average(averages, "amplitude_sweep")
+        noise = sweep["storage_modulus_noise"].values
+        np.testing.assert_allclose(noise[:3], 0.04 / strain[:3] / np.sqrt(8), rtol=0.4)
+        linear = fitting.amplitude_sweep_lve_curve(sweep)
+        summary = lve.lve_summary(runs, averages)
+        average_row = list(summary["source"].values).index("average")
+        assert math.isnan(linear.nominal["lve_limit_strain"]) and linear.n_points == strain.size
+        assert math.isnan(float(summary["lve_strain"].values[average_row]))

@@ -346,7 +346,8 @@ def amplitude_sweep_lve_curve(sweep: xr.Dataset, tolerance: float = 0.05) -> Cur
     """The linear part of an averaged amplitude sweep as an elastic shear curve (linear shear modulus G).
 
     Inside the LVE range a linear material's in-phase stress amplitude is ``G' * gamma_0``, so the points with
-    amplitude up to the ISO 6721-10 limit of the mean G' (:func:`tissuemech.lve.lve_limit`, 5 % band) become an
+    amplitude up to the ISO 6721-10 limit of the mean G' (:func:`tissuemech.lve.lve_limit`, 5 % band, with the mean's
+    measurement noise ``storage_modulus_noise`` where the averages carry it: the limit of ``lve.csv``) become an
     ``elastic_shear`` curve: input ``shear_strain`` = amplitude [1], observed ``shear_stress`` = G' * amplitude [Pa].
     A fitted linear elastic law then returns the thesis's "linear G from the amplitude sweep" (Table 4.4).
     The instrument's G' is already a modulus (plate geometry cancels for a linear material), so the curve is
@@ -369,8 +370,10 @@ def amplitude_sweep_lve_curve(sweep: xr.Dataset, tolerance: float = 0.05) -> Cur
     storage = np.asarray(sweep["storage_modulus_mean"].values, float)
     sd = np.asarray(sweep["storage_modulus_sd"].values, float) if "storage_modulus_sd" in sweep else None
     ok = np.isfinite(strain) & np.isfinite(storage) & (strain > 0) & (storage > 0)
+    noise = (np.asarray(sweep["storage_modulus_noise"].values, float)[ok] if "storage_modulus_noise" in sweep
+             else None)
     try:
-        limit = lve_limit(strain[ok], storage[ok], tolerance=tolerance).strain
+        limit = lve_limit(strain[ok], storage[ok], tolerance=tolerance, modulus_sd=noise).strain
     except ValueError:
         return None
     if np.isfinite(limit):
