@@ -503,6 +503,9 @@ def average_runs(
     if not groups:
         raise ValueError("no run to average: none has a test with a grid rule " f"({sorted(GRID_SPECS)})")
 
+    # one noise model per sweep test (all its conditions: one instrument), for the noise of the averaged moduli
+    noise_models = {test: estimate_noise([r for (t, _), group in groups.items() if t == test for r in group])
+                    for test in {t for t, _ in groups} if test in OSCILLATORY_TESTS}
     curves, members = [], []
     for key in sorted(groups):
         curve, curve_members = _average_condition(
@@ -517,7 +520,7 @@ def average_runs(
         )
         for m in curve_members:
             m["curve"] = len(curves)
-        curve["noise"] = _noise_of_mean(curve, groups, key[0])
+        curve["noise"] = _noise_of_mean(curve, noise_models.get(key[0]), key[0])
         curves.append(curve)
         members.extend(curve_members)
     _mark_missing_samples(curves)
@@ -527,12 +530,12 @@ def average_runs(
     return averages
 
 
-def _noise_of_mean(curve: dict, groups: Mapping[tuple[str, str], list[xr.Dataset]], test: str) -> dict:
-    """Noise SD of the averaged moduli of a sweep curve (module docstring, ``v_noise``): the noise model of every run
-    of the test (all conditions: one instrument) at the curve's mean and strain amplitude, over sqrt(n)."""
-    if test not in OSCILLATORY_TESTS:
+def _noise_of_mean(curve: dict, noise: Mapping | None, test: str) -> dict:
+    """Noise SD of the averaged moduli of a sweep curve (module docstring, ``v_noise``): ``noise``, the
+    :func:`tissuemech.noise.estimate_noise` model of every run of the test, at the curve's mean and strain
+    amplitude, over sqrt(n); empty for other tests."""
+    if noise is None:
         return {}
-    noise = estimate_noise([r for (t, _), members in groups.items() if t == test for r in members])
     strain = curve["grid"] if curve["grid_variable"] == "shear_strain" else curve["mean"].get("shear_strain")
     out = {}
     for name in MODULI:

@@ -657,7 +657,8 @@ def run_fem_replay(cards: Sequence[ReplayCard], averages_path, out_csv, points_c
     if replayed is not None:
         done_table = read_replay_table(replayed[0])
         done_points = pd.read_csv(replayed[1])
-        cards = [c for c in cards if c.name not in set(done_table["card"])]
+        done = set(done_table["card"].dropna().astype(str))
+        cards = [c for c in cards if c.name not in done]
     # without a card the FEM can run, every test still gets its row, saying so
     elif not cards:
         cards = [ReplayCard("", "baseline", None, "no card the FEM can run in the replay scopes "
