@@ -44,6 +44,7 @@ import scipy
 from . import fitting as F
 from .adequacy import add_assessment, assess, determined, misfit_in_noise_units, undetermined, verdict
 from .models.base import ConstitutiveModel, initial_shear_modulus
+from .models import qlv
 from .models.registry import FIXED_TIME_KEY, model_on_times
 from .ranking import Candidate, fit_candidate, ranking_table
 from .scopes import MATERIAL_LAWS, MATERIAL_TESTS  # noqa: F401 (MATERIAL_TESTS re-exported)
@@ -163,6 +164,11 @@ def as_strain_controlled(curve: F.Curve) -> F.Curve:
     The QLV prediction of a strain history is linear in the branch weights, its creep strain is not; the
     relaxation-time selection (:func:`nnls_relaxation_times`) needs the linear form. The torque-controlled
     plate imposes the apparent rim stress, which is what a strain-controlled plate prediction returns.
+
+    The imposed history is the strain at the observation points, so only the loaded part is read this way: the
+    observations are the points under load (stress above half its largest magnitude), and the history ends with the
+    last of them. A recovery's stress is zero to within noise, and the strain between the points of a thinned
+    recovery (:func:`tissuemech.fitting.thin`) is not known well enough to predict it.
     """
     if curve.response != "creep":
         return curve
@@ -171,10 +177,14 @@ def as_strain_controlled(curve: F.Curve) -> F.Curve:
     s = np.asarray(curve.obs_inputs("shear_stress"), float)
     ok = np.isfinite(t) & np.isfinite(g) & np.isfinite(s)
     t, g, s = t[ok], g[ok], s[ok]
+    loaded = np.abs(s) > 0.5 * np.max(np.abs(s)) if s.size and np.max(np.abs(s)) > 0 else np.ones(s.size, bool)
+    end = int(np.flatnonzero(loaded)[-1]) + 1 if loaded.any() else s.size
+    t, g, s, loaded = t[:end], g[:end], s[:end], loaded[:end]
     start = 1 if t[0] > 0 else 0
     th, gh = (np.r_[0.0, t], np.r_[0.0, g]) if start else (t, g)
     return replace(curve, response="shear_history", inputs={"time": th, "shear_strain": gh},
-                   observed={"shear_stress": s}, sd={}, obs_index=np.arange(start, start + t.size))
+                   observed={"shear_stress": s[loaded]}, sd={},
+                   obs_index=np.arange(start, start + t.size)[loaded])
 
 
 @dataclass(frozen=True)
@@ -395,6 +405,42 @@ class MaterialFit:
     recommendation: dict
     factories: dict
     failures: dict
+
+
+#: how far (decades) a refined relaxation time may move from its NNLS time, at most; it never passes the log
+#: midpoint to a neighbouring time, so the branches keep their order
+REFINE_DECADES = 0.5
+
+
+def refined_times(key: str, curves: Sequence[F.Curve], target: str, taus_s: Sequence[float], fit: F.FitResult,
+                  noise: F.NoiseModel | None = None) -> np.ndarray | None:
+    """The relaxation times of a fixed-time QLV solid ``key`` fitted with the rest of the model, from its NNLS
+    times ``taus_s`` and its fit ``fit`` on ``curves``; None for other keys (fluid, Pipkin-Rogers) or a failed fit.
+
+    NNLS picks times on a grid (a few per decade, neighbours merged); a slow mode between grid points shows where
+    the data see it most precisely, e.g. in the tail of a creep recovery, far below the creep strain but well above
+    the strain noise. The model is refitted with free times (:class:`tissuemech.models.qlv.QLVModel` ``free_taus``),
+    each bounded to :data:`REFINE_DECADES` around its NNLS time and to the log midpoints to its neighbours.
+    """
+    taus = np.asarray(taus_s, float)
+    m = FIXED_TIME_KEY.fullmatch(key)
+    if m is None or m.group(1) != "qlv" or m.group(3) == "fluid" or taus.size == 0 or not fit.success:
+        return None
+    model = qlv.QLVModel(qlv.instantaneous_law(m.group(2)), n_prony=taus.size, taus_s=taus, free_taus=True,
+                         name=key)
+    log_t = np.log10(taus)
+    mid = 0.5 * (log_t[1:] + log_t[:-1])
+    lower = np.maximum(np.r_[-np.inf, mid], log_t - REFINE_DECADES)
+    upper = np.minimum(np.r_[mid, np.inf], log_t + REFINE_DECADES)
+    bounds = {f"tau_{i + 1}": (10.0 ** lower[i], 10.0 ** upper[i]) for i in range(taus.size)}
+    problem = F.FitProblem(model=model, curves=list(curves), target=target, model_key=key, scope="refine",
+                           noise=noise or F.NoiseModel(), bounds=bounds)
+    start = {**fit.params, **{f"tau_{i + 1}": float(t) for i, t in enumerate(taus)}}
+    free = F.fit(problem, starts=[start], n_random=0)
+    if not free.success:
+        return None
+    return np.array([free.params[f"tau_{i + 1}"] for i in range(taus.size)])
+
 
 
 def _fit_candidates(cands, curves, target, scope, n_random, seed, failures) -> dict:

@@ -251,6 +251,46 @@ def test_thin_and_select_strain():
         F.select_strain(c, max_strain=1e-6)
 
 
+def _creep_recovery_run(unloading_s: float) -> xr.Dataset:
+    """120 s of creep under 10 Pa then 120 s of recovery, sampled log-spaced from 2 ms in each phase (as
+    instruments log them), with an unloading ramp of ``unloading_s`` sampled every millisecond."""
+    t_creep = np.geomspace(0.002, 120.0, 400)
+    t_un = 120.0 + np.arange(0.001, unloading_s, 0.001) if unloading_s > 0 else np.zeros(0)
+    t_rec = 120.0 + unloading_s + np.geomspace(0.002, 120.0, 400)
+    t = np.r_[t_creep, t_un, t_rec]
+    stress = np.r_[np.full(t_creep.size, 10.0), 10.0 * (1.0 - (t_un - 120.0) / unloading_s) if unloading_s else [],
+                   np.zeros(t_rec.size)]
+    strain = 1e-3 * stress + 1e-4 * np.minimum(t, 120.0) * (t <= 120.0 + unloading_s)
+    return make_run_dataset({"time": t, "shear_strain": strain, "shear_stress": stress},
+                            {"dataset": "d", "run": "cr", "test": "creep_recovery", "specimen": "s", "sample": "a",
+                             "order": 1, "stress_pa": 10.0, "radius_m": 0.0125, "gap_m": 0.002,
+                             "source_file": "none", "source_sha256": "0"})
+
+
+@pytest.mark.parametrize("unloading_s", [0.0, 0.05])
+def test_thin_shares_the_points_of_a_creep_recovery_between_its_phases(unloading_s):
+    """Log-spaced over the whole test (5 decades), the recovery's 120 s after 120 s of creep are a third of a decade:
+    it kept 2 of 30 points and a fit could not tell a solid from a fluid. Thinned by phase, the recovery keeps about
+    half, log-spaced in the time since unloading began, however finely the unloading ramp was sampled."""
+    run = _creep_recovery_run(unloading_s)
+    curve = F.curve_from_run(run)
+    stress = curve.obs_inputs("shear_stress")
+    phases = F.loading_phases(stress)
+    assert len(phases) == 2 and np.all(stress[phases[0]] > 5.0) and np.all(stress[phases[1]] < 5.0)
+    thinned = F.thin(curve, 30)
+    t = thinned.obs_inputs("time")
+    recovery = t[t > 120.0 + 0.5 * unloading_s]
+    assert 25 <= thinned.n_points <= 30 and 12 <= recovery.size <= 16
+    since = recovery - 120.0
+    assert since.min() < unloading_s + 0.02 and since.max() > 100.0    # from the unloading to the end of the test
+    after = since[since > unloading_s]
+    assert after.size >= 10 and np.all(np.diff(np.log(after)) > 0.3)  # log-spaced, not crowded at the unloading
+    assert F.loading_phases(np.full(5, 3.0))[0].tolist() == [0, 1, 2, 3, 4]
+    # a sampled loading from rest is part of the creep; a second step after the recovery is a phase again
+    assert [p.tolist() for p in F.loading_phases([0.5, 2.0, 4.0, 5.0, 5.0, 0.0, 0.0, 5.0])] == \
+        [[0, 1, 2, 3, 4], [5, 6], [7]]
+
+
 def test_curves_from_averages_carry_sd_and_fit(tmp_path):
     from tissuemech.curves import average_runs
 

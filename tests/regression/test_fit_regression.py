@@ -102,10 +102,10 @@ def test_check_command_exits_1_with_the_table(reference_copy, fresh, monkeypatch
 
 
 def test_a_changed_pipeline_setting_fails_the_check(repo_root, reference_dir, monkeypatch):
-    """A code-side regression: fitting 30 instead of 40 points per curve moves the agar fits beyond tolerance."""
+    """A code-side regression: fitting 20 instead of 40 points per curve moves the agar fits beyond tolerance."""
     from tissuemech import stages
 
-    monkeypatch.setattr(stages, "POINTS_PER_CURVE", 30)
+    monkeypatch.setattr(stages, "POINTS_PER_CURVE", 20)
     passed, comparison, message = REG.check(reference_dir, raw_dir=repo_root / "raw",
                                             config_path=repo_root / "config" / "config.yaml",
                                             datasets=["agar_3pct_thesis"])

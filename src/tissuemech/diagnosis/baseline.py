@@ -33,7 +33,9 @@ from ..models.plate import oscillation_moduli
 from ..models.registry import get_model, model_on_times
 from .. import material
 from ..material import NNLS_TIMES_PER_DECADE, window_taus
+from ..curves import condition_label, condition_of
 from ..ranking import recommended_mask
+from .noise import estimate_noise, fit_noise
 
 
 def read_fit_record(path: str | Path) -> dict:
@@ -289,8 +291,9 @@ def level_normalised(runs: Sequence[xr.Dataset], levels: Mapping[str, float]) ->
 
 
 def curves_of_runs(runs: Sequence[xr.Dataset], relaxation: str, n_points: int) -> list[fitting.Curve]:
-    """The runs as fitting curves (``fitting.curve_from_run``, thinned to ``n_points``); runs of tests the fit
-    stage does not describe, or that cannot be read as a curve, are left out."""
+    """The runs as fitting curves (``fitting.curve_from_run``, thinned to ``n_points``, a creep-recovery by phase
+    so that its recovery keeps its share); runs of tests the fit stage does not describe, or that cannot be read as
+    a curve, are left out."""
     out = []
     for r in runs:
         if r.attrs.get("test") in fitting.TEST_RESPONSE:
@@ -306,12 +309,50 @@ def fit_runs(model_key: str, runs: Sequence[xr.Dataset], target: str, relaxation
              taus_s: Sequence[float] | None = None):
     """Fit a registered model jointly to the runs (thinned per curve); returns the ``FitResult``.
 
+    The points are weighted by the noise measured in these runs (:func:`tissuemech.diagnosis.noise.fit_noise` of
+    :func:`~tissuemech.diagnosis.noise.estimate_noise`), the noise model the residual tests then judge the fit
+    under: with the fit's default floors a creep recovery's tail, a hundred times below the creep strain, weighed
+    as little as a tenth of its measured precision, and its misfit became structure along time and strain.
+
     ``taus_s``: relaxation times [s] to rebuild a fixed-time QLV/Pipkin-Rogers model on
     (:func:`tissuemech.models.registry.model_on_times`); None keeps the registered model."""
     model = get_model(model_key) if taus_s is None else model_on_times(model_key, taus_s)
     curves = curves_of_runs(runs, relaxation, n_points)
-    problem = fitting.FitProblem(model=model, curves=curves, target=target, model_key=model_key, scope="diagnosis")
+    problem = fitting.FitProblem(model=model, curves=curves, target=target, model_key=model_key, scope="diagnosis",
+                                 noise=fit_noise(estimate_noise(runs)))
     return fitting.fit(problem, starts=[start] if start else (), n_random=n_random, seed=seed)
+
+
+#: observation points per curve of the free-time fit (the times need the shape of each phase, not every point;
+#: the fixed-time refit on the refined times uses the caller's points)
+POLISH_POINTS = 12
+#: runs per test and condition in the free-time fit (the runs are level-normalised: replicates repeat the shape)
+POLISH_RUNS_PER_CONDITION = 2
+
+
+def polished_times(model_key: str, runs: Sequence[xr.Dataset], target: str, relaxation: str, n_points: int,
+                   taus_s: Sequence[float], fit: fitting.FitResult) -> tuple[np.ndarray, fitting.FitResult]:
+    """The relaxation times of a fixed-time QLV solid fitted with the rest of the model, from its NNLS times
+    (:func:`tissuemech.material.refined_times` on :data:`POLISH_POINTS` points per curve of
+    :data:`POLISH_RUNS_PER_CONDITION` runs per test and condition, weighted by the runs' measured noise); when the
+    fixed-time model refitted on the refined times has a lower chi-square than ``fit``, it is returned with them
+    (every later fit, fold and extension then uses them as it used the NNLS times). Other models (fluid,
+    Pipkin-Rogers, free-time or fractional keys), a failed fit or no gain return ``(taus_s, fit)`` unchanged.
+    """
+    taus = np.asarray(taus_s, float)
+    per_condition: dict[tuple, int] = {}
+    sample = []
+    for run in runs:
+        key = (run.attrs.get("test"), condition_label(condition_of(run)))
+        per_condition[key] = per_condition.get(key, 0) + 1
+        if per_condition[key] <= POLISH_RUNS_PER_CONDITION:
+            sample.append(run)
+    new = material.refined_times(model_key, curves_of_runs(sample, relaxation, min(n_points, POLISH_POINTS)), target,
+                                 taus, fit, noise=fit_noise(estimate_noise(runs)))
+    if new is None:
+        return taus, fit
+    refit = fit_runs(model_key, runs, target, relaxation, n_points=n_points, taus_s=new, start=dict(fit.params))
+    return (new, refit) if refit.success and refit.chisqr <= fit.chisqr else (taus, fit)
 
 
 def extension_gain(runs: Sequence[xr.Dataset], baseline_key: str, extension_key: str, target: str,

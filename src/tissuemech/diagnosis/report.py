@@ -73,8 +73,9 @@ from .. import fitting
 from ..canonical import read_netcdf, write_netcdf
 from ..models.registry import FIXED_TIME_KEY, get_model, model_on_times
 from .. import stats as st
+from ..material import REFINE_DECADES
 from . import homogeneous
-from .baseline import (baseline_adequacy, fit_runs, level_normalised, predict_runs, ranked_candidates,
+from .baseline import (baseline_adequacy, fit_runs, level_normalised, polished_times, predict_runs, ranked_candidates,
                        nnls_relaxation_times, read_fit_record, resolved_window_s, window_taus)
 from .causes import CAUSE_IDS, DETECTORS, what_to_do
 from .covariates import covariate_tests, curve_frame, outlier_rows
@@ -289,7 +290,9 @@ def diagnose_runs(runs: Sequence[xr.Dataset], baseline: str | Sequence[str] = RU
                 "correlations": {}, "taus_s": [float(t) for t in taus], "window": window, "fixes": {},
                 "relaxation_times": {"method": spectrum["method"], "grid_s": [float(t) for t in spectrum["grid_s"]],
                                      "levels": spectrum["levels"],
-                                     "weights": [float(w) for w in spectrum["weights"]]},
+                                     "weights": [float(w) for w in spectrum["weights"]],
+                                     **({"nnls_taus_s": [float(t) for t in spectrum["nnls_taus_s"]]}
+                                        if "nnls_taus_s" in spectrum else {})},
                 "params": {k: float(v) for k, v in fit.params.items()},
                 "baseline_order": order_source or ("aicc" if len(keys) > 1 else "requested"),
                 "baseline_aicc": {k: float(f.aicc) for k, f in fits.items()}}
@@ -328,17 +331,23 @@ def _fit_on_data_times(key: str, runs: Sequence[xr.Dataset], target: str, relaxa
     that every candidate is fitted to the same data and their AICc compare. Returns ``(FitResult, spectrum
     dict with the times used as taus_s)``."""
     taus = spectrum["taus_s"]
-    fit = fit_runs(key, level_normalised(runs, spectrum["levels"]), target, relaxation, n_points=n_points,
-                   taus_s=taus if taus.size else None)
+    normalised = level_normalised(runs, spectrum["levels"])
+    fit = fit_runs(key, normalised, target, relaxation, n_points=n_points, taus_s=taus if taus.size else None)
     law = getattr(model_on_times(key, taus), "instantaneous", None) if taus.size else None
     # a one-parameter law is its modulus times a fixed shape, absorbed by the weights: nothing to repeat
     if law is not None and len(law.param_names) > 1 and fit.success:
         again = nnls_relaxation_times(runs, target, relaxation, window, model_key=key, law_params=fit.params)
         if again["taus_s"].size and not np.array_equal(again["taus_s"], taus):
-            refit = fit_runs(key, level_normalised(runs, spectrum["levels"]), target, relaxation,
-                             n_points=n_points, taus_s=again["taus_s"])
-            return refit, {**again, "levels": spectrum["levels"],
-                           "method": again["method"] + ", repeated with the fitted instantaneous law"}
+            fit = fit_runs(key, normalised, target, relaxation, n_points=n_points, taus_s=again["taus_s"])
+            taus = again["taus_s"]
+            spectrum = {**again, "levels": spectrum["levels"],
+                        "method": again["method"] + ", repeated with the fitted instantaneous law"}
+    polished, fit_polished = polished_times(key, normalised, target, relaxation, n_points, taus, fit)
+    if fit_polished is not fit:
+        spectrum = {**spectrum, "taus_s": polished, "nnls_taus_s": np.asarray(taus, float),
+                    "method": spectrum["method"] + "; times then fitted with the model (within "
+                    f"{REFINE_DECADES:g} decade of each)"}
+        fit = fit_polished
     return fit, spectrum
 
 

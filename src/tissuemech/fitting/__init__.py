@@ -54,7 +54,7 @@ from __future__ import annotations
 from ..records import FitRecord
 from ..spectra import log_spaced_taus
 from ._data import (TEST_RESPONSE, Curve, amplitude_sweep_curve, amplitude_sweep_lve_curve, curve_and_rows, curve_from_run, curve_ranges,
-                    curves_from_averages, geometry_from_runs, relaxation_history, select_strain, thin,
+                    curves_from_averages, geometry_from_runs, loading_phases, relaxation_history, select_strain, thin,
                     with_relaxation_history)
 from ._fit import (CORRELATION_FLAG, EQUIVALENT_CHISQR_RTOL, FITS_CSV_ATTRS, FitResult, at_bound_parameters, evaluate,
                    fit, fit_to_dataset, fits_csv_row, has_covariance, weights_at_upper_bound, write_fit_netcdf)
@@ -67,7 +67,7 @@ __all__ = [
     "PLATE_TARGETS", "TEST_RESPONSE", "LOG_RESPONSES", "CORRELATION_FLAG", "EQUIVALENT_CHISQR_RTOL",
     "AMPLITUDE_SWEEP_CYCLES", "describes", "amplitude_sweep_curve",
     "Curve", "amplitude_sweep_lve_curve", "curve_from_run", "curve_and_rows", "curves_from_averages",
-    "geometry_from_runs", "relaxation_history", "thin", "select_strain", "with_relaxation_history", "curve_ranges",
+    "geometry_from_runs", "loading_phases", "relaxation_history", "thin", "select_strain", "with_relaxation_history", "curve_ranges",
     "plate_factor", "target_observations", "predict", "oscillation_window_bounds",
     "NoiseModel", "FitProblem", "FitResult", "fit", "evaluate", "log_spaced_taus",
     "prony_nnls", "prony_start", "FitRecord", "fit_to_dataset", "write_fit_netcdf", "fits_csv_row", "FITS_CSV_ATTRS",

@@ -425,22 +425,62 @@ def _subset(curve: Curve, keep: np.ndarray) -> Curve:
     return replace(curve, inputs=inputs, observed=observed, sd=sd, obs_index=None)
 
 
-def thin(curve: Curve, n_points: int = 40) -> Curve:
-    """Keep about ``n_points`` observation points, log-spaced in the curve's ordering variable
-    (time, frequency, rate, strain; linear spacing where it is not positive)."""
-    x = _obs_x(curve)
+def loading_phases(drive: np.ndarray) -> list[np.ndarray]:
+    """Loading and unloading phases of a sampled stress-controlled drive, as positions into ``drive``.
+
+    A new phase begins where the drive's magnitude crosses half its largest magnitude, e.g. the unloading of a
+    creep-recovery test, however finely the instrument sampled the change. The loading from rest at the start
+    belongs to the first phase (a sampled loading ramp is not a phase of its own); a drive that never leaves that
+    level, or never comes back below it, is one phase.
+    """
+    magnitude = np.abs(np.asarray(drive, float))
+    if magnitude.size == 0 or not magnitude.max() > 0:
+        return [np.arange(magnitude.size)]
+    high = magnitude > 0.5 * magnitude.max()
+    cuts = np.flatnonzero(high[1:] != high[:-1]) + 1
+    if cuts.size and not high[0]:
+        cuts = cuts[1:]
+    return [p for p in np.split(np.arange(magnitude.size), cuts) if p.size]
+
+
+def _spaced(x: np.ndarray, n_points: int) -> np.ndarray:
+    """About ``n_points`` sorted positions into ``x``: log-spaced where ``x`` is mostly positive, else linearly."""
     if x.size <= n_points:
-        return curve
+        return np.arange(x.size)
     pos = x > 0
     if pos.sum() > 0.9 * x.size:
         cand = np.nonzero(pos)[0]
         lx = np.log(x[cand])
         grid = np.linspace(lx.min(), lx.max(), n_points)
-        keep = cand[np.unique(np.abs(lx[:, None] - grid[None, :]).argmin(axis=0))]
-    else:
-        grid = np.linspace(x.min(), x.max(), n_points)
-        keep = np.unique(np.abs(x[:, None] - grid[None, :]).argmin(axis=0))
-    return _subset(curve, np.sort(keep))
+        return np.sort(cand[np.unique(np.abs(lx[:, None] - grid[None, :]).argmin(axis=0))])
+    grid = np.linspace(x.min(), x.max(), n_points)
+    return np.unique(np.abs(x[:, None] - grid[None, :]).argmin(axis=0))
+
+
+def thin(curve: Curve, n_points: int = 40) -> Curve:
+    """Keep about ``n_points`` observation points, log-spaced in the curve's ordering variable
+    (time, frequency, rate, strain; linear spacing where it is not positive).
+
+    A creep curve with several phases (:func:`loading_phases` of its imposed stress at the observation points:
+    creep, then recovery) shares the points between its phases, each log-spaced in the time since its phase began
+    (the last point of the phase before); a phase with fewer points than its share keeps them all. Log-spaced over
+    the whole test, a recovery spans a small part of the test's decades and would keep one or two points: a fit
+    would not see how the strain recovers, which is what tells a solid from a fluid.
+    """
+    x = _obs_x(curve)
+    if x.size <= n_points:
+        return curve
+    phases = loading_phases(curve.obs_inputs("shear_stress")) if curve.response == "creep" else [np.arange(x.size)]
+    if len(phases) == 1:
+        return _subset(curve, _spaced(x, n_points))
+    keep, left = [], n_points
+    for i, k in enumerate(sorted(range(len(phases)), key=lambda j: phases[j].size)):
+        share = max(2, left // (len(phases) - i))
+        since = x[phases[k]] - (x[phases[k - 1][-1]] if k else 0.0)
+        chosen = phases[k][_spaced(since, share)]
+        keep.append(chosen)
+        left -= chosen.size
+    return _subset(curve, np.sort(np.concatenate(keep)))
 
 
 def select_strain(curve: Curve, max_strain: float | None = None, min_strain: float | None = None) -> Curve:

@@ -206,17 +206,20 @@ class NoiseModel:
 
     ``absolute`` maps observable -> absolute floor in its unit; default: 0.03 Pa for stresses (the
     ~0.05 uN m torque resolution of a 10 mm plate), 0.05 uN m for torque, 1e-5 for strain.
-    ``relative`` is the relative floor (1 % = instrument accuracy).
+    ``relative`` is the relative floor (1 % = instrument accuracy); ``relative_by`` maps an observable to its own
+    relative floor (e.g. the within-curve scatter the diagnosis measures, :func:`tissuemech.diagnosis.noise.fit_noise`).
     """
 
     relative: float = 0.01
     absolute: Mapping[str, float] = field(default_factory=lambda: {
         "shear_stress": 0.03, "torque": 5e-8, "storage_modulus": 0.03, "loss_modulus": 0.03,
         "shear_strain": 1e-5, "nominal_stress": 0.03})
+    relative_by: Mapping[str, float] = field(default_factory=dict)
 
     def sigma(self, name: str, y: np.ndarray, sd: np.ndarray | None) -> np.ndarray:
         y = np.asarray(y, float)
-        floor = np.sqrt(self.absolute.get(name, 0.0) ** 2 + (self.relative * np.abs(y)) ** 2)
+        relative = self.relative_by.get(name, self.relative)
+        floor = np.sqrt(self.absolute.get(name, 0.0) ** 2 + (relative * np.abs(y)) ** 2)
         floor = np.where(floor > 0, floor, np.finfo(float).tiny)
         if sd is None:
             return floor
