@@ -286,9 +286,9 @@ def test_thin_shares_the_points_of_a_creep_recovery_between_its_phases(unloading
     after = since[since > unloading_s]
     assert after.size >= 10 and np.all(np.diff(np.log(after)) > 0.3)  # log-spaced, not crowded at the unloading
     assert F.loading_phases(np.full(5, 3.0))[0].tolist() == [0, 1, 2, 3, 4]
-    # a sampled loading from rest is part of the creep; a second step after the recovery is a phase again
+    # a sampled loading ramp: its lower half is a phase (the fast response), the hold another
     assert [p.tolist() for p in F.loading_phases([0.5, 2.0, 4.0, 5.0, 5.0, 0.0, 0.0, 5.0])] == \
-        [[0, 1, 2, 3, 4], [5, 6], [7]]
+        [[0, 1], [2, 3, 4], [5, 6], [7]]
 
 
 def test_curves_from_averages_carry_sd_and_fit(tmp_path):

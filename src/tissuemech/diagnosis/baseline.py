@@ -42,8 +42,9 @@ def read_fit_record(path: str | Path) -> dict:
     """Parameters and metadata of a fit netCDF written by :func:`tissuemech.fitting.write_fit_netcdf`.
 
     Returns ``{"model_key", "target", "params", "aicc", "family", "correlations", "scope", "tests",
-    "relaxation", "stderr", "varying", "flags", "converged"}``;
-    ``correlations`` maps ``"a|b"`` to the fitted correlation of every varying pair.
+    "relaxation", "stderr", "varying", "flags", "converged", "taus_s"}``;
+    ``correlations`` maps ``"a|b"`` to the fitted correlation of every varying pair; ``taus_s`` the relaxation
+    times [s] of a fixed-time model's structure (empty for other models).
     """
     rec = fitting.FitRecord.from_netcdf(path)  # the one fit-record reader
     # relaxation: the strain-history treatment of the fit (fitting.relaxation_history), "measured" when the
@@ -51,7 +52,8 @@ def read_fit_record(path: str | Path) -> dict:
     return {"model_key": rec.model_key, "target": rec.target, "family": rec.family, "scope": rec.scope,
             "aicc": rec.aicc, "params": rec.params, "correlations": rec.correlations, "relaxation": rec.relaxation,
             "tests": rec.tests, "stderr": rec.stderr, "varying": rec.varying, "flags": rec.flags,
-            "converged": rec.converged}
+            "converged": rec.converged,
+            "taus_s": [float(t) for t in (rec.structure or {}).get("taus_s") or []]}
 
 
 #: a baseline whose typical point (median over rows) is off by more than this factor misfits grossly: the

@@ -73,9 +73,11 @@ from .. import fitting
 from ..canonical import read_netcdf, write_netcdf
 from ..models.registry import FIXED_TIME_KEY, get_model, model_on_times
 from .. import stats as st
+from .. import material
 from ..material import REFINE_DECADES
 from . import homogeneous
-from .baseline import (baseline_adequacy, fit_runs, level_normalised, polished_times, predict_runs, ranked_candidates,
+from .baseline import (baseline_adequacy, curves_of_runs, fit_runs, level_normalised, polished_times, predict_runs,
+                       ranked_candidates,
                        nnls_relaxation_times, read_fit_record, resolved_window_s, window_taus)
 from .causes import CAUSE_IDS, DETECTORS, what_to_do
 from .covariates import covariate_tests, curve_frame, outlier_rows
@@ -211,7 +213,8 @@ def diagnose_runs(runs: Sequence[xr.Dataset], baseline: str | Sequence[str] = RU
                   fitted_tests: Sequence[str] = RUNS_BASELINE_TESTS, n_points: int = 16, alpha: float = st.ALPHA,
                   extensions: bool = True, return_table: bool = False,
                   order_source: str | None = None,
-                  simulation_fits: dict | None = None) -> dict | tuple[dict, pd.DataFrame]:
+                  simulation_fits: dict | None = None,
+                  fit_stage_taus_s: Sequence[float] = ()) -> dict | tuple[dict, pd.DataFrame]:
     """Diagnose canonical runs on a baseline whose relaxation times come from the data: the one path from runs
     to a diagnosis (the pipeline's :func:`run_diagnosis` takes its candidate laws from the ranking and comes here).
 
@@ -225,7 +228,9 @@ def diagnose_runs(runs: Sequence[xr.Dataset], baseline: str | Sequence[str] = RU
     taken in the given order (e.g. the dataset's ranking, ``order_source`` saying so) and fitted only as far as
     needed. They are checked in that order with :func:`~tissuemech.diagnosis.baseline.baseline_adequacy`, and
     the first adequate one is diagnosed under the noise model estimated from the runs; model-level fixes are
-    scored when ``extensions``. Returns the :func:`diagnose` result with ``fit_info.taus_s``,
+    scored when ``extensions``. ``fit_stage_taus_s``: the relaxation times the fit stage's model chose from every
+    test kind (its fit record); those that only the sweeps resolve join the NNLS times
+    (:func:`_with_sweep_times`). Returns the :func:`diagnose` result with ``fit_info.taus_s``,
     ``fit_info.window`` and ``fit_info.baseline_aicc`` ({key: AICc} of the candidates fitted) (and the
     diagnosed model's residual table with ``return_table``).
     """
@@ -236,7 +241,7 @@ def diagnose_runs(runs: Sequence[xr.Dataset], baseline: str | Sequence[str] = RU
     if not fitted:
         raise ValueError(f"no run of the fitted tests {list(fitted_tests)} to fit the baseline {baseline!r} to")
     fits, spectra = {}, {}
-    first = _linear_law_spectrum(fitted, target, relaxation, window)
+    first = _with_sweep_times(_linear_law_spectrum(fitted, target, relaxation, window), fitted, fit_stage_taus_s)
 
     def candidate(k):
         if k not in fits:
@@ -319,6 +324,35 @@ def _linear_law_spectrum(runs: Sequence[xr.Dataset], target: str, relaxation: st
     return spectrum
 
 
+#: a fit-stage time joins the NNLS times only this far (factor) from every one of them: nearer, NNLS already has it
+SWEEP_TIME_SEPARATION = 10 ** 0.5
+
+
+def _with_sweep_times(spectrum: dict, runs: Sequence[xr.Dataset], fit_stage_taus_s: Sequence[float]) -> dict:
+    """``spectrum`` with the fit stage's times that only the sweeps resolve: those outside the histories' window
+    (:func:`tissuemech.material.resolved_window_s` of the ramps, relaxations and creep) and more than
+    :data:`SWEEP_TIME_SEPARATION` from every NNLS time. The NNLS reads the histories only
+    (:data:`~tissuemech.diagnosis.baseline.NNLS_RESPONSES`), so a mode that shapes G*(omega) faster than any ramp
+    sample (a 7 ms mode under 0.01-1 1/s ramps) was missing from the baseline and left its shape along every
+    frequency sweep as unexplained structure. Unchanged without sweeps among ``runs`` or without such a time."""
+    taus = np.asarray(spectrum["taus_s"], float)
+    extra = np.asarray(fit_stage_taus_s, float)
+    curves = curves_of_runs(runs, "measured", 10 ** 9)
+    if not extra.size or not any(c.response in ("oscillation", "amplitude_sweep") for c in curves):
+        return spectrum
+    histories = material.resolved_window_s([c for c in curves if c.response in ("shear_history", "creep")])
+    lo, hi = histories["t_min_s"], histories["t_max_s"]
+    outside = (extra < lo) | (extra > hi) if np.isfinite(lo) and np.isfinite(hi) else np.ones(extra.size, bool)
+    far = np.array([not taus.size or np.min(np.abs(np.log(t / taus))) > np.log(SWEEP_TIME_SEPARATION)
+                    for t in extra])
+    added = extra[outside & far & np.isfinite(extra) & (extra > 0)]
+    if not added.size:
+        return spectrum
+    return {**spectrum, "taus_s": np.sort(np.r_[taus, added]), "sweep_taus_s": added,
+            "method": spectrum["method"] + "; with the fit stage's time(s) " + ", ".join(f"{t:.3g}" for t in added)
+            + " s that only the sweeps resolve"}
+
+
 def _fit_on_data_times(key: str, runs: Sequence[xr.Dataset], target: str, relaxation: str, window: dict,
                        n_points: int, spectrum: dict):
     """One candidate of the runs-only path on the relaxation times the data ask for.
@@ -337,6 +371,11 @@ def _fit_on_data_times(key: str, runs: Sequence[xr.Dataset], target: str, relaxa
     # a one-parameter law is its modulus times a fixed shape, absorbed by the weights: nothing to repeat
     if law is not None and len(law.param_names) > 1 and fit.success:
         again = nnls_relaxation_times(runs, target, relaxation, window, model_key=key, law_params=fit.params)
+        sweep_taus = np.asarray(spectrum.get("sweep_taus_s", ()), float)
+        if again["taus_s"].size and sweep_taus.size:
+            again = {**again, "taus_s": np.sort(np.r_[again["taus_s"], sweep_taus]), "sweep_taus_s": sweep_taus,
+                     "method": again["method"] + "; with the fit stage's time(s) "
+                     + ", ".join(f"{t:.3g}" for t in sweep_taus) + " s that only the sweeps resolve"}
         if again["taus_s"].size and not np.array_equal(again["taus_s"], taus):
             fit = fit_runs(key, normalised, target, relaxation, n_points=n_points, taus_s=again["taus_s"])
             taus = again["taus_s"]
@@ -412,7 +451,7 @@ def run_diagnosis(runs_dir: str | Path, fits_dir: str | Path, out_json: str | Pa
             relaxation=lead.get("relaxation", "measured"), fitted_tests=lead["tests"], alpha=alpha,
             extensions=extensions, return_table=True,
             order_source=order_source + "; relaxation times of each candidate from the data (NNLS)",
-            simulation_fits=simulation_fits)
+            simulation_fits=simulation_fits, fit_stage_taus_s=lead.get("taus_s", ()))
         if extension_cards_dir is not None:
             write_simulation_cards(result, simulation_fits, extension_cards_dir, poisson_ratio, name)
         return _write_outputs(result, base_table, out_json, out_nc, fig_dir, name)

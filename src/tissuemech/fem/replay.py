@@ -200,7 +200,7 @@ def _time_test(base: PlateTest, curve: F.Curve, settings: ReplaySettings) -> Pla
         sub = keep_rows[phase]
         part = replace(curve, observed={k: np.asarray(v)[sub] for k, v in curve.observed.items()},
                        sd={}, obs_index=idx[sub])
-        kept.append(sub[np.searchsorted(idx[sub], F.thin(part, settings.points_per_curve).obs_index)])
+        kept.append(sub[np.searchsorted(idx[sub], F.thin(part, settings.points_per_curve, by_phase=False).obs_index)])
     kept = np.concatenate(kept)
     points = _breakpoints(t, drive, idx[kept], settings.history_tolerance)
     t_h, d_h = t[points], drive[points]

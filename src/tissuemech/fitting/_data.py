@@ -428,19 +428,17 @@ def _subset(curve: Curve, keep: np.ndarray) -> Curve:
 def loading_phases(drive: np.ndarray) -> list[np.ndarray]:
     """Loading and unloading phases of a sampled stress-controlled drive, as positions into ``drive``.
 
-    A new phase begins where the drive's magnitude crosses half its largest magnitude, e.g. the unloading of a
-    creep-recovery test, however finely the instrument sampled the change. The loading from rest at the start
-    belongs to the first phase (a sampled loading ramp is not a phase of its own); a drive that never leaves that
-    level, or never comes back below it, is one phase.
+    A new phase begins wherever the drive crosses the middle of its range, however finely the instrument sampled
+    the change: a creep-recovery test is the lower half of its loading ramp (where the fast modes show), the
+    creep, and the recovery from the middle of its unloading on; a step load is two phases and a constant drive
+    one.
     """
-    magnitude = np.abs(np.asarray(drive, float))
-    if magnitude.size == 0 or not magnitude.max() > 0:
-        return [np.arange(magnitude.size)]
-    high = magnitude > 0.5 * magnitude.max()
+    drive = np.asarray(drive, float)
+    if drive.size == 0 or not np.ptp(drive) > 0:
+        return [np.arange(drive.size)]
+    high = np.abs(drive - drive.min()) > 0.5 * np.ptp(drive)
     cuts = np.flatnonzero(high[1:] != high[:-1]) + 1
-    if cuts.size and not high[0]:
-        cuts = cuts[1:]
-    return [p for p in np.split(np.arange(magnitude.size), cuts) if p.size]
+    return [p for p in np.split(np.arange(drive.size), cuts) if p.size]
 
 
 def _spaced(x: np.ndarray, n_points: int) -> np.ndarray:
@@ -457,7 +455,7 @@ def _spaced(x: np.ndarray, n_points: int) -> np.ndarray:
     return np.unique(np.abs(x[:, None] - grid[None, :]).argmin(axis=0))
 
 
-def thin(curve: Curve, n_points: int = 40) -> Curve:
+def thin(curve: Curve, n_points: int = 40, by_phase: bool = True) -> Curve:
     """Keep about ``n_points`` observation points, log-spaced in the curve's ordering variable
     (time, frequency, rate, strain; linear spacing where it is not positive).
 
@@ -465,12 +463,14 @@ def thin(curve: Curve, n_points: int = 40) -> Curve:
     creep, then recovery) shares the points between its phases, each log-spaced in the time since its phase began
     (the last point of the phase before); a phase with fewer points than its share keeps them all. Log-spaced over
     the whole test, a recovery spans a small part of the test's decades and would keep one or two points: a fit
-    would not see how the strain recovers, which is what tells a solid from a fluid.
+    would not see how the strain recovers, which is what tells a solid from a fluid. ``by_phase=False``: one
+    log-spaced set (for a caller that has split the phases itself, e.g. the FEM replay's histories).
     """
     x = _obs_x(curve)
     if x.size <= n_points:
         return curve
-    phases = loading_phases(curve.obs_inputs("shear_stress")) if curve.response == "creep" else [np.arange(x.size)]
+    phases = loading_phases(curve.obs_inputs("shear_stress")) if by_phase and curve.response == "creep" \
+        else [np.arange(x.size)]
     if len(phases) == 1:
         return _subset(curve, _spaced(x, n_points))
     keep, left = [], n_points
