@@ -334,7 +334,8 @@ def _with_sweep_times(spectrum: dict, runs: Sequence[xr.Dataset], fit_stage_taus
     :data:`SWEEP_TIME_SEPARATION` from every NNLS time. The NNLS reads the histories only
     (:data:`~tissuemech.diagnosis.baseline.NNLS_RESPONSES`), so a mode that shapes G*(omega) faster than any ramp
     sample (a 7 ms mode under 0.01-1 1/s ramps) was missing from the baseline and left its shape along every
-    frequency sweep as unexplained structure. Unchanged without sweeps among ``runs`` or without such a time."""
+    frequency sweep as unexplained structure. Unchanged without sweeps or histories among ``runs``, or without
+    such a time."""
     taus = np.asarray(spectrum["taus_s"], float)
     extra = np.asarray(fit_stage_taus_s, float)
     curves = curves_of_runs(runs, "measured", 10 ** 9)
@@ -342,7 +343,11 @@ def _with_sweep_times(spectrum: dict, runs: Sequence[xr.Dataset], fit_stage_taus
         return spectrum
     histories = material.resolved_window_s([c for c in curves if c.response in ("shear_history", "creep")])
     lo, hi = histories["t_min_s"], histories["t_max_s"]
-    outside = (extra < lo) | (extra > hi) if np.isfinite(lo) and np.isfinite(hi) else np.ones(extra.size, bool)
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        # no history: the NNLS had nothing to read and the window's grid stands in (sweeps alone, e.g. a
+        # temperature series of frequency sweeps); adding every fit-stage time there cost 7x the CPU
+        return spectrum
+    outside = (extra < lo) | (extra > hi)
     far = np.array([not taus.size or np.min(np.abs(np.log(t / taus))) > np.log(SWEEP_TIME_SEPARATION)
                     for t in extra])
     added = extra[outside & far & np.isfinite(extra) & (extra > 0)]
