@@ -158,6 +158,16 @@ def noise_sd(noise: Mapping, test: str, quantity: str, observed: np.ndarray, str
 
 #: imposed inputs, not responses: their scatter does not set the noise of a fix's metric
 INPUT_QUANTITIES = ("shear_strain",)
+#: what a test kind imposes where it is not :data:`INPUT_QUANTITIES`: a creep test imposes the stress (the torque)
+#: and responds in strain
+IMPOSED_BY_TEST = {"creep_recovery": ("shear_stress", "torque")}
+
+
+def is_response(block: str) -> bool:
+    """Whether an :func:`estimate_noise` block ``"<test>|<quantity>"`` is a measured response of its test, not
+    the input the test imposes (:data:`IMPOSED_BY_TEST`, else :data:`INPUT_QUANTITIES`)."""
+    test, _, quantity = block.partition("|")
+    return quantity not in IMPOSED_BY_TEST.get(test, INPUT_QUANTITIES)
 
 
 def relative_noise_level(noise: Mapping) -> float:

@@ -9,15 +9,13 @@ import numpy as np
 
 from .. import fitting
 from ..noise import (ABOVE_NOISE_SIGMAS, COMPARED_QUANTITIES, INPUT_QUANTITIES, MODULI, OSCILLATORY_TESTS,
-                     estimate_noise, noise_sd, points_above_floor, relative_noise_level, robust_noise_sd)
+                     estimate_noise, is_response, noise_sd, points_above_floor, relative_noise_level,
+                     robust_noise_sd)
 
 __all__ = ["ABOVE_NOISE_SIGMAS", "COMPARED_QUANTITIES", "INPUT_QUANTITIES", "MODULI", "OSCILLATORY_TESTS",
-           "estimate_noise", "fit_noise", "noise_sd", "points_above_floor", "relative_noise_level", "robust_noise_sd"]
+           "estimate_noise", "fit_noise", "is_response", "noise_sd", "points_above_floor", "relative_noise_level", "robust_noise_sd"]
 
 
-#: quantities a test kind imposes (its drive) where they are not :data:`INPUT_QUANTITIES`: a creep test imposes
-#: the stress (the torque) and responds in strain
-IMPOSED_BY_TEST = {"creep_recovery": ("shear_stress", "torque")}
 #: fit observables whose noise block is the run quantity of the same name; a torque observable has the relative
 #: scatter of the rim stress it is proportional to (its absolute floor needs the plate radius: the fit's default)
 _FIT_OBSERVABLE_OF = {"torque": "shear_stress"}
@@ -35,8 +33,7 @@ def fit_noise(noise: Mapping) -> fitting.NoiseModel:
     for observable in set(default.absolute) | set(_FIT_OBSERVABLE_OF):
         quantity = _FIT_OBSERVABLE_OF.get(observable, observable)
         # only the tests that respond in the quantity: an imposed strain or creep stress has no response noise
-        entries = [b for k, b in blocks.items() if k.split("|", 1)[1] == quantity
-                   and quantity not in IMPOSED_BY_TEST.get(k.split("|", 1)[0], INPUT_QUANTITIES)]
+        entries = [b for k, b in blocks.items() if k.partition("|")[2] == quantity and is_response(k)]
         rel = [float(b["relative"]) for b in entries if float(b["relative"]) > 0]
         if rel:
             relative[observable] = float(np.median(rel))
@@ -44,5 +41,3 @@ def fit_noise(noise: Mapping) -> fitting.NoiseModel:
         if own and observable == quantity:
             absolute[observable] = float(np.median(own))
     return fitting.NoiseModel(relative=default.relative, absolute=absolute, relative_by=relative)
-
-

@@ -73,12 +73,11 @@ from .. import fitting
 from ..canonical import read_netcdf, write_netcdf
 from ..models.registry import FIXED_TIME_KEY, get_model, model_on_times
 from .. import stats as st
-from .. import material
 from ..material import REFINE_DECADES
 from . import homogeneous
-from .baseline import (baseline_adequacy, curves_of_runs, fit_runs, level_normalised, polished_times, predict_runs,
-                       ranked_candidates,
-                       nnls_relaxation_times, read_fit_record, resolved_window_s, window_taus)
+from .baseline import (NNLS_RESPONSES, baseline_adequacy, fit_runs, level_normalised, nnls_relaxation_times,
+                       polished_times, predict_runs, ranked_candidates, read_fit_record, resolved_window_s,
+                       window_taus)
 from .causes import CAUSE_IDS, DETECTORS, what_to_do
 from .covariates import covariate_tests, curve_frame, outlier_rows
 from .decision import DECISION_RULE, apply_rule, ordered, top_finding, unexplained_structure  # noqa: F401 (top_finding: API)
@@ -87,7 +86,7 @@ from .figures import write_figures, write_multimode_figures
 from .findings import DiagnosisContext, write_diagnosis_json
 from .fixes import score_model_fixes
 from .generic import confounded_covariates, serial_structure, structure_tests
-from .noise import estimate_noise, relative_noise_level
+from .noise import OSCILLATORY_TESTS, estimate_noise, relative_noise_level
 from .simulation_cards import write_simulation_cards
 
 
@@ -330,32 +329,36 @@ SWEEP_TIME_SEPARATION = 10 ** 0.5
 
 def _with_sweep_times(spectrum: dict, runs: Sequence[xr.Dataset], fit_stage_taus_s: Sequence[float]) -> dict:
     """``spectrum`` with the fit stage's times that only the sweeps resolve: those outside the histories' window
-    (:func:`tissuemech.material.resolved_window_s` of the ramps, relaxations and creep) and more than
+    (:func:`~tissuemech.diagnosis.baseline.resolved_window_s` of the ramps, relaxations and creep) and more than
     :data:`SWEEP_TIME_SEPARATION` from every NNLS time. The NNLS reads the histories only
     (:data:`~tissuemech.diagnosis.baseline.NNLS_RESPONSES`), so a mode that shapes G*(omega) faster than any ramp
     sample (a 7 ms mode under 0.01-1 1/s ramps) was missing from the baseline and left its shape along every
-    frequency sweep as unexplained structure. Unchanged without sweeps or histories among ``runs``, or without
-    such a time."""
+    frequency sweep as unexplained structure. Unchanged without sweeps or histories among ``runs`` (sweeps alone:
+    the NNLS had nothing to read and the window's grid stands in; adding every fit-stage time there cost 7x the
+    CPU of a temperature series' diagnosis), or without such a time."""
     taus = np.asarray(spectrum["taus_s"], float)
     extra = np.asarray(fit_stage_taus_s, float)
-    curves = curves_of_runs(runs, "measured", 10 ** 9)
-    if not extra.size or not any(c.response in ("oscillation", "amplitude_sweep") for c in curves):
+    extra = extra[np.isfinite(extra) & (extra > 0)]
+    if not extra.size or not any(r.attrs.get("test") in OSCILLATORY_TESTS for r in runs):
         return spectrum
-    histories = material.resolved_window_s([c for c in curves if c.response in ("shear_history", "creep")])
+    histories = resolved_window_s([r for r in runs if fitting.TEST_RESPONSE.get(r.attrs.get("test"))
+                                   in NNLS_RESPONSES])
     lo, hi = histories["t_min_s"], histories["t_max_s"]
     if not (np.isfinite(lo) and np.isfinite(hi)):
-        # no history: the NNLS had nothing to read and the window's grid stands in (sweeps alone, e.g. a
-        # temperature series of frequency sweeps); adding every fit-stage time there cost 7x the CPU
         return spectrum
-    outside = (extra < lo) | (extra > hi)
     far = np.array([not taus.size or np.min(np.abs(np.log(t / taus))) > np.log(SWEEP_TIME_SEPARATION)
                     for t in extra])
-    added = extra[outside & far & np.isfinite(extra) & (extra > 0)]
-    if not added.size:
+    return _joined(spectrum, taus, extra[((extra < lo) | (extra > hi)) & far])
+
+
+def _joined(spectrum: dict, taus: np.ndarray, sweep_taus: np.ndarray) -> dict:
+    """``spectrum`` on ``taus`` with the sweep-only times ``sweep_taus`` added (kept as ``sweep_taus_s`` for a
+    later NNLS of the same runs, :func:`_fit_on_data_times`); unchanged when there are none."""
+    if not sweep_taus.size:
         return spectrum
-    return {**spectrum, "taus_s": np.sort(np.r_[taus, added]), "sweep_taus_s": added,
-            "method": spectrum["method"] + "; with the fit stage's time(s) " + ", ".join(f"{t:.3g}" for t in added)
-            + " s that only the sweeps resolve"}
+    return {**spectrum, "taus_s": np.sort(np.r_[taus, sweep_taus]), "sweep_taus_s": sweep_taus,
+            "method": spectrum["method"] + "; with the fit stage's time(s) "
+            + ", ".join(f"{t:.3g}" for t in sweep_taus) + " s that only the sweeps resolve"}
 
 
 def _fit_on_data_times(key: str, runs: Sequence[xr.Dataset], target: str, relaxation: str, window: dict,
@@ -376,11 +379,8 @@ def _fit_on_data_times(key: str, runs: Sequence[xr.Dataset], target: str, relaxa
     # a one-parameter law is its modulus times a fixed shape, absorbed by the weights: nothing to repeat
     if law is not None and len(law.param_names) > 1 and fit.success:
         again = nnls_relaxation_times(runs, target, relaxation, window, model_key=key, law_params=fit.params)
-        sweep_taus = np.asarray(spectrum.get("sweep_taus_s", ()), float)
-        if again["taus_s"].size and sweep_taus.size:
-            again = {**again, "taus_s": np.sort(np.r_[again["taus_s"], sweep_taus]), "sweep_taus_s": sweep_taus,
-                     "method": again["method"] + "; with the fit stage's time(s) "
-                     + ", ".join(f"{t:.3g}" for t in sweep_taus) + " s that only the sweeps resolve"}
+        if again["taus_s"].size:
+            again = _joined(again, again["taus_s"], np.asarray(spectrum.get("sweep_taus_s", ()), float))
         if again["taus_s"].size and not np.array_equal(again["taus_s"], taus):
             fit = fit_runs(key, normalised, target, relaxation, n_points=n_points, taus_s=again["taus_s"])
             taus = again["taus_s"]
