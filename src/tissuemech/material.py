@@ -187,6 +187,118 @@ def as_strain_controlled(curve: F.Curve) -> F.Curve:
                    obs_index=np.arange(start, start + t.size)[loaded])
 
 
+#: a creep observation's weight in :func:`creep_relaxation_times` is capped at that of a strain this fraction of its
+#: curve's largest: the relative noise model gives a recovery's near-zero strains unbounded weight
+CREEP_WEIGHT_FLOOR = 0.01
+
+
+def creep_relaxation_times(curves: Sequence[F.Curve], window: Mapping, per_decade: float = NNLS_TIMES_PER_DECADE,
+                           units: Sequence[str] | None = None,
+                           merge_per_decade: float | None = MATERIAL_TIMES_PER_DECADE) -> dict:
+    r"""Relaxation times of the creep-recovery curves, from a retardation NNLS on their creep *and* recovery.
+
+    A linear material answers an imposed stress history with
+
+    .. math:: \gamma(t) = J_g \sigma(t) + \sum_k j_k [\sigma(t) - q_k(t)] + \phi \int_0^t \sigma\,dt',
+              \qquad q_k = \int_0^t e^{-(t - s)/\lambda_k}\,d\sigma(s),
+
+    linear in the retardation spectrum ``(J_g, j_k >= 0, phi >= 0)``; each column is exact for the stress linear
+    between samples (:func:`tissuemech.models.recursion.prony_branch_histories`). Read in this direction, the
+    strain -- what the test measures -- is the observation (weighted by the relative noise model, capped at
+    :data:`CREEP_WEIGHT_FLOOR` of the curve's largest strain), and the recovery, which carries most of what a creep
+    says about its slow modes, takes part. (Read the other way round, :func:`as_strain_controlled`, the recovery's
+    zero stress has no usable weight; on a development creep-only null with modes at 1, 9 and 48 s that reading
+    gave 0.56, 1, 1.8 and 210 s, and the diagnosis's model on those times misfit by 15x the noise variance.)
+
+    With ``units`` each piece gets a compliance level (alternating with NNLS, as in
+    :func:`nnls_relaxation_times`). The retardation spectrum on the window's grid (a decade below it to its end,
+    ``per_decade`` per decade; neighbouring active times merged by :func:`merged_times` with ``merge_per_decade``)
+    is converted exactly to a Prony series (:func:`tissuemech.spectra.kelvin_voigt_to_prony`; a retardation faster
+    than the first observation counts as glassy compliance);
+    its times with a weight above the noise model's relative floor (1 %) of the instantaneous modulus, inside the
+    grid's span, are returned.
+
+    Returns
+    -------
+    ``{"taus_s": relaxation times [s] ascending (empty without creep, window or active mode), "retardation_s":
+    the active retardation times [s], "flow": whether the flow term is active, "levels": {unit: modulus level}}``
+    """
+    from .models.recursion import prony_branch_histories
+    from .spectra import kelvin_voigt_to_prony
+
+    out = {"taus_s": np.array([]), "retardation_s": np.array([]), "flow": False, "levels": {}}
+    kept = [i for i, c in enumerate(curves) if c.response == "creep"]
+    grid = window_taus({**window, "t_min_s": window.get("t_min_s", np.nan) / 10.0 ** NNLS_GRID_BELOW_DECADES},
+                       per_decade)
+    if not kept or grid.size == 0:
+        return out
+    noise = F.NoiseModel()
+    blocks, rhs, row_unit = [], [], []
+    for i in kept:
+        c = curves[i]
+        t = np.asarray(c.inputs["time"], float)
+        stress = np.asarray(c.inputs["shear_stress"], float)
+        idx = np.arange(t.size) if c.obs_index is None else np.asarray(c.obs_index)
+        strain = np.asarray(c.observed["shear_strain"], float)
+        ok = np.isfinite(strain) & np.isfinite(t[idx]) & np.isfinite(stress[idx])
+        if ok.sum() < 2 or not np.all(np.isfinite(stress)) or not np.all(np.diff(t) > 0):
+            continue
+        branches = prony_branch_histories(t, np.tile(stress, (grid.size, 1)), grid)
+        flow = np.concatenate([[0.0], np.cumsum(0.5 * (stress[1:] + stress[:-1]) * np.diff(t))])
+        cols = np.column_stack([stress, (stress[None, :] - branches).T, flow])[idx][ok]
+        y = strain[ok]
+        scale = noise.sigma("shear_strain", np.maximum(np.abs(y), CREEP_WEIGHT_FLOOR * np.max(np.abs(y))), None)
+        blocks.append(cols / scale[:, None])
+        rhs.append(y / scale)
+        row_unit.append(np.full(y.size, units[i] if units is not None else "", dtype=object))
+    if not blocks:
+        return out
+    design, rhs, row_unit = np.vstack(blocks), np.concatenate(rhs), np.concatenate(row_unit)
+    norm = np.linalg.norm(design, axis=0)
+    norm = np.where(norm > 0, norm, 1.0)
+    names = sorted({str(u) for u in row_unit}) if units is not None else []
+    level = {u: 1.0 for u in names}
+    for _ in range(LEVEL_ITERATIONS):
+        # a piece c times stiffer creeps 1/c as far
+        c_row = np.array([1.0 / level[u] for u in row_unit]) if names else np.ones(rhs.size)
+        coef, _ = scipy.optimize.nnls(design * c_row[:, None] / norm, rhs, maxiter=100 * design.shape[1])
+        pred = design @ (coef / norm)
+        if not coef.sum() > 0 or len(names) < 2:
+            break
+        new = {}
+        for u in names:
+            sel = (row_unit == u) & (pred > 0) & (rhs > 0)
+            new[u] = float(np.exp(np.median(np.log(pred[sel] / rhs[sel])))) if sel.any() else 1.0
+        centre = float(np.exp(np.mean(np.log(list(new.values())))))
+        new = {u: v / centre for u, v in new.items()}
+        change = max(abs(new[u] / level[u] - 1.0) for u in names)
+        level = new
+        if change < 1e-3:
+            break
+    coef = coef / norm
+    j_g, j, fluidity = float(coef[0]), coef[1:-1].copy(), float(coef[-1])
+    # a retardation faster than the first observation is complete before it: the glassy compliance (left apart, it
+    # would convert to a relaxation faster than anything measured)
+    early = grid < window.get("t_min_s", 0.0)
+    j_g += float(j[early].sum())
+    j[early] = 0.0
+    if not (j.sum() > 0 or fluidity > 0):
+        return out
+    if not j_g > 0:
+        # no instantaneous compliance resolved: the fastest retardation stands in for the glassy response
+        j_g = 1e-3 * float(j.sum() + fluidity * grid[-1])
+    # one mode between two grid times shows as weight on both: merged as the relaxation NNLS's times are
+    retardation = merged_times(grid, j, merge_per_decade)
+    nearest = np.abs(np.log(grid)[:, None] - np.log(retardation)[None, :]).argmin(axis=1) if retardation.size else []
+    merged_j = np.bincount(np.asarray(nearest, int)[j > 0], weights=j[j > 0], minlength=retardation.size)
+    g_e, g_k, tau_k = kelvin_voigt_to_prony(j_g, merged_j, retardation, fluidity)
+    # a mode under the noise model's relative floor (1 %, the instrument's accuracy) of the instantaneous modulus
+    # moves no strain by more than that floor
+    keep = (g_k * j_g > noise.relative) & (tau_k >= grid[0]) & (tau_k <= grid[-1])
+    out.update(taus_s=np.sort(tau_k[keep]), retardation_s=retardation, flow=bool(fluidity > 0), levels=level)
+    return out
+
+
 @dataclass(frozen=True)
 class SpectrumFactory:
     """Picklable factory of a fixed-time QLV model on data-chosen times (``models.registry.model_on_times``)."""
@@ -248,6 +360,7 @@ def nnls_relaxation_times(curves: Sequence[F.Curve], window: Mapping | None = No
     units = list(units) if units is not None else None
     if units is not None and len(units) != len(curves):
         raise ValueError(f"units: {len(units)} labels for {len(curves)} curves")
+    originals = list(curves)
     curves = [as_strain_controlled(c) for c in curves]
     window = resolved_window_s(curves) if window is None else window
     grid = window_taus({**window, "t_min_s": window.get("t_min_s", np.nan) / 10.0 ** NNLS_GRID_BELOW_DECADES},
@@ -308,12 +421,36 @@ def nnls_relaxation_times(curves: Sequence[F.Curve], window: Mapping | None = No
             break
     coef = coef / norm
     total = coef.sum()
-    if not total > 0:
-        return out
-    g0 = initial_shear_modulus(model.instantaneous, model.instantaneous_params(elastic))
-    out.update(taus_s=merged_times(grid, coef[1:], merge_per_decade), weights=coef / total,
-               modulus_pa=float(g0 * total), equilibrium_share=float(coef[0] / total), levels=level)
-    return out
+    if total > 0:
+        g0 = initial_shear_modulus(model.instantaneous, model.instantaneous_params(elastic))
+        out.update(taus_s=merged_times(grid, coef[1:], merge_per_decade), weights=coef / total,
+                   modulus_pa=float(g0 * total), equilibrium_share=float(coef[0] / total), levels=level)
+    return _with_creep_times(out, originals, window, per_decade, units, merge_per_decade)
+
+
+#: a time of the creep's retardation NNLS joins the other tests' NNLS times only this far (factor) from every one
+CREEP_TIME_SEPARATION = 10 ** 0.5
+
+
+def _with_creep_times(spectrum: dict, curves: Sequence[F.Curve], window: Mapping, per_decade: float,
+                      units: Sequence[str] | None, merge_per_decade: float | None) -> dict:
+    """``spectrum`` with the creep curves' relaxation times (:func:`creep_relaxation_times`): they replace the
+    times (and levels) when creep is the only history or sweep among ``curves``, and otherwise join them where
+    they are more than :data:`CREEP_TIME_SEPARATION` from every one."""
+    creep = creep_relaxation_times(curves, window, per_decade, units, merge_per_decade)
+    extra = creep["taus_s"]
+    if not extra.size:
+        return spectrum
+    note = "; creep-recovery read in its own direction (retardation NNLS on creep and recovery, exact conversion)"
+    others = [c for c in curves if c.response in ("shear_history", "oscillation", "amplitude_sweep")]
+    taus = np.asarray(spectrum["taus_s"], float)
+    if not others or not taus.size:
+        levels = creep["levels"] if not others else spectrum["levels"]
+        return {**spectrum, "taus_s": extra, "levels": levels, "method": spectrum["method"] + note}
+    far = np.array([np.min(np.abs(np.log(t / taus))) > np.log(CREEP_TIME_SEPARATION) for t in extra])
+    if not far.any():
+        return spectrum
+    return {**spectrum, "taus_s": np.sort(np.r_[taus, extra[far]]), "method": spectrum["method"] + note}
 
 
 # ----------------------------------------------------------------------------------------------------------

@@ -231,6 +231,29 @@ def test_sweeps_and_creep_only_recover_a_linear_material():
     _check_relaxation_function(model, p, truth)
 
 
+def test_creep_recovery_gives_its_relaxation_times_read_in_its_own_direction():
+    """Creep-recovery only, three modes (1, 8, 50 s; the slow two shape mostly the recovery), two pieces of which
+    one is 1.5x stiffer: the retardation NNLS on creep and recovery, converted exactly, gives each true relaxation
+    time within 0.15 decade and nothing else, and the stiffer piece's level."""
+    from dataclasses import replace
+
+    from tissuemech.material import creep_relaxation_times, nnls_relaxation_times, resolved_window_s
+    truth = {**TRUTH, "C20": 0.0, "g": np.array([0.24, 0.1, 0.15]), "tau": np.array([1.0, 8.0, 50.0])}
+    soft, stiff = creep_curves(np.random.default_rng(14), truth, stresses=(20.0, 30.0), t_load=90.0)
+    # the oracle's load is a step at t = 0: so is the imposed history's (a step from rest at the first sample)
+    soft, stiff = (replace(c, inputs={k: v[1:] for k, v in c.inputs.items()}, obs_index=None) for c in (soft, stiff))
+    stiff = replace(stiff, observed={"shear_strain": stiff.observed["shear_strain"] / 1.5})
+    window = resolved_window_s([soft, stiff])
+    out = creep_relaxation_times([soft, stiff], window, units=["soft", "stiff"], merge_per_decade=None)
+    found = np.asarray(out["taus_s"])
+    assert found.size == 3, found
+    np.testing.assert_allclose(np.log10(found), np.log10(truth["tau"]), atol=0.15)
+    assert out["levels"]["stiff"] / out["levels"]["soft"] == pytest.approx(1.5, rel=0.02)
+    # the material NNLS takes them where creep is the only history
+    spectrum = nnls_relaxation_times([soft, stiff], window, units=["soft", "stiff"], merge_per_decade=None)
+    np.testing.assert_allclose(spectrum["taus_s"], found)
+
+
 def test_a_flagged_fit_is_never_recommended():
     """The verdict rule: an undetermined, inadequate or unskilled fit is never chosen, even with the lowest AICc; with
     no supported fit the verdict is no_model_supported with the reason."""

@@ -330,9 +330,13 @@ def test_linear_maxwell_creep_equals_qlv_creep():
     p = {"G0": 200.0, **{f"mu_b{i + 1}": m for i, m in enumerate(mu)}}
     qlv = QLVModel(LinearElasticShear(), 4)
     pq = qlv_params(qlv, {"G0": 200.0 + mu.sum()}, mu / (200.0 + mu.sum()))
-    t, stress = creep_recovery_history()
-    np.testing.assert_allclose(model.creep_strain(p, t, stress), qlv.creep_strain(pq, t, stress), rtol=1e-9,
-                               atol=1e-14)
+    # the Maxwell-branch stepper takes its drives linear between samples (second order), QLV's creep is exact
+    errors = []
+    for n in (60, 240):
+        t, stress = creep_recovery_history(n, n)
+        exact = qlv.creep_strain(pq, t, stress)
+        errors.append(np.abs(model.creep_strain(p, t, stress) - exact).max() / exact.max())
+    assert errors[1] < errors[0] / 8 and errors[1] < 2e-4
 
 
 @pytest.mark.parametrize("kind", ["maxwell_ogden_bb", "schapery", "strain_relaxing"])
