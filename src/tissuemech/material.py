@@ -215,8 +215,9 @@ def creep_relaxation_times(curves: Sequence[F.Curve], window: Mapping, per_decad
     ``per_decade`` per decade; neighbouring active times merged by :func:`merged_times` with ``merge_per_decade``)
     is converted exactly to a Prony series (:func:`tissuemech.spectra.kelvin_voigt_to_prony`; a retardation faster
     than the first observation counts as glassy compliance);
-    its times with a weight above the noise model's relative floor (1 %) of the instantaneous modulus, inside the
-    grid's span, are returned.
+    its times with a weight above the noise model's relative floor (1 %) of the instantaneous modulus, from the
+    grid's start, are returned, a time beyond the grid's end (a flow term, or modes far beyond the creep's duration)
+    at its end.
 
     Returns
     -------
@@ -294,8 +295,11 @@ def creep_relaxation_times(curves: Sequence[F.Curve], window: Mapping, per_decad
     g_e, g_k, tau_k = kelvin_voigt_to_prony(j_g, merged_j, retardation, fluidity)
     # a mode under the noise model's relative floor (1 %, the instrument's accuracy) of the instantaneous modulus
     # moves no strain by more than that floor
-    keep = (g_k * j_g > noise.relative) & (tau_k >= grid[0]) & (tau_k <= grid[-1])
-    out.update(taus_s=np.sort(tau_k[keep]), retardation_s=retardation, flow=bool(fluidity > 0), levels=level)
+    keep = (g_k * j_g > noise.relative) & (tau_k >= grid[0])
+    # a relaxation slower than the window (a flow term, or modes far beyond the creep's duration) acts on these
+    # data as one mode at the window's end
+    taus = np.unique(np.minimum(tau_k[keep], grid[-1]))
+    out.update(taus_s=taus, retardation_s=retardation, flow=bool(fluidity > 0), levels=level)
     return out
 
 

@@ -140,10 +140,24 @@ def rms(x) -> float:
     return float(np.sqrt(np.mean(x ** 2))) if x.size else np.nan
 
 
+#: the quantity that carries a curve's level, by test (else the stress): G' of a sweep, the strain of a creep
+LEVEL_QUANTITY = {"amplitude_sweep": "storage_modulus", "frequency_sweep": "storage_modulus",
+                  "creep_recovery": "shear_strain"}
+#: tests whose level quantity is a compliance: a stiffer curve answers with less of it
+COMPLIANCE_LEVEL_TESTS = ("creep_recovery",)
+
+
 def primary_rows(table: pd.DataFrame) -> pd.DataFrame:
-    """Rows of the quantity that carries each curve's level: stress for time-domain tests, G' for sweeps."""
-    q = np.where(table["test"].isin(("amplitude_sweep", "frequency_sweep")), "storage_modulus", "shear_stress")
+    """Rows of the quantity that carries each curve's level (:data:`LEVEL_QUANTITY`: stress for strain-controlled
+    time-domain tests, G' for sweeps, the strain for creep), with ``log_ratio`` as a stiffness scale: a creep's
+    log(observed/predicted) strain is negated (:data:`COMPLIANCE_LEVEL_TESTS`), so that every level-based detector
+    (drift, first load, outlier specimen, temperature, covariates) reads creep curves as it reads the others
+    instead of finding no level in them."""
+    q = table["test"].map(LEVEL_QUANTITY).fillna("shear_stress")
     rows = table[(table["quantity"] == q) & np.isfinite(table["log_ratio"])]
+    compliance = rows["test"].isin(COMPLIANCE_LEVEL_TESTS)
+    if compliance.any():
+        rows = rows.assign(log_ratio=np.where(compliance, -rows["log_ratio"], rows["log_ratio"]))
     # the first points of a ramp carry no level information and amplify noise in the log ratio
     return rows[rows["above_noise"]] if "above_noise" in rows else rows
 
