@@ -45,10 +45,11 @@ from . import fitting as F
 from .adequacy import add_assessment, assess, determined, misfit_in_noise_units, undetermined, verdict
 from .models.base import ConstitutiveModel, initial_shear_modulus
 from .models import qlv
+from .models.recursion import prony_branch_histories
 from .models.registry import FIXED_TIME_KEY, model_on_times
 from .ranking import Candidate, fit_candidate, ranking_table
 from .scopes import MATERIAL_LAWS, MATERIAL_TESTS  # noqa: F401 (MATERIAL_TESTS re-exported)
-from .spectra import decade_aligned_taus
+from .spectra import decade_aligned_taus, kelvin_voigt_to_prony
 
 
 #: grid density of :func:`nnls_relaxation_times` (times per decade): a mode lies within 0.125 decade of a grid time
@@ -224,9 +225,6 @@ def creep_relaxation_times(curves: Sequence[F.Curve], window: Mapping, per_decad
     ``{"taus_s": relaxation times [s] ascending (empty without creep, window or active mode), "retardation_s":
     the active retardation times [s], "flow": whether the flow term is active, "levels": {unit: modulus level}}``
     """
-    from .models.recursion import prony_branch_histories
-    from .spectra import kelvin_voigt_to_prony
-
     out = {"taus_s": np.array([]), "retardation_s": np.array([]), "flow": False, "levels": {}}
     kept = [i for i, c in enumerate(curves) if c.response == "creep"]
     grid = window_taus({**window, "t_min_s": window.get("t_min_s", np.nan) / 10.0 ** NNLS_GRID_BELOW_DECADES},

@@ -292,3 +292,47 @@ def test_drift_in_a_fixed_test_order_is_reported_as_confounded_with_the_conditio
 def test_outlier_not_testable_when_specimens_share_no_test():
     f = detect_outlier_specimen(make_runs([[0], [1], [2], [3]], outlier=3.0))
     assert not f["tested"] and "confounded" in f["evidence"] and "common test condition" in f["evidence"]
+
+
+def test_a_creep_curve_has_a_stiffness_level_read_from_its_strain():
+    """A creep's measured quantity is its strain: a sample that creeps to 0.8x the predicted strain is 1.25x as stiff
+    (the level every level-based detector reads; before, creep curves had no level and drift, first load and outlier
+    specimens were untestable on creep-only designs). A relaxation beside it keeps its stress ratio."""
+    from tissuemech.diagnosis.findings import curve_levels
+
+    n = 20
+    strain = np.linspace(0.01, 0.05, n)
+    common = {"specimen": "S1", "sample": "S1/s1", "first_load": 0, "test_order": 1, "frequency_sq": np.nan,
+              "strain": strain, "above_noise": True}
+    creep = pd.DataFrame({**common, "curve": "c", "test": "creep_recovery", "condition": "stress=20Pa",
+                          "quantity": "shear_strain", "log_ratio": np.log(0.8), "elapsed_time": 0.0})
+    relax = pd.DataFrame({**common, "curve": "r", "test": "stress_relaxation", "condition": "strain=5%",
+                          "quantity": "shear_stress", "log_ratio": np.log(1.1), "elapsed_time": 3600.0})
+    levels = curve_levels(pd.concat([creep, relax], ignore_index=True)).set_index("curve")["log_scale"]
+    assert levels["c"] == pytest.approx(np.log(1.25))
+    assert levels["r"] == pytest.approx(np.log(1.1))
+
+
+def test_a_clock_that_follows_the_test_order_is_not_read_as_a_covariate_within_samples():
+    """One specimen, four samples, the same three tests in the same order with equal pauses (clock jitter of 0.1 s), a misfit that
+    differs by test and no drift: within samples the clock is the condition, so the covariates table must not read
+    the condition's misfit as a clock effect (it did: a slope of thousands per hour at t = inf on a development
+    null). It is read between samples instead, where there is no trend."""
+    from tissuemech.diagnosis.covariates import covariate_tests
+
+    rng = np.random.default_rng(5)
+    rows = []
+    for k in range(4):
+        start = [0.3, 5.1, 2.2, 7.9][k]
+        offset = 0.05 * rng.standard_normal()
+        for j, (cond, misfit) in enumerate((("a", 0.00), ("b", 0.03), ("c", -0.02))):
+            rows.append({"curve": f"s{k}_{cond}", "specimen": "S1", "sample": f"S1/s{k}",
+                         "test": "stress_relaxation", "condition": cond,
+                         "log_scale": misfit + offset + 0.002 * rng.standard_normal(),
+                         "elapsed_time": start + 0.1 * j + 0.1 / 3600 * rng.standard_normal(),
+                         "position": j + 1.0, "first_load": float(j == 0)})
+    lv = pd.DataFrame(rows)
+    entry = next(e for e in covariate_tests(lv) if e["covariate"] == "elapsed_time")
+    # read within samples, the slope is the level noise over the clock jitter: 5.5 per hour here
+    assert entry["tested"] and "between the samples" in entry["variation"] and abs(entry["slope"]) < 0.05, entry
+    assert entry["p_value"] > 0.01

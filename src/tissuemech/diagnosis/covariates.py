@@ -11,8 +11,8 @@ covariate that follows them.
 
 * the session clock -- elapsed time (``elapsed_time``, hours) and the position in each sample's sequence
   (``test_order``) -- is tested *within* samples (the covariate centred on its sample mean; within specimens, on
-  the specimen mean, where every sample has one curve): a drift follows the clock inside a sample, the specimens'
-  differences do not;
+  the specimen mean, where every sample has one curve, or where the test condition explains the clock within
+  samples, a fixed test order): a drift follows the clock inside a sample, the specimens' differences do not;
 * the logged channels (``channel_temperature``, ``channel_gap``: the curve's mean; ``channel_normal_force``: the
   force at the curve's smallest strains, the preload, since the thrust during a test is a response), the
   run temperature (``temperature_c``, from the channel or the sample sheet), the gap and plate radius of the sample
@@ -175,7 +175,7 @@ def covariate_tests(lv: pd.DataFrame) -> list[dict]:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             if kind == "session clock":
-                got = within_test(lv[lv[column].notna()], column)
+                got = within_test(lv[lv[column].notna()], column, confounded_within=False)
                 t = got[0] if got else None
                 variation = got[1].split(" (")[0] if got else ""
             else:

@@ -58,12 +58,14 @@ def _varies_within(x: pd.Series, groups: pd.Series) -> bool:
     return bool((x - x.groupby(groups).transform("mean")).abs().max() > 1e-12 * max(float(x.abs().max()), 1e-300))
 
 
-def within_test(levels: pd.DataFrame, column: str, controls: Sequence[str] = ()) -> tuple[dict, str] | None:
+def within_test(levels: pd.DataFrame, column: str, controls: Sequence[str] = (),
+                confounded_within: bool = True) -> tuple[dict, str] | None:
     """Mixed-model test of ``column`` read within samples, else within specimens: the condition as fixed effects,
     specimen and sample as random effects (:func:`tissuemech.stats.mixed_coefficient_test`, between-within
     degrees of freedom). Within samples, the column and its ``controls`` are centred on their sample's mean; where
-    that leaves nothing testable (one curve per sample, or a fixed test order that makes the column follow the
-    condition: :func:`_condition_share` at least :data:`CONFOUND_CORRELATION` squared), each sample's mean, centred on its specimen's mean, is tested across the samples of a specimen. So a
+    that leaves nothing testable (one curve per sample, or, with ``confounded_within`` False, a fixed test order that
+    makes the column follow the condition: :func:`_condition_share` at least :data:`CONFOUND_CORRELATION` squared;
+    the drift detector reads it within and reports the confounding instead), each sample's mean, centred on its specimen's mean, is tested across the samples of a specimen. So a
     trend of the session clock is read inside a specimen, never from the specimens' differences (a block design
     measures the specimens one after the other). Returns ``(test, design sentence)`` or None."""
     factors = ("condition",) if levels["condition"].nunique() > 1 else ()
@@ -71,7 +73,8 @@ def within_test(levels: pd.DataFrame, column: str, controls: Sequence[str] = ())
     x = {c: levels[c].astype(float) for c in cols}
     # a column the condition explains within samples (a fixed test order with equal pauses) leaves the within-sample
     # regression only its clock jitter to read: a misfit that differs by condition would pass for its effect
-    if _varies_within(x[column], levels["sample"]) and _condition_share(levels, column) < CONFOUND_CORRELATION ** 2:
+    readable = confounded_within or _condition_share(levels, column) < CONFOUND_CORRELATION ** 2
+    if _varies_within(x[column], levels["sample"]) and readable:
         frame = levels.assign(**{c: x[c] - x[c].groupby(levels["sample"]).transform("mean") for c in cols})
         t = st.mixed_coefficient_test(frame, "log_scale", column, factors, controls=tuple(controls))
         if t is not None:
