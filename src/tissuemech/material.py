@@ -188,6 +188,38 @@ def as_strain_controlled(curve: F.Curve) -> F.Curve:
                    obs_index=np.arange(start, start + t.size)[loaded])
 
 
+def nnls_with_levels(design: np.ndarray, rhs: np.ndarray, row_unit: np.ndarray | None,
+                     power: float = 1.0) -> tuple[np.ndarray, dict[str, float]]:
+    """Non-negative least squares with one modulus level per loaded piece, alternating until the levels settle.
+
+    Row ``i`` of piece ``u`` is fitted as ``c_u**power (design @ coef)_i`` (``power`` 1 for a stress answering an
+    imposed strain, -1 for a strain answering an imposed stress); each level is the median log ratio of its piece's
+    points, the geometric mean of all levels 1, at most :data:`LEVEL_ITERATIONS` rounds, until the levels change
+    by < 0.1 %. ``row_unit`` None: one level for all. Columns are scaled to unit norm for NNLS and ``coef`` is
+    returned in the design's units. Returns ``(coef, {unit: c_u})``."""
+    norm = np.linalg.norm(design, axis=0)
+    norm = np.where(norm > 0, norm, 1.0)
+    names = sorted({str(u) for u in row_unit}) if row_unit is not None else []
+    level = {u: 1.0 for u in names}
+    for _ in range(LEVEL_ITERATIONS):
+        c_row = np.array([level[u] ** power for u in row_unit]) if names else np.ones(rhs.size)
+        coef, _ = scipy.optimize.nnls(design * c_row[:, None] / norm, rhs, maxiter=100 * design.shape[1])
+        pred = design @ (coef / norm)
+        if not coef.sum() > 0 or len(names) < 2:
+            break
+        new = {}
+        for u in names:
+            sel = (row_unit == u) & (pred > 0) & (rhs > 0)
+            new[u] = float(np.exp(power * np.median(np.log(rhs[sel] / pred[sel])))) if sel.any() else 1.0
+        centre = float(np.exp(np.mean(np.log(list(new.values())))))
+        new = {u: v / centre for u, v in new.items()}
+        change = max(abs(new[u] / level[u] - 1.0) for u in names)
+        level = new
+        if change < 1e-3:
+            break
+    return coef / norm, level
+
+
 #: a creep observation's weight in :func:`creep_relaxation_times` is capped at that of a strain this fraction of its
 #: curve's largest: the relative noise model gives a recovery's near-zero strains unbounded weight
 CREEP_WEIGHT_FLOOR = 0.01
@@ -253,28 +285,8 @@ def creep_relaxation_times(curves: Sequence[F.Curve], window: Mapping, per_decad
     if not blocks:
         return out
     design, rhs, row_unit = np.vstack(blocks), np.concatenate(rhs), np.concatenate(row_unit)
-    norm = np.linalg.norm(design, axis=0)
-    norm = np.where(norm > 0, norm, 1.0)
-    names = sorted({str(u) for u in row_unit}) if units is not None else []
-    level = {u: 1.0 for u in names}
-    for _ in range(LEVEL_ITERATIONS):
-        # a piece c times stiffer creeps 1/c as far
-        c_row = np.array([1.0 / level[u] for u in row_unit]) if names else np.ones(rhs.size)
-        coef, _ = scipy.optimize.nnls(design * c_row[:, None] / norm, rhs, maxiter=100 * design.shape[1])
-        pred = design @ (coef / norm)
-        if not coef.sum() > 0 or len(names) < 2:
-            break
-        new = {}
-        for u in names:
-            sel = (row_unit == u) & (pred > 0) & (rhs > 0)
-            new[u] = float(np.exp(np.median(np.log(pred[sel] / rhs[sel])))) if sel.any() else 1.0
-        centre = float(np.exp(np.mean(np.log(list(new.values())))))
-        new = {u: v / centre for u, v in new.items()}
-        change = max(abs(new[u] / level[u] - 1.0) for u in names)
-        level = new
-        if change < 1e-3:
-            break
-    coef = coef / norm
+    # a piece c times stiffer creeps 1/c as far
+    coef, level = nnls_with_levels(design, rhs, row_unit if units is not None else None, power=-1.0)
     j_g, j, fluidity = float(coef[0]), coef[1:-1].copy(), float(coef[-1])
     # a retardation faster than the first observation is complete before it: the glassy compliance (left apart, it
     # would convert to a relaxation faster than anything measured)
@@ -401,27 +413,7 @@ def nnls_relaxation_times(curves: Sequence[F.Curve], window: Mapping | None = No
     design = np.column_stack(cols)
     ok = np.isfinite(design).all(axis=1) & np.isfinite(rhs)
     design, rhs, row_unit = design[ok], rhs[ok], row_unit[ok]
-    norm = np.linalg.norm(design, axis=0)
-    norm = np.where(norm > 0, norm, 1.0)
-    names = sorted({str(u) for u in row_unit}) if units is not None else []
-    level = {u: 1.0 for u in names}
-    for _ in range(LEVEL_ITERATIONS):
-        c_row = np.array([level[u] for u in row_unit]) if names else np.ones(rhs.size)
-        coef, _ = scipy.optimize.nnls(design * c_row[:, None] / norm, rhs, maxiter=100 * design.shape[1])
-        pred = design @ (coef / norm)
-        if not coef.sum() > 0 or len(names) < 2:
-            break
-        new = {}
-        for u in names:
-            sel = (row_unit == u) & (pred > 0) & (rhs > 0)
-            new[u] = float(np.exp(np.median(np.log(rhs[sel] / pred[sel])))) if sel.any() else 1.0
-        centre = float(np.exp(np.mean(np.log(list(new.values())))))
-        new = {u: v / centre for u, v in new.items()}
-        change = max(abs(new[u] / level[u] - 1.0) for u in names)
-        level = new
-        if change < 1e-3:
-            break
-    coef = coef / norm
+    coef, level = nnls_with_levels(design, rhs, row_unit if units is not None else None)
     total = coef.sum()
     if total > 0:
         g0 = initial_shear_modulus(model.instantaneous, model.instantaneous_params(elastic))
