@@ -81,7 +81,7 @@ import numpy as np
 import xarray as xr
 
 from .canonical import CANONICAL_VARIABLES, read_netcdf, write_netcdf
-from .noise import MODULI, OSCILLATORY_TESTS, estimate_noise, noise_sd
+from .noise import MODULI, OSCILLATORY_TESTS, estimate_noise, noise_sd, torque_modulus
 
 _log = logging.getLogger(__name__)
 
@@ -538,12 +538,15 @@ def _noise_of_mean(curve: dict, noise: Mapping | None, test: str) -> dict:
         return {}
     strain = curve["grid"] if curve["grid_variable"] == "shear_strain" else curve["mean"].get("shear_strain")
     out = {}
+    both = [curve["mean"].get(name) for name in MODULI]
     for name in MODULI:
         mean, n = curve["mean"].get(name), curve["n"].get(name)
         if mean is None or strain is None:
             continue
+        magnitude = torque_modulus(*both, name) if all(v is not None for v in both) else None
         with np.errstate(invalid="ignore", divide="ignore"):
-            out[name] = noise_sd(noise, test, name, mean, np.asarray(strain, float)) / np.sqrt(np.maximum(n, 1))
+            out[name] = noise_sd(noise, test, name, mean, np.asarray(strain, float),
+                                 magnitude=magnitude) / np.sqrt(np.maximum(n, 1))
     return out
 
 

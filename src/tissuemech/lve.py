@@ -60,7 +60,7 @@ import xarray as xr
 
 from .canonical import atomic_write, write_netcdf
 from .curves import as_str, select_average
-from .noise import ABOVE_NOISE_SIGMAS, estimate_noise, noise_sd
+from .noise import ABOVE_NOISE_SIGMAS, estimate_noise, noise_sd, torque_modulus
 
 _log = logging.getLogger(__name__)
 
@@ -228,7 +228,8 @@ def amplitude_sweep_noise(noise: dict | None, strain: np.ndarray, storage: np.nd
     for key, quantity, values in (("storage_sd", "storage_modulus", storage), ("loss_sd", "loss_modulus", loss)):
         if values is None:
             continue
-        sd = noise_sd(noise, "amplitude_sweep", quantity, values, strain, radius_m, torque_resolution_nm)
+        magnitude = torque_modulus(storage, loss, quantity) if storage is not None and loss is not None else None
+        sd = noise_sd(noise, "amplitude_sweep", quantity, values, strain, radius_m, torque_resolution_nm, magnitude)
         out[key] = sd if np.isfinite(sd).any() else None
     return out
 

@@ -50,6 +50,33 @@ def _stress_per_modulus(run: xr.Dataset, test: str, quantity: str) -> np.ndarray
     return None
 
 
+def measured_torque_modulus(run: xr.Dataset, quantity: str) -> np.ndarray | None:
+    """:func:`torque_modulus` at every point of the sweep ``run``; None for other quantities and runs without both
+    moduli."""
+    if quantity not in MODULI or run.attrs.get("test") not in OSCILLATORY_TESTS or not all(q in run for q in MODULI):
+        return None
+    storage, loss = (np.asarray(run[q].values, float) for q in MODULI)
+    if not storage.shape == loss.shape == run[quantity].shape:
+        return None
+    return torque_modulus(storage, loss, quantity)
+
+
+def torque_modulus(storage: np.ndarray, loss: np.ndarray, quantity: str) -> np.ndarray:
+    """The magnitude [Pa] a sweep modulus's relative noise is relative to, at every point of a sweep of storage and
+    loss moduli [Pa]: the torque the instrument reported, in modulus units (torque over strain amplitude and plate
+    factor).
+
+    Both moduli are the in- and out-of-phase parts of one measured torque, whose noise (and the phase resolution)
+    does not shrink with the out-of-phase part: a gel's loss modulus a twentieth of |G*| carries |G*|'s noise, not
+    a twentieth of it. So the smaller modulus of the sweep (by median) is referred to |G*|; the dominant one to
+    itself, which is |G*| up to its smaller partner where the signal stands above the noise, and does not take the
+    partner's noise where it does not."""
+    storage, loss = np.asarray(storage, float), np.asarray(loss, float)
+    own = np.abs(storage if quantity == "storage_modulus" else loss)
+    other = np.abs(loss if quantity == "storage_modulus" else storage)
+    return np.hypot(storage, loss) if np.nanmedian(own) < np.nanmedian(other) else own
+
+
 def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
     """Noise model of the measured quantities, from the data themselves (no instrument constant).
 
@@ -61,7 +88,8 @@ def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
     ``relative^2 + absolute^2 / |y|^2`` -- i.e. SD(y) = sqrt(absolute^2 + (relative |y|)^2). With too few
     points for bins only ``relative`` is estimated. The storage and loss moduli of sweeps are a torque over
     the strain amplitude, so their absolute part is not constant: where every sweep of the block records its
-    strain amplitude, |y| is the stress amplitude |modulus| x amplitude, ``absolute`` is in stress units
+    strain amplitude, |y| is the measured torque's stress amplitude (:func:`measured_torque_modulus`: the relative noise of
+    both moduli is relative to the torque), ``absolute`` is in stress units
     (``absolute_units``) and a point's floor is ``absolute`` / amplitude (:func:`noise_sd`); points of an
     amplitude sweep at amplitudes where the torque is noise are then recognised as such (``above_noise``).
     A torque resolution declared for the instrument
@@ -80,12 +108,13 @@ def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
         for q in COMPARED_QUANTITIES:
             if q not in run or run[q].ndim != 1:
                 continue
-            pooled.setdefault(f"{test}|{q}", []).append((run[q].values, _stress_per_modulus(run, test, q)))
+            pooled.setdefault(f"{test}|{q}", []).append((run[q].values, _stress_per_modulus(run, test, q),
+                                                         measured_torque_modulus(run, q)))
     blocks = {}
     for key, curves in pooled.items():
         # a modulus block is pooled in stress amplitude only when every sweep records its strain amplitude
-        per_strain = all(a is not None for _, a in curves)
-        parts = [relative_differences(y, a if per_strain else None) for y, a in curves]
+        per_strain = all(a is not None for _, a, _ in curves)
+        parts = [relative_differences(y, a if per_strain else None, m) for y, a, m in curves]
         parts = [(m, d) for m, d in parts if m.size]
         if not parts:
             continue
@@ -125,14 +154,16 @@ def estimate_noise(runs: Sequence[xr.Dataset]) -> dict:
 
 
 def noise_sd(noise: Mapping, test: str, quantity: str, observed: np.ndarray, strain: np.ndarray | None = None,
-             radius_m: float = np.nan, torque_resolution_nm: float = np.nan) -> np.ndarray:
+             radius_m: float = np.nan, torque_resolution_nm: float = np.nan,
+             magnitude: np.ndarray | None = None) -> np.ndarray:
     """Per-point noise SD (quantity units) of observed values under :func:`estimate_noise`'s model.
 
     A declared torque resolution (N m) with a known radius R (m) gives the absolute floor of a stress as
     2 M / (pi R^3) and of a modulus as that over the strain amplitude; it is used when larger than the
-    estimated floor. NaN where the block has no estimate.
+    estimated floor. ``magnitude``: what the relative part is relative to where it is not |observed|
+    (:func:`measured_torque_modulus` for a sweep's moduli). NaN where the block has no estimate.
     """
-    obs = np.abs(np.asarray(observed, float))
+    obs = np.abs(np.asarray(observed, float)) if magnitude is None else np.abs(np.asarray(magnitude, float))
     b = noise.get("blocks", {}).get(f"{test}|{quantity}")
     if b is None:
         return np.full(obs.shape, np.nan)
@@ -205,6 +236,6 @@ def points_above_floor(run: xr.Dataset, quantity: str, noise: Mapping | None = N
     strain = np.asarray(run["shear_strain"].values, float) if "shear_strain" in run else None
     sd = noise_sd(noise, str(run.attrs.get("test", "")), quantity, y, strain,
                   float(run.attrs.get("radius_m", np.nan) or np.nan),
-                  float(run.attrs.get("torque_resolution_nm", np.nan)))
+                  float(run.attrs.get("torque_resolution_nm", np.nan)), measured_torque_modulus(run, quantity))
     with np.errstate(invalid="ignore"):
         return np.isfinite(y) & np.isfinite(sd) & (np.abs(y) > sigmas * sd)

@@ -59,7 +59,8 @@ def robust_noise_sd(values: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(d2)) / np.sqrt(6.0))
 
 
-def relative_differences(y: np.ndarray, scale: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def relative_differences(y: np.ndarray, scale: np.ndarray | None = None,
+                         magnitude: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(|y| x ``scale`` at the centre points, relative k-th differences scaled to the noise SD) of one curve.
 
     Six detrendings are computed: k-th differences (k = 2, 3, 4) of ln|y| (exact for exponential and
@@ -67,12 +68,16 @@ def relative_differences(y: np.ndarray, scale: np.ndarray | None = None) -> tupl
     by sqrt(C(2k, k)) so that white noise of relative SD s gives differences of SD s. A smooth trend can only
     add to them, so the detrending with the smallest median magnitude is kept for the curve. ``scale``
     (per point, e.g. the strain amplitude of a modulus) converts the magnitudes to the units the absolute
-    noise is constant in.
+    noise is constant in; such a curve (a modulus along amplitude or frequency) is detrended in ln|y| only, its
+    trends being power laws. ``magnitude`` (per point, e.g. |G*| for a storage or loss modulus): the noise is
+    relative to it, not to |y|; the differences are then expressed relative to it (those of ln|y| times
+    |y| / magnitude) and the magnitudes returned are it times ``scale``.
     """
     y = np.asarray(y, float)
     s = np.ones_like(y) if scale is None else np.abs(np.asarray(scale, float))
-    keep = np.isfinite(y) & (y != 0) & np.isfinite(s) & (s > 0)
-    y, s = y[keep], s[keep]
+    m = np.abs(y) if magnitude is None else np.abs(np.asarray(magnitude, float))
+    keep = np.isfinite(y) & (y != 0) & np.isfinite(s) & (s > 0) & np.isfinite(m) & (m > 0)
+    y, s, m = y[keep], s[keep], m[keep]
     if y.size < 5:
         return np.empty(0), np.empty(0)
     z = np.log(np.abs(y))
@@ -80,11 +85,12 @@ def relative_differences(y: np.ndarray, scale: np.ndarray | None = None) -> tupl
     for k in (2, 3, 4):
         norm = np.sqrt(float(comb(2 * k, k)))
         lo = k // 2
-        mag = np.abs(y[lo:y.size - (k - lo)]) * s[lo:y.size - (k - lo)]
-        for d in (np.diff(z, k) / norm, np.diff(y, k) / norm / mag):
+        mid = slice(lo, y.size - (k - lo))
+        ln_d = np.diff(z, k) / norm * np.abs(y[mid]) / m[mid]
+        for d in (ln_d,) if scale is not None else (ln_d, np.diff(y, k) / norm / m[mid]):
             spread = float(np.median(np.abs(d)))
             if spread < best_scale:
-                best, best_scale, centre = d, spread, mag
+                best, best_scale, centre = d, spread, m[mid] * s[mid]
     return centre, best
 
 

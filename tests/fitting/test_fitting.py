@@ -14,6 +14,7 @@ from doubles import ProxyMooneyRivlin, ProxyNewton, ProxyPowerLaw, ProxyProny, P
 from tissuemech import fitting as F
 from tissuemech.canonical import make_run_dataset, read_netcdf
 from tissuemech.models import plate
+from tissuemech.models.registry import get_model
 from tissuemech.records import FitRecord
 from tissuemech.stats import information_criteria
 
@@ -465,3 +466,30 @@ def test_sloppy_direction_of_mooney_rivlin_is_c10_minus_c01():
     assert abs(abs(v["C10"]) - abs(v["C01"])) < 0.05 and np.sign(v["C10"]) != np.sign(v["C01"])
     assert any(f.startswith("correlated: C10~C01") for f in res.flags)
     assert res.params["C10"] + res.params["C01"] == pytest.approx(80.0, rel=0.01)
+
+
+def test_sweep_points_at_the_noise_floor_are_fitted_on_a_linear_scale():
+    """A frequency sweep whose loss modulus falls to the torque floor at both ends (some points come out negative):
+    with each point's SD given, the Maxwell-mode truth is recovered and the reduced chi-square is that of the noise
+    (the misfit in noise units that adequacy reads). Oracle: the closed-form moduli of a Prony series,
+    G'(w) = G_inf + sum G_i (w tau_i)^2 / (1 + (w tau_i)^2), G''(w) = sum G_i w tau_i / (1 + (w tau_i)^2). A log
+    residual there is unbounded (ln of a value within noise of zero): the reduced chi-square was 11 with all-log
+    residuals."""
+    truth = {"G_inf": 400.0, "G_1": 600.0, "G_2": 300.0, "tau_1": 0.05, "tau_2": 2.0}
+    omega = np.geomspace(1e-3, 1e4, 36)
+    wt = np.outer(omega, [truth["tau_1"], truth["tau_2"]])
+    gi = np.array([truth["G_1"], truth["G_2"]])
+    storage = truth["G_inf"] + (wt ** 2 / (1 + wt ** 2)) @ gi
+    loss = (wt / (1 + wt ** 2)) @ gi
+    floor_pa, relative = 6.0, 0.01
+    sd = {q: np.hypot(floor_pa, relative * v) for q, v in (("storage_modulus", storage), ("loss_modulus", loss))}
+    rng = np.random.default_rng(RNG_SEED)
+    observed = {q: v + sd[q] * rng.standard_normal(v.size) for q, v in (("storage_modulus", storage),
+                                                                           ("loss_modulus", loss))}
+    assert (observed["loss_modulus"] < 0).any() and (observed["loss_modulus"] < 3 * sd["loss_modulus"]).sum() >= 6
+    curve = F.Curve(test="frequency_sweep", condition="strain=1%", response="oscillation",
+                    inputs={"angular_frequency": omega}, observed=observed, sd=sd)
+    fit = F.fit(F.FitProblem(model=get_model("prony2"), curves=[curve], target="apparent_stress"))
+    assert fit.success
+    assert_params(fit.params, truth, [0.03, 0.03, 0.05, 0.05, 0.05])
+    assert 0.5 < fit.redchi < 2.0, fit.redchi

@@ -20,6 +20,7 @@
 """
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
@@ -35,7 +36,7 @@ from .. import material
 from ..material import NNLS_TIMES_PER_DECADE, window_taus
 from ..curves import condition_label, condition_of
 from ..ranking import recommended_mask
-from .noise import estimate_noise, fit_noise
+from .noise import MODULI, OSCILLATORY_TESTS, estimate_noise, fit_noise, measured_torque_modulus, noise_sd
 
 
 def read_fit_record(path: str | Path) -> dict:
@@ -292,18 +293,51 @@ def level_normalised(runs: Sequence[xr.Dataset], levels: Mapping[str, float]) ->
     return out
 
 
-def curves_of_runs(runs: Sequence[xr.Dataset], relaxation: str, n_points: int) -> list[fitting.Curve]:
+def curves_of_runs(runs: Sequence[xr.Dataset], relaxation: str, n_points: int,
+                   noise: Mapping | None = None) -> list[fitting.Curve]:
     """The runs as fitting curves (``fitting.curve_from_run``, thinned to ``n_points``, a creep-recovery by phase
     so that its recovery keeps its share); runs of tests the fit stage does not describe, or that cannot be read as
-    a curve, are left out."""
+    a curve, are left out.
+
+    ``noise`` (an :func:`estimate_noise` model of the runs): the sweeps' moduli then carry their per-point noise SD
+    (:func:`oscillation_noise_sd`) as the curve's ``sd``, so that a fit weighs them as the residual tests judge
+    them."""
     out = []
     for r in runs:
         if r.attrs.get("test") in fitting.TEST_RESPONSE:
             try:
-                out.append(fitting.thin(fitting.curve_from_run(r, relaxation), n_points))
+                curve, rows = fitting.curve_and_rows(r, relaxation)
+                if noise is not None:
+                    curve = oscillation_noise_sd(curve, r, rows, noise)
+                out.append(fitting.thin(curve, n_points))
             except (ValueError, KeyError):
                 continue
     return out
+
+
+def oscillation_noise_sd(curve: fitting.Curve, run: xr.Dataset, rows: np.ndarray, noise: Mapping) -> fitting.Curve:
+    """``curve`` with the noise SD [Pa] of each storage- and loss-modulus point of its sweep ``run`` (``rows``: the
+    run's rows that are the curve's points) under ``noise``: :func:`tissuemech.noise.noise_sd`, whose absolute
+    floor is a torque and so, in a modulus, the floor over the strain amplitude, and whose relative part is
+    relative to the measured torque (:func:`tissuemech.noise.measured_torque_modulus`). A fit's own per-observable floor
+    (:class:`tissuemech.fitting.NoiseModel`) has no strain amplitude: without this, a sweep's small loss modulus
+    near the torque floor weighed as if it were known to 1 %. Other curves are returned unchanged."""
+    test = str(run.attrs.get("test", ""))
+    if test not in OSCILLATORY_TESTS:
+        return curve
+    strain = np.asarray(run["shear_strain"].values, float)[rows] if "shear_strain" in run else None
+    if strain is None and "strain_pct" in run.attrs:
+        strain = np.full(rows.size, float(run.attrs["strain_pct"]) / 100.0)
+    sd = dict(curve.sd)
+    for q in MODULI:
+        if q in curve.observed and curve.observed[q] is not None:
+            magnitude = measured_torque_modulus(run, q)
+            s = noise_sd(noise, test, q, curve.observed[q], strain, float(run.attrs.get("radius_m", np.nan)),
+                         float(run.attrs.get("torque_resolution_nm", np.nan)),
+                         None if magnitude is None else magnitude[rows])
+            if np.isfinite(s).any():
+                sd[q] = s
+    return dataclasses.replace(curve, sd=sd)
 
 
 def fit_runs(model_key: str, runs: Sequence[xr.Dataset], target: str, relaxation: str = "measured",
@@ -319,9 +353,10 @@ def fit_runs(model_key: str, runs: Sequence[xr.Dataset], target: str, relaxation
     ``taus_s``: relaxation times [s] to rebuild a fixed-time QLV/Pipkin-Rogers model on
     (:func:`tissuemech.models.registry.model_on_times`); None keeps the registered model."""
     model = get_model(model_key) if taus_s is None else model_on_times(model_key, taus_s)
-    curves = curves_of_runs(runs, relaxation, n_points)
+    noise = estimate_noise(runs)
+    curves = curves_of_runs(runs, relaxation, n_points, noise)
     problem = fitting.FitProblem(model=model, curves=curves, target=target, model_key=model_key, scope="diagnosis",
-                                 noise=fit_noise(estimate_noise(runs)))
+                                 noise=fit_noise(noise))
     return fitting.fit(problem, starts=[start] if start else (), n_random=n_random, seed=seed)
 
 
@@ -349,8 +384,9 @@ def polished_times(model_key: str, runs: Sequence[xr.Dataset], target: str, rela
         per_condition[key] = per_condition.get(key, 0) + 1
         if per_condition[key] <= POLISH_RUNS_PER_CONDITION:
             sample.append(run)
-    new = material.refined_times(model_key, curves_of_runs(sample, relaxation, min(n_points, POLISH_POINTS)), target,
-                                 taus, fit, noise=fit_noise(estimate_noise(runs)))
+    noise = estimate_noise(runs)
+    new = material.refined_times(model_key, curves_of_runs(sample, relaxation, min(n_points, POLISH_POINTS), noise),
+                                 target, taus, fit, noise=fit_noise(noise))
     if new is None:
         return taus, fit
     refit = fit_runs(model_key, runs, target, relaxation, n_points=n_points, taus_s=new, start=dict(fit.params))

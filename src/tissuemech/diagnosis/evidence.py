@@ -43,7 +43,7 @@ import xarray as xr
 import scipy
 
 from ..models.recursion import prony_branch_histories
-from .noise import ABOVE_NOISE_SIGMAS, COMPARED_QUANTITIES, estimate_noise, noise_sd
+from .noise import ABOVE_NOISE_SIGMAS, COMPARED_QUANTITIES, estimate_noise, measured_torque_modulus, noise_sd
 
 
 #: logged channels carried into the residual table as covariates when a run has them
@@ -220,7 +220,7 @@ def residual_table(runs: Sequence[xr.Dataset], predictions: Sequence[Mapping[str
             block["predicted"] = prd
             block["residual"] = obs - prd
             sigma = noise_sd(noise, base["test"], q, obs, strain, radius,
-                             float(a.get("torque_resolution_nm", np.nan)))
+                             float(a.get("torque_resolution_nm", np.nan)), measured_torque_modulus(run, q))
             block["sigma"] = sigma
             block["std_residual"] = (obs - prd) / sigma
             block["rel_residual"] = (obs - prd) / np.where(np.abs(prd) > 0, np.abs(prd), np.nan)

@@ -9,11 +9,11 @@ import numpy as np
 
 from .. import fitting
 from ..noise import (ABOVE_NOISE_SIGMAS, COMPARED_QUANTITIES, INPUT_QUANTITIES, MODULI, OSCILLATORY_TESTS,
-                     estimate_noise, is_response, noise_sd, points_above_floor, relative_noise_level,
-                     robust_noise_sd)
+                     estimate_noise, is_response, measured_torque_modulus, noise_sd, points_above_floor,
+                     relative_noise_level, robust_noise_sd)
 
 __all__ = ["ABOVE_NOISE_SIGMAS", "COMPARED_QUANTITIES", "INPUT_QUANTITIES", "MODULI", "OSCILLATORY_TESTS",
-           "estimate_noise", "fit_noise", "is_response", "noise_sd", "points_above_floor", "relative_noise_level", "robust_noise_sd"]
+           "estimate_noise", "fit_noise", "is_response", "measured_torque_modulus", "noise_sd", "points_above_floor", "relative_noise_level", "robust_noise_sd"]
 
 
 #: fit observables whose noise block is the run quantity of the same name; a torque observable has the relative

@@ -22,6 +22,10 @@ PLATE_TARGETS: tuple[str, ...] = ("thesis", "apparent_stress", "corrected_stress
 
 #: responses fitted with log residuals (the data span decades)
 LOG_RESPONSES: frozenset[str] = frozenset({"oscillation", "flow", "amplitude_sweep"})
+#: a point of a log response is fitted by its log residual only where it stands this many of its noise SDs above
+#: zero; nearer the noise (a loss modulus at the torque floor, a noisy point that came out negative) the log is not
+#: the scale of its error (ln of a value within noise of 0 is unbounded), and its residual is linear, (f - y) / sd
+LOG_RESIDUAL_MIN_SNR = 3.0
 
 #: cycles simulated, cycles analysed and samples per cycle of an ``amplitude_sweep`` prediction: the first harmonic
 #: of the last cycle; start-up transients of modes slower than a period are near-linear in time over it and the
@@ -262,6 +266,7 @@ class FitProblem:
         if not self.model_key:
             self.model_key = self.model.name
         self.observations = []
+        self._near_noise = []
         for c in self.curves:
             if not describes(self.model, c.response):
                 raise ValueError(f"model {self.model_key!r} ({self.model.family}) cannot describe {c.label} "
@@ -269,6 +274,8 @@ class FitProblem:
             obs, sd = target_observations(c, self.target)
             sig = {k: self.noise.sigma(k, v, sd.get(k)) for k, v in obs.items()}
             self.observations.append((obs, sig))
+            self._near_noise.append({k: ~(v > LOG_RESIDUAL_MIN_SNR * sig[k]) for k, v in obs.items()}
+                                    if c.response in LOG_RESPONSES else {})
         # the plate-torsion histories are predicted in one compiled pass when the model takes concatenated
         # histories: per curve, the Python layers around the kernels cost more than the kernels (issue 17)
         self._plate_curves = [i for i, c in enumerate(self.curves)
@@ -333,15 +340,16 @@ class FitProblem:
                 idx = self.curves[i].obs_index
                 batched[i] = {key: f if idx is None else f[idx]}
         out = []
-        for i, (c, (obs, sig)) in enumerate(zip(self.curves, self.observations)):
+        for i, (c, (obs, sig), near) in enumerate(zip(self.curves, self.observations, self._near_noise)):
             pred = batched[i] if i in batched else predict(self.model, p, c, self.target)
             terms = {}
             for k, y in obs.items():
                 f = np.asarray(pred[k], float)
                 if c.response in LOG_RESPONSES:
-                    # log residual with the relative SD as its scale
+                    # log residual with the relative SD as its scale; linear near the noise (LOG_RESIDUAL_MIN_SNR)
                     tiny = 1e-12 * max(np.max(np.abs(y)), 1e-300)
                     w = (np.log(np.maximum(f, tiny)) - np.log(np.maximum(y, tiny))) / (sig[k] / np.maximum(np.abs(y), tiny))
+                    w = np.where(near[k], (f - y) / sig[k], w)
                 else:
                     w = (f - y) / sig[k]
                 terms[k] = (y, f, w)
