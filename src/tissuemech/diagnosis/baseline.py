@@ -34,7 +34,7 @@ from ..models.plate import oscillation_moduli
 from ..models.registry import get_model, model_on_times
 from .. import material
 from ..material import NNLS_TIMES_PER_DECADE, window_taus
-from ..curves import condition_label, condition_of
+from ..curves import condition_label, condition_of, drop_flagged
 from ..ranking import recommended_mask
 from .noise import MODULI, OSCILLATORY_TESTS, estimate_noise, fit_noise, measured_torque_modulus, noise_sd
 
@@ -75,7 +75,8 @@ def baseline_adequacy(record: Mapping, table: pd.DataFrame) -> dict:
     -------
     dict ``{"model", "adequate", "at_bound" (parameter names), "no_covariance" (bool),
     "not_converged" (bool), "median_abs_log_ratio" [1], "misfit_factor" (exp of it),
-    "misfit_noise_units" (RMS of residual/sigma over rows with a noise estimate), "reasons" (sentences)}``.
+    "misfit_noise_units" (RMS of residual/sigma over rows with a noise estimate), "reasons" (sentences)}``; rows
+    the ingest flagged (``quality_flag``) are left out, as the fits leave them out.
     Inadequate when a varying parameter sits at a bound (a Prony weight ``beta_i`` at its lower bound 0 is
     exempt: that relaxation mode is simply absent), no parameter has a finite standard error (no
     covariance), the fit did not converge, or the typical point is off by more than
@@ -87,6 +88,8 @@ def baseline_adequacy(record: Mapping, table: pd.DataFrame) -> dict:
     varying = list(record.get("varying", []))
     se = record.get("stderr", {})
     no_cov = bool(varying) and bool(se) and not any(np.isfinite(se.get(n, np.nan)) for n in varying)
+    if "quality_flag" in table:
+        table = table[table["quality_flag"] == 0]
     lr = table["log_ratio"].to_numpy(float) if "log_ratio" in table else np.array([])
     lr = lr[np.isfinite(lr)]
     med = float(np.median(np.abs(lr))) if lr.size else np.nan
@@ -297,7 +300,9 @@ def curves_of_runs(runs: Sequence[xr.Dataset], relaxation: str, n_points: int,
                    noise: Mapping | None = None) -> list[fitting.Curve]:
     """The runs as fitting curves (``fitting.curve_from_run``, thinned to ``n_points``, a creep-recovery by phase
     so that its recovery keeps its share); runs of tests the fit stage does not describe, or that cannot be read as
-    a curve, are left out.
+    a curve, are left out. The quality-flagged points of a sweep (:func:`tissuemech.curves.drop_flagged`:
+    inertia-dominated, below the declared torque resolution, beyond the sample's LVE limit) are left out, as the
+    fit stage's averages leave them out; a history keeps every sample (it is the model's input).
 
     ``noise`` (an :func:`estimate_noise` model of the runs): the sweeps' moduli then carry their per-point noise SD
     (:func:`oscillation_noise_sd`) as the curve's ``sd``, so that a fit weighs them as the residual tests judge
@@ -306,6 +311,8 @@ def curves_of_runs(runs: Sequence[xr.Dataset], relaxation: str, n_points: int,
     for r in runs:
         if r.attrs.get("test") in fitting.TEST_RESPONSE:
             try:
+                if r.attrs.get("test") in OSCILLATORY_TESTS:
+                    r = drop_flagged(r)
                 curve, rows = fitting.curve_and_rows(r, relaxation)
                 if noise is not None:
                     curve = oscillation_noise_sd(curve, r, rows, noise)

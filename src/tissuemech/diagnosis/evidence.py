@@ -42,6 +42,7 @@ import pandas as pd
 import xarray as xr
 import scipy
 
+from ..curves import QUALITY_FLAG_VARIABLE
 from ..models.recursion import prony_branch_histories
 from .noise import ABOVE_NOISE_SIGMAS, COMPARED_QUANTITIES, estimate_noise, measured_torque_modulus, noise_sd
 
@@ -199,6 +200,8 @@ def residual_table(runs: Sequence[xr.Dataset], predictions: Sequence[Mapping[str
             "elapsed_time": total, "test_order": np.full(n, float(a.get("order", np.nan))),
             "first_load": np.full(n, float(first)), "frequency_sq": omega ** 2,
             "inverse_gap": 1.0 / gap, "radius_m": np.full(n, radius),
+            "quality_flag": (np.asarray(run[QUALITY_FLAG_VARIABLE].values, int) if QUALITY_FLAG_VARIABLE in run
+                             else np.zeros(n, int)),
         }
         for ch in LOGGED_CHANNELS:
             if ch in run:

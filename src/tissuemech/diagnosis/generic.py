@@ -176,6 +176,11 @@ def structure_tests(table: pd.DataFrame, predicted_tests=(), shapes: list | None
     # log_time in the constructed designs (tests/diagnosis/test_catalogue.py); the prediction does not
     # depend on one point's noise, so it selects without that bias.
     rows = rows[rows["predicted_abs"] > 5.0 * rows["sigma"]]
+    # points the ingest flagged (inertia-dominated, below the declared torque resolution, a frequency sweep
+    # beyond its sample's LVE limit) are a fact of the measurement, reported by their own findings; the fits
+    # leave them out, and their residuals are not the material's
+    if "quality_flag" in rows:
+        rows = rows[rows["quality_flag"] == 0]
     covs = covariate_columns(rows)
     for (test, quantity), block in rows.groupby(["test", "quantity"]):
         coordinate = SPECTRUM_COORDINATE.get(str(test))
