@@ -202,16 +202,19 @@ def test_the_run_level_fit_weighs_sweep_moduli_by_their_torque_floor():
 
 def test_quality_flagged_sweep_points_are_left_out_of_the_run_level_fit_and_the_misfit():
     """The top five frequencies of every sweep flagged at ingest (bit 1, inertia-dominated) and corrupted as an
-    inertia mis-correction corrupts them (G' down by 70 %, G'' up threefold): the run-level fit recovers the truth as
+    inertia mis-correction corrupts them (G' down by 70 %, G'' up threefold), and a seventh sweep flagged at every
+    point: the run-level fit recovers the truth as
     the fit stage's averages would (they drop flagged points), and the baseline's misfit leaves those rows out."""
     from tissuemech.diagnosis.baseline import fit_runs, predict_runs
     from tissuemech.diagnosis.evidence import residual_table
     from tissuemech.models.registry import get_model
 
     runs = []
-    for r in _prony2_sweeps():
+    for k, r in enumerate(_prony2_sweeps(n_runs=7)):
         flags = np.zeros(r.sizes["point"], np.int32)
         flags[-5:] = 1
+        if k == 6:  # a sweep flagged at every point is left out, not a crash
+            flags[:] = 1
         r = r.assign(quality_flags=("point", flags))
         r["storage_modulus"].values[-5:] *= 0.3
         r["loss_modulus"].values[-5:] *= 3.0
@@ -221,7 +224,7 @@ def test_quality_flagged_sweep_points_are_left_out_of_the_run_level_fit_and_the_
         assert fit.params[name] == pytest.approx(value, rel=0.05), name
     model = get_model("prony2")
     table = residual_table(runs, predict_runs(model, fit.params, runs, "torque", "measured"), "prony2")
-    assert (table["quality_flag"] == 1).sum() == 6 * 5 * 2
+    assert (table["quality_flag"] == 1).sum() == (6 * 5 + 30) * 2
     verdict = baseline_adequacy({"model_key": "prony2", "flags": fit.flags, "stderr": fit.stderr,
                                  "varying": fit.varying, "converged": fit.success}, table)
     assert verdict["misfit_noise_units"] < 1.6, verdict

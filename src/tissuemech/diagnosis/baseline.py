@@ -302,7 +302,8 @@ def curves_of_runs(runs: Sequence[xr.Dataset], relaxation: str, n_points: int,
     so that its recovery keeps its share); runs of tests the fit stage does not describe, or that cannot be read as
     a curve, are left out. The quality-flagged points of a sweep (:func:`tissuemech.curves.drop_flagged`:
     inertia-dominated, below the declared torque resolution, beyond the sample's LVE limit) are left out, as the
-    fit stage's averages leave them out; a history keeps every sample (it is the model's input).
+    fit stage's averages leave them out (a sweep flagged at every point is left out); a history keeps every sample
+    (it is the model's input).
 
     ``noise`` (an :func:`estimate_noise` model of the runs): the sweeps' moduli then carry their per-point noise SD
     (:func:`oscillation_noise_sd`) as the curve's ``sd``, so that a fit weighs them as the residual tests judge
@@ -313,6 +314,8 @@ def curves_of_runs(runs: Sequence[xr.Dataset], relaxation: str, n_points: int,
             try:
                 if r.attrs.get("test") in OSCILLATORY_TESTS:
                     r = drop_flagged(r)
+                    if not r.sizes.get("point", 0):
+                        continue
                 curve, rows = fitting.curve_and_rows(r, relaxation)
                 if noise is not None:
                     curve = oscillation_noise_sd(curve, r, rows, noise)
