@@ -65,9 +65,12 @@ MENU = (("stress_relaxation", 0.01), ("stress_relaxation", 0.05), ("frequency_sw
 
 
 def make_runs(sequences, *, seed=0, first_load=0.0, drift_per_h=0.0, outlier=1.0, specimen_sd=0.15, sample_sd=0.05,
-              order_attr=True, started_at=True, pause_s=None, temperature_per_h=None):
+              order_attr=True, started_at=True, pause_s=None, temperature_per_h=None, samples_per_specimen=1,
+              pause_jitter_s=0.0):
     """Canonical runs and residual table of a design given as one test sequence per specimen (one sample
     per specimen): ``sequences[b]`` is the list of MENU indices run on specimen b, in measuring order.
+    ``samples_per_specimen``: each specimen's samples run its sequence one after the other on the specimen's clock;
+    ``pause_jitter_s``: a fixed ``pause_s`` varies by up to this many seconds either way.
 
     ``order_attr``/``started_at``: whether the run records its position / its start time (ISO 8601);
     ``pause_s``: seconds between test starts (random 200-1400 s when None); ``temperature_per_h``: a
@@ -79,30 +82,32 @@ def make_runs(sequences, *, seed=0, first_load=0.0, drift_per_h=0.0, outlier=1.0
     spec_scale[0] *= outlier
     day = pd.Timestamp("2026-03-02T09:00:00")
     for b, seq in enumerate(sequences):
-        k_sample = spec_scale[b] * np.exp(rng.normal(0, sample_sd))
         t_start = 0.0
-        for pos, m in enumerate(seq, start=1):
-            test, cond = MENU[m]
-            cols, pred, extra = _curve(test, cond)
-            k = k_sample * np.exp(rng.normal(0, 0.02)) * (1 + drift_per_h * t_start / 3600.0)
-            if pos == 1:
-                k *= 1 + first_load
-            for q in ("shear_stress", "storage_modulus", "loss_modulus"):
-                if q in cols:
-                    cols[q] = cols[q] * k * np.exp(rng.normal(0, 0.01, cols[q].size))
-            if temperature_per_h is not None:
-                # the bath follows the ramp to within 0.05 degC per test
-                cols["temperature"] = np.full(cols["time"].size, 25.0 + temperature_per_h * t_start / 3600.0
-                                              + rng.normal(0.0, 0.05))
-            attrs = {"dataset": "design_agnostic", "run": f"sp{b}-{pos}-{test}@{cond:g}", "test": test,
-                     "specimen": f"sp{b}", "sample": "s1", "radius_m": RADIUS, "gap_m": GAP, **extra}
-            if order_attr:
-                attrs["order"] = pos
-            if started_at:
-                attrs["started_at"] = (day + pd.Timedelta(days=b, seconds=t_start)).isoformat()
-            runs.append(make_run_dataset(cols, attrs))
-            preds.append(pred)
-            t_start += rng.uniform(200.0, 1400.0) if pause_s is None else pause_s
+        for smp in range(samples_per_specimen):
+            k_sample = spec_scale[b] * np.exp(rng.normal(0, sample_sd))
+            for pos, m in enumerate(seq, start=1):
+                test, cond = MENU[m]
+                cols, pred, extra = _curve(test, cond)
+                k = k_sample * np.exp(rng.normal(0, 0.02)) * (1 + drift_per_h * t_start / 3600.0)
+                if pos == 1:
+                    k *= 1 + first_load
+                for q in ("shear_stress", "storage_modulus", "loss_modulus"):
+                    if q in cols:
+                        cols[q] = cols[q] * k * np.exp(rng.normal(0, 0.01, cols[q].size))
+                if temperature_per_h is not None:
+                    # the bath follows the ramp to within 0.05 degC per test
+                    cols["temperature"] = np.full(cols["time"].size, 25.0 + temperature_per_h * t_start / 3600.0
+                                                  + rng.normal(0.0, 0.05))
+                attrs = {"dataset": "design_agnostic", "run": f"sp{b}-s{smp + 1}-{pos}-{test}@{cond:g}", "test": test,
+                         "specimen": f"sp{b}", "sample": f"s{smp + 1}", "radius_m": RADIUS, "gap_m": GAP, **extra}
+                if order_attr:
+                    attrs["order"] = pos
+                if started_at:
+                    attrs["started_at"] = (day + pd.Timedelta(days=b, seconds=t_start)).isoformat()
+                runs.append(make_run_dataset(cols, attrs))
+                preds.append(pred)
+                t_start += rng.uniform(200.0, 1400.0) if pause_s is None else pause_s + (
+                    rng.uniform(-pause_jitter_s, pause_jitter_s) if pause_jitter_s else 0.0)
     table = residual_table(runs, preds, "lve_constructed")
     return DiagnosisContext(runs=runs, table=table, model="lve_constructed", fit_info={"target": "torque"})
 
@@ -336,3 +341,19 @@ def test_a_clock_that_follows_the_test_order_is_not_read_as_a_covariate_within_s
     # read within samples, the slope is the level noise over the clock jitter: 5.5 per hour here
     assert entry["tested"] and "between the samples" in entry["variation"] and abs(entry["slope"]) < 0.05, entry
     assert entry["p_value"] > 0.01
+
+
+def test_drift_in_a_fixed_order_with_regular_pauses_is_read_between_the_samples_of_a_specimen():
+    """Every sample runs the same 4 tests in the same order with 15-minute pauses, three samples per specimen one
+    after the other: within a sample the clock is the condition, so the drift can only be read from the later
+    samples of a specimen being stiffer. Before, the within-sample read took the slope from the pauses' few seconds
+    of jitter (hundreds per hour, never significant); the between-samples read recovers the truth's 10 %/h."""
+    design = [[0, 1, 2, 3]] * 6
+    f = detect_elapsed_time_drift(make_runs(design, drift_per_h=0.10, pause_s=900.0, pause_jitter_s=5.0,
+                                            samples_per_specimen=3, sample_sd=0.02, seed=21))
+    assert f["tested"] and f["design"].startswith("between the samples of each specimen"), f["evidence"]
+    assert f["p_value"] < 1e-3 and f["effect_size"] == pytest.approx(0.10, abs=0.03)
+    assert "condition" not in f["confounded_with"]
+    null = detect_elapsed_time_drift(make_runs(design, pause_s=900.0, pause_jitter_s=5.0, samples_per_specimen=3,
+                                               sample_sd=0.02, seed=21))
+    assert null["tested"] and null["p_value"] > 0.01 and abs(null["effect_size"]) < 0.05

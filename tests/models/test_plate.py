@@ -252,3 +252,42 @@ def test_rim_normal_stress_difference_inverts_thrust():
     force = thrust_normal_force(MooneyRivlinShear(), p, rim, R)
     n1, n2 = MooneyRivlinShear().normal_stress_differences(p, rim)
     np.testing.assert_allclose(rim_normal_stress_difference(force, rim, R), n1 - n2, rtol=1e-6)
+
+
+def test_a_law_that_softens_beyond_the_data_is_inverted_on_its_rising_branch():
+    """A two-term Lopez-Pamies law with negative exponents, as a joint fit returned it for a generated creep
+    dataset: the plate's apparent elastic stress rises to ~1 kPa at a rim strain of ~0.3 and falls to zero beyond
+    (stress 2 gamma sum mu_i (I1/3)^(alpha_i - 1), I1 = 3 + gamma^2). A creep's rim strain is the root on the rising
+    branch from zero strain (the one the sample passes through), found with a table and Newton steps; before, the
+    fall at strains the creep never reaches sent every such inversion to 60 bisections over the whole line."""
+    from lmfit import Parameters
+
+    from tissuemech.models.plate import apparent_elastic_stress, invert_increasing
+    from tissuemech.models.registry import get_model
+
+    model = QLVModel(get_model("lopez_pamies2"), 1)
+    p = Parameters()
+    for name, value in dict(mu1=9411.0, alpha1=-20.524, mu2=-3918.8, alpha2=-16.623, beta_1=0.76, tau_1=1.0).items():
+        p.add(name, value=value)
+    calls = []
+
+    def fun(rim):
+        calls.append(1)
+        return apparent_elastic_stress(model, p, rim)
+
+    target = np.linspace(-900.0, 900.0, 41)
+    rim = invert_increasing(fun, target)
+
+    # the oracle: the apparent stress in closed form, Gauss-Legendre-free (4 int_0^1 sigma(x g) x^2 dx by scipy)
+    from scipy.integrate import quad
+
+    def apparent(g):
+        def sigma(s):
+            i1 = 3.0 + s * s
+            return s * sum(mu * (i1 / 3.0) ** (a - 1.0) for mu, a in ((9411.0, -20.524), (-3918.8, -16.623)))
+        return 4.0 * quad(lambda x: sigma(x * g) * x * x, 0.0, 1.0)[0]
+
+    peak = max(np.linspace(0.0, 1.0, 2001), key=apparent)
+    assert np.all(np.abs(rim) < peak)
+    np.testing.assert_allclose([apparent(g) for g in rim], target, rtol=1e-6, atol=1e-6)
+    assert len(calls) <= 8

@@ -5,7 +5,7 @@ Detection
 The temperature of every run is read from the data: the median of its logged ``temperature`` channel, else
 its ``temperature_c`` attribute (sample sheet / export); never a default
 (:func:`tissuemech.tts.run_temperature_c`). When fewer than :data:`MIN_TEMPERATURES` distinct temperatures
-(rounded to :data:`TEMPERATURE_RESOLUTION_C`) are present the cause is not testable.
+(:func:`tissuemech.curves.distinct_temperatures`: rounded to 0.5 degC, as the averaging rounds them) are present the cause is not testable.
 
 The per-curve level of the baseline's residual (:func:`tissuemech.diagnosis.findings.curve_levels`: median
 ln(observed/predicted) on the lower half of each curve) is regressed on the run temperature with the condition
@@ -45,6 +45,7 @@ import pandas as pd
 import xarray as xr
 
 from .. import tts
+from ..curves import distinct_temperatures, rounded_setting
 from .. import stats as st
 from .findings import DiagnosisContext, curve_levels, describe_fix, fix_record, make_finding, untested_finding
 from .levels import scale_correction_cv
@@ -54,9 +55,6 @@ from .generic import CONFOUNDED_R2, MIN_EFFECT
 EFFECT = "temperature_dependence"
 #: fewest distinct run temperatures for a test (a slope and a held-out temperature need three)
 MIN_TEMPERATURES = 3
-#: temperatures closer than this are one temperature (degC); the set-point stability of rheometer Peltier
-#: and oven controls is about +-0.1 degC, so 0.5 degC separates set points, not sensor noise
-TEMPERATURE_RESOLUTION_C = 0.5
 
 
 def curve_temperatures(runs: Sequence[xr.Dataset]) -> dict[str, float]:
@@ -67,13 +65,6 @@ def curve_temperatures(runs: Sequence[xr.Dataset]) -> dict[str, float]:
         if np.isfinite(t):
             out[run_id(r)] = t
     return out
-
-
-def distinct_temperatures(temps) -> np.ndarray:
-    """Distinct temperatures after rounding to :data:`TEMPERATURE_RESOLUTION_C`."""
-    t = np.asarray(list(temps), float)
-    t = t[np.isfinite(t)]
-    return np.unique(np.round(t / TEMPERATURE_RESOLUTION_C) * TEMPERATURE_RESOLUTION_C)
 
 
 def _shift_function(res: tts.TTSResult):
@@ -93,7 +84,7 @@ def leave_one_temperature_out(sweeps: Sequence[tts.Sweep]) -> dict:
 
     Returns ``before``, ``after`` (RMS decades), ``n_folds``, ``n_points``, ``shift_functions`` (name
     used per fold) and ``per_temperature`` {T: [before, after]}."""
-    groups = np.round(np.array([s.temperature_c for s in sweeps]) / TEMPERATURE_RESOLUTION_C)
+    groups = np.array([rounded_setting(s.temperature_c) for s in sweeps], float)
     cache: dict = {}
     before, after, used, per_t = [], [], [], {}
     for g in np.unique(groups):

@@ -98,22 +98,29 @@ def apparent_elastic_stress(model: ConstitutiveModel, p: Params, rim_strain: np.
 def invert_increasing(fun, target: np.ndarray, n_table: int = 128, n_newton: int = 4) -> np.ndarray:
     """Solve ``fun(x) = target`` for an increasing odd ``fun`` of strain: a monotone table inverted by
     interpolation, then Newton steps on the exact function with central-difference slopes. The table spans the
-    strains the targets need (the first of 1, 2, 4, ... 512 whose stress holds them; beyond: ValueError).
+    strains the targets need (the first of 2^-10 ... 512 whose stress holds them; beyond: ValueError). A law that
+    softens beyond some strain (a fitted Ogden or Lopez-Pamies law with negative exponents, at strains far beyond
+    the data) is inverted on its rising branch from zero strain when that branch holds every target; only a law
+    that is not increasing below the targets goes to bisection (:func:`tissuemech.models.qlv.invert_monotone`).
 
     ``fun`` is called on whole arrays, once per stage (the candidate table tops, the table, each Newton step with
     its two slope points): its cost per call, not per point, dominates a fit's creep curves."""
     target = np.asarray(target, float)
     need = float(np.max(np.abs(target))) if target.size else 0.0
-    tops = 2.0 ** np.arange(10)
+    tops = 2.0 ** np.arange(-10, 10)
     reached = np.flatnonzero(np.asarray(fun(tops), float) >= need)
     if not reached.size:
         raise ValueError(f"cannot invert the elastic law: stress {need:g} Pa not reached for strains <= 1e3")
     top = float(tops[reached[0]])
     grid = np.concatenate([[0.0], np.geomspace(1e-9 * top, top, n_table)])
     table = np.asarray(fun(grid), float)
-    if np.any(np.diff(table) <= 0):
-        # not increasing in floating point somewhere (a locking or softening law at these parameters)
-        return invert_monotone(fun, target)
+    falls = np.flatnonzero(~(np.diff(table) > 0))
+    if falls.size:
+        rising = falls[0] + 1           # table[:rising] is increasing
+        if rising < 3 or not table[rising - 1] >= need:
+            # not increasing in floating point below the targets (a locking or softening law at these parameters)
+            return invert_monotone(fun, target)
+        grid, table = grid[:rising], table[:rising]
     x = np.sign(target) * np.interp(np.abs(target), table, grid)
     for _ in range(n_newton):
         h = 1e-7 * np.maximum(np.abs(x), 1e-9 * top)
