@@ -46,8 +46,11 @@ import xarray as xr
 
 from .. import tts
 from ..curves import distinct_temperatures, rounded_setting
+from ..models.registry import FIXED_TIME_KEY, model_on_times
 from .. import stats as st
-from .findings import DiagnosisContext, curve_levels, describe_fix, fix_record, make_finding, untested_finding
+from .baseline import predict_runs
+from .findings import (DiagnosisContext, curve_levels, cv_group_column, describe_fix, fix_record, group_cv,
+                       make_finding, untested_finding)
 from .levels import scale_correction_cv
 from .evidence import run_id
 from .generic import CONFOUNDED_R2, MIN_EFFECT
@@ -55,6 +58,9 @@ from .generic import CONFOUNDED_R2, MIN_EFFECT
 EFFECT = "temperature_dependence"
 #: fewest distinct run temperatures for a test (a slope and a held-out temperature need three)
 MIN_TEMPERATURES = 3
+#: step of ln a_T for the numerical shift sensitivity (5 %: small against the decades a spectrum spans, large
+#: against the round-off of a creep inversion)
+SHIFT_STEP = 0.05
 
 
 def curve_temperatures(runs: Sequence[xr.Dataset]) -> dict[str, float]:
@@ -149,6 +155,110 @@ def _curved_test(levels: pd.DataFrame, controls: Sequence[str] = ()) -> dict | N
                                      controls=tuple(controls))
 
 
+def shift_sensitivity(ctx: DiagnosisContext) -> pd.DataFrame | None:
+    """The rows of ``ctx.table`` with ``shift_sensitivity`` = d ln|prediction| / d ln a_T: the baseline predicted
+    again with every relaxation time multiplied by exp(:data:`SHIFT_STEP`) (a_T scales the times of a
+    thermorheologically simple material, so this is its response to a shift of the time axis; a sweep's modulus
+    moves along frequency, a relaxation's or creep's along time, a ramp's along rate). None when the baseline has
+    no fixed relaxation times (``fit_info`` without ``taus_s``/``params``, or a model key other than the
+    fixed-time QLV/Pipkin-Rogers family)."""
+    info = ctx.fit_info
+    taus, params = info.get("taus_s"), info.get("params")
+    if not taus or not params or FIXED_TIME_KEY.fullmatch(str(ctx.model)) is None or ctx.table.empty:
+        return None
+    curves = set(ctx.table["curve"])
+    runs = [r for r in ctx.runs if run_id(r) in curves]
+    model = model_on_times(ctx.model, np.asarray(taus, float) * np.exp(SHIFT_STEP))
+    preds = predict_runs(model, params, runs, info.get("target", "apparent_stress"),
+                         info.get("relaxation", "measured"))
+    parts = []
+    for run, pred in zip(runs, preds):
+        for quantity, values in (pred or {}).items():
+            values = np.asarray(values, float)
+            parts.append(pd.DataFrame({"curve": run_id(run), "quantity": quantity, "point": np.arange(values.size),
+                                       "predicted_shifted": values}))
+    if not parts:
+        return None
+    rows = ctx.table.merge(pd.concat(parts, ignore_index=True), on=["curve", "quantity", "point"], how="inner")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (np.log(np.abs(rows["predicted_shifted"])) - np.log(np.abs(rows["predicted"]))) / SHIFT_STEP
+    return rows.assign(shift_sensitivity=s)
+
+
+def _demeaned(frame: pd.DataFrame, columns: Sequence[str], group: pd.Series) -> pd.DataFrame:
+    return frame[list(columns)] - frame[list(columns)].groupby(group).transform("mean")
+
+
+def shift_test(ctx: DiagnosisContext, temps: dict[str, float]) -> dict | None:
+    """Test of a time-temperature shift read from the shape of every curve (module docstring, "Shift test"):
+    the baseline's log residual regressed, within each curve and quantity, on ``shift_sensitivity`` x (T - mean T),
+    with ``shift_sensitivity`` x condition as controls, standard errors clustered by specimen (by sample with
+    fewer than 3 specimens). Returns the coefficient test with ``per_k`` (d ln a_T / dT [1/K]), ``rows`` (the
+    frame, for the fix) and ``sensitivity_q90`` (90th percentile of |d ln prediction / d ln a_T| over the points:
+    the points where the time scale matters); None when no curve's sensitivity varies along it."""
+    rows = shift_sensitivity(ctx)
+    if rows is None:
+        return None
+    flagged = rows["quality_flag"] != 0 if "quality_flag" in rows else False
+    rows = rows.assign(temperature_c=rows["curve"].map(temps))
+    rows = rows[rows["above_noise"].astype(bool) & ~flagged & np.isfinite(rows["shift_sensitivity"])
+                & np.isfinite(rows["log_ratio"]) & rows["temperature_c"].notna()]
+    if rows.empty or len(distinct_temperatures(rows["temperature_c"])) < MIN_TEMPERATURES:
+        return None
+    group = rows["curve"].astype(str) + "|" + rows["quantity"].astype(str)
+    d_t = rows["temperature_c"] - rows.groupby("curve")["temperature_c"].first().mean()
+    x = rows.assign(shift_x_temperature=rows["shift_sensitivity"] * d_t)
+    controls = []
+    if x["condition"].nunique() > 1:
+        for k, c in enumerate(sorted(x["condition"].astype(str).unique())):
+            x[f"shift_x_condition_{k}"] = x["shift_sensitivity"] * (x["condition"].astype(str) == c)
+            controls.append(f"shift_x_condition_{k}")
+    cols = ["shift_x_temperature", *controls]
+    X = _demeaned(x, cols, group)
+    y = x["log_ratio"] - x["log_ratio"].groupby(group).transform("mean")
+    spread = float(np.sqrt(np.mean(X["shift_x_temperature"] ** 2)))
+    if not spread > 1e-9 * max(float(np.abs(x["shift_x_temperature"]).max()), 1e-300):
+        return None
+    clusters = x["specimen"] if x["specimen"].nunique() >= 3 else x["sample"]
+    # controls collinear with each other (a condition measured at one temperature only) are dropped by rank
+    keep = [c for c in cols if float(np.abs(X[c]).max()) > 0]
+    Xk = X[keep]
+    if np.linalg.matrix_rank(Xk.to_numpy(float)) < len(keep):
+        q, r = np.linalg.qr(Xk.to_numpy(float))
+        independent = np.abs(np.diag(r)) > 1e-10 * np.abs(np.diag(r)).max()
+        keep = [c for c, ok in zip(keep, independent) if ok or c == "shift_x_temperature"]
+    if "shift_x_temperature" not in keep:
+        return None
+    result = st.cluster_regression(y.to_numpy(float), X[keep], groups=clusters.to_numpy())
+    t = st.coefficient_test(result, "shift_x_temperature")
+    if not np.isfinite(t.get("p_value", np.nan)):
+        return None
+    return dict(t, per_k=float(t["estimate"]), rows=x.assign(y=y.to_numpy(), x_shift=X["shift_x_temperature"]
+                                                            .to_numpy()),
+                sensitivity_q90=float(np.quantile(np.abs(x["shift_sensitivity"]), 0.9)),
+                n_clusters=int(clusters.nunique()), cluster_unit="specimen" if x["specimen"].nunique() >= 3
+                else "sample")
+
+
+def _shift_fix(test: dict) -> tuple[float, float, str, int]:
+    """Held-out score of the shift a_T(T) = exp(b (T - mean T)): b from the other specimens (samples) by the
+    regression of :func:`shift_test` without its controls, applied to the held-out curves' shapes (each curve's
+    mean log residual removed: a level is not the shift's business). Returns (before, after, unit, n points)."""
+    frame = test["rows"]
+    unit = cv_group_column(frame)
+
+    def fit(train):
+        xs, ys = train["x_shift"].to_numpy(), train["y"].to_numpy()
+        return float(np.dot(xs, ys) / np.dot(xs, xs)) if np.dot(xs, xs) > 0 else 0.0
+
+    def error(held, b):
+        ys = held["y"].to_numpy()
+        return ys if b is None else ys - b * held["x_shift"].to_numpy()
+
+    before, after = group_cv(frame, unit, fit, error)
+    return before, after, unit, int(len(frame))
+
+
 def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
     """Curve levels of the baseline regressed on run temperature; fix = TTS scored on a held-out
     temperature (module docstring)."""
@@ -163,11 +273,17 @@ def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
     levels = levels.assign(temperature_c=levels["curve"].map(temps)).dropna(subset=["temperature_c"])
     if len(levels) < 4 or levels["temperature_c"].nunique() < MIN_TEMPERATURES:
         return untested_finding(EFFECT, "not testable here: fewer than 4 residual curves with a temperature")
+    try:
+        shift = shift_test(ctx, temps)
+    except (ValueError, np.linalg.LinAlgError):
+        shift = None
     controls = _time_control(levels)
     t = st.mixed_coefficient_test(levels, "log_scale", "temperature_c", _factors(levels), controls=tuple(controls))
-    if t is None:
+    if t is None and shift is None:
         return untested_finding(EFFECT, "not testable here: temperature is collinear with the test conditions of this "
                                         "design")
+    if t is None:
+        return _shift_finding(ctx, shift, levels, distinct, tested_alone=True)
     design = (f"curve levels, condition fixed effects, specimen and sample random effects"
               + (", elapsed-time control" if controls else "") + f"; {t['method']}")
     joint = _curved_test(levels, controls)
@@ -182,6 +298,13 @@ def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
         else:
             design += ", t of the slope, Bonferroni x 2 with the joint F of T and T^2"
         t = dict(t, p_value=10 ** lp, log10_p=lp)
+    if shift is not None and shift["log10_p"] < t["log10_p"]:
+        return _shift_finding(ctx, shift, levels, distinct, tested_alone=False, level_test=t)
+    if shift is not None:
+        lp = min(0.0, t["log10_p"] + np.log10(2.0))
+        t = dict(t, p_value=10 ** lp, log10_p=lp)
+        design += (f"; stronger than the shift read from the curves' shapes (t = {shift['statistic']:.2f}), "
+                   "Bonferroni x 2")
     lo, hi = np.nanquantile(levels["temperature_c"], [0.05, 0.95])
     size = float(t["estimate"] * (hi - lo))
     sweeps = tts.sweeps_from_runs(ctx.runs)
@@ -236,3 +359,33 @@ def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
                 f"{'F' if 'joint F of T and T^2 (df' in design else 't'} = {t['statistic']:.2f}, p = {t['p_value']:.2g}).{fix_txt}")
     return make_finding(EFFECT, t, "F" if "joint F of T and T^2 (df" in design else "t", size, "ln(observed/predicted) over the temperature range",
                    abs(size) >= MIN_EFFECT, evidence, fix, **extra)
+
+
+def _shift_finding(ctx: DiagnosisContext, shift: dict, levels: pd.DataFrame, distinct, tested_alone: bool,
+                   level_test: dict | None = None) -> dict:
+    """The finding when the shift test (:func:`shift_test`) is the stronger of the two (or the only one)."""
+    t = dict(shift)
+    if not tested_alone:
+        lp = min(0.0, t["log10_p"] + np.log10(2.0))
+        t = dict(t, p_value=10 ** lp, log10_p=lp)
+    lo, hi = np.nanquantile(levels["temperature_c"], [0.05, 0.95])
+    decades = float(t["per_k"] * (hi - lo) / np.log(10.0))
+    moved = float(shift["sensitivity_q90"] * abs(t["per_k"]) * (hi - lo))
+    before, after, unit, n_pts = _shift_fix(shift)
+    fix = fix_record("time-temperature shift of the baseline's relaxation times: a_T = exp(b (T - mean T)), b from "
+                     "the other " + unit + "s", "rms_log_residual_within_curve", before, after,
+                     f"leave-one-{unit}-out", log10_aT_per_degc=float(t["per_k"] / np.log(10.0)),
+                     n_held_out_points=n_pts)
+    evidence = (f"The shapes of {ctx.model}'s residuals follow a shift of its time scale with temperature: "
+                f"log10 a_T changes by {decades:+.2f} decades over {lo:.3g}..{hi:.3g} degC "
+                f"({t['per_k'] / np.log(10.0):+.3g} per degC; read within each curve from d ln(prediction)/d ln a_T "
+                f"x (T - mean T), condition x sensitivity controls, {shift['n_clusters']} {shift['cluster_unit']} "
+                f"clusters; t = {t['statistic']:.2f}"
+                + ("" if tested_alone else f"; stronger than the curve-level test (t = "
+                   f"{level_test['statistic']:.2f}), Bonferroni x 2") + f"); it moves the prediction by "
+                f"{100 * moved:.1f} % over that range where the time scale matters (90th percentile of the points). A time shift, not a level: a higher temperature "
+                f"makes the material relax sooner. Held out, the shift predicts the {unit}s' curve shapes with "
+                f"{describe_fix(before, after)}.")
+    return make_finding(EFFECT, t, "t", decades, "decades of log10 a_T over the temperature range",
+                        moved >= MIN_EFFECT, evidence, fix, temperatures_c=[float(x) for x in distinct],
+                        read_as="time shift")
