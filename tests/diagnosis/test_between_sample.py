@@ -93,3 +93,28 @@ def test_a_block_design_does_not_turn_the_specimens_into_a_time_trend():
 def test_a_drift_within_samples_is_found_in_a_block_design():
     t, design = within_test(_block_design(0.10), "elapsed_h")
     assert t["estimate"] == pytest.approx(0.10, abs=0.03) and t["p_value"] < 1e-4
+
+
+def test_a_preload_that_acts_as_a_power_is_read_on_a_log_scale():
+    """Six specimens, three samples each, every sample pressed with its own preload F (log-uniform 0.02-0.5 N) and
+    stiffened by (F / 0.1 N)^0.15: a power law in the preload. A linear regressor on F puts its leverage on the few
+    largest preloads; the covariates table also reads a positive covariate that spans a decade on a log scale, and
+    there recovers the exponent (oracle: 0.15 ln F), Bonferroni x 2 with the linear read."""
+    from tissuemech.diagnosis.covariates import covariate_tests
+
+    rng = np.random.default_rng(11)
+    rows = []
+    for s in range(6):
+        spec = rng.normal(0.0, 0.2)
+        for k in range(3):
+            force = float(np.exp(rng.uniform(np.log(0.02), np.log(0.5))))
+            level = spec + 0.15 * np.log(force / 0.1) + rng.normal(0.0, 0.03)
+            for cond, offset in (("c1", 0.0), ("c2", 0.3)):
+                rows.append({"curve": f"S{s}/{k}/{cond}", "specimen": f"S{s}", "sample": f"S{s}/{k}",
+                             "condition": cond, "channel_normal_force": force,
+                             "log_scale": offset + level + rng.normal(0.0, 0.01)})
+    entry = next(e for e in covariate_tests(pd.DataFrame(rows)) if e["covariate"] == "channel_normal_force")
+    assert entry["tested"] and "log scale" in entry["variation"], entry
+    assert entry["slope"] == pytest.approx(0.15, abs=0.03) and entry["p_value"] < 1e-4
+    linear = st.mixed_coefficient_test(pd.DataFrame(rows), "log_scale", "channel_normal_force", ("condition",))
+    assert linear["log10_p"] > entry["log10_p"]

@@ -17,7 +17,8 @@ covariate that follows them.
   force at the curve's smallest strains, the preload, since the thrust during a test is a response), the
   run temperature (``temperature_c``, from the channel or the sample sheet), the gap and plate radius of the sample
   sheet (``gap_mm``, ``radius_mm``) and every extra sample-sheet column (``covariate_<name>``; text columns are
-  factors, tested by a joint Wald F over their levels) are tested on all the variation they have;
+  factors, tested by a joint Wald F over their levels) are tested on all the variation they have; a positive one
+  that spans a decade is also tested on a log scale (the stronger, Bonferroni x 2; :data:`LOG_SCALE_SPAN`);
 * ``first_load`` (the first test of each sample) within samples.
 
 Each entry: ``covariate``, ``kind`` (``session clock``, ``logged channel``, ``sample sheet``, ``factor``), ``source``,
@@ -136,11 +137,28 @@ def _candidates(lv: pd.DataFrame) -> list[tuple[str, str, str, bool]]:
     return [o for o in out if o[0] in lv]
 
 
-def _effect_size(lv: pd.DataFrame, column: str, test: dict, categorical: bool) -> float:
+#: a positive covariate whose values span at least this ratio is also tested on a log scale (Bonferroni x 2):
+#: a preload, a rate or a concentration often acts as a power of itself, and a decade-wide linear regressor puts
+#: all its leverage on its largest values
+LOG_SCALE_SPAN = 10.0
+
+
+def _log_scale_test(lv: pd.DataFrame, column: str, factors) -> dict | None:
+    """The mixed-model test of ln(``column``) where every value is positive and they span :data:`LOG_SCALE_SPAN`."""
+    x = pd.to_numeric(lv[column], errors="coerce")
+    x = x[x.notna()]
+    if x.empty or not (x > 0).all() or x.max() / x.min() < LOG_SCALE_SPAN:
+        return None
+    return st.mixed_coefficient_test(lv.assign(**{column: np.log(pd.to_numeric(lv[column], errors="coerce"))}),
+                                     "log_scale", column, factors)
+
+
+def _effect_size(lv: pd.DataFrame, column: str, test: dict, categorical: bool, log_scale: bool = False) -> float:
     if categorical:
         means = (lv["log_scale"] - lv.groupby("condition")["log_scale"].transform("mean")).groupby(lv[column]).mean()
         return float(means.max() - means.min()) if len(means) > 1 else 0.0
-    lo, hi = np.nanquantile(lv[column].astype(float), [0.05, 0.95])
+    values = lv[column].astype(float)
+    lo, hi = np.nanquantile(np.log(values) if log_scale else values, [0.05, 0.95])
     return float(test.get("estimate", np.nan) * (hi - lo))
 
 
@@ -180,6 +198,13 @@ def covariate_tests(lv: pd.DataFrame) -> list[dict]:
                 variation = got[1].split(" (")[0] if got else ""
             else:
                 t = st.mixed_coefficient_test(lv, "log_scale", column, factors, categorical=categorical)
+                logged = _log_scale_test(lv, column, factors) if not categorical else None
+                if logged is not None and (t is None or logged["log10_p"] < t["log10_p"]):
+                    t = logged
+                    variation = f"ln {column}"
+                if logged is not None and t is not None:
+                    lp = min(0.0, t["log10_p"] + np.log10(2.0))
+                    t = dict(t, p_value=10 ** lp, log10_p=lp)
         if t is None:
             why = (f"{column} cannot be read within samples or within specimens apart from the test conditions "
                    f"(a trend of the session clock is never read from the specimens' differences); a design that "
@@ -188,14 +213,18 @@ def covariate_tests(lv: pd.DataFrame) -> list[dict]:
                    f"freedom (not separable from a misfit that differs by condition)")
             out.append(_entry(column, kind, source, n_levels, int(vals.notna().sum()), tested=False, evidence=why))
             continue
-        size = _effect_size(lv, column, t, categorical)
+        size = _effect_size(lv, column, t, categorical, log_scale=variation == f"ln {column}")
         out.append(_entry(column, kind, source, n_levels, int(t["n"]), tested=True, statistic=t["statistic"],
                           statistic_name="F" if categorical else "t", p_value=t["p_value"], log10_p=t["log10_p"],
                           effect_size=size, slope=t.get("estimate", np.nan), df=t.get("df", t.get("df2", np.nan)),
-                          variation=variation or f"varies at the {t['level']} level",
+                          variation=(f"varies at the {t['level']} level; read on a log scale"
+                                     if variation == f"ln {column}" else variation
+                                     or f"varies at the {t['level']} level"),
                           method=t["method"], practical=bool(abs(size) >= MIN_EFFECT),
                           evidence=(f"curve levels {describe_log_change(size)} over the range of {column} "
-                                    f"({'F' if categorical else 't'} = {t['statistic']:.2f}, p = {t['p_value']:.2g}; "
+                                    + (f"(read on a log scale, Bonferroni x 2 with the linear scale; "
+                                       if variation == f"ln {column}" else "(")
+                                    + f"{'F' if categorical else 't'} = {t['statistic']:.2f}, p = {t['p_value']:.2g}; "
                                     f"{t['method']})")))
     return out
 
