@@ -25,8 +25,6 @@ from .time_domain import offset_intercept
 
 #: the tests whose torque a transducer offset shifts and the model-level fixes refit: ramps and relaxations
 RAMP_AND_RELAXATION = ("constant_shear_rate", "stress_relaxation")
-#: most re-readings of the offset from the refit's residuals (:func:`offset_fix`)
-OFFSET_ITERATIONS = 4
 
 
 def nonseparable_fix(runs, baseline_key: str, target: str, taus_s: Sequence[float] | None = None,
@@ -175,27 +173,9 @@ def offset_fix(runs: Sequence[xr.Dataset], baseline_key: str, fit_info: dict, no
             if kept else None
         if est is None:
             continue
-        to_nm = np.pi * float(np.median(radii)) ** 3 / 2.0
-        offset_nm = float(est["estimate"]) * to_nm
+        offset_nm = float(est["estimate"]) * np.pi * float(np.median(radii)) ** 3 / 2.0
         refit = fit_runs(baseline_key, offset_removed(train, offset_nm), target, relaxation, n_points,
                          start=raw.params, taus_s=taus)
-        # the baseline fitted with the offset in its data takes part of it into its law, so the first reading is
-        # biased; the intercept of the refit's residuals is added until it stops moving (the joint least-squares
-        # fit of the baseline and M0 is this iteration's fixed point)
-        for _ in range(OFFSET_ITERATIONS):
-            shifted = offset_removed(train, offset_nm)
-            preds = predict_runs(model, refit.params, shifted, target, relaxation)
-            kept = [(r, p) for r, p in zip(shifted, preds) if p]
-            again = offset_intercept(residual_table([r for r, _ in kept], [p for _, p in kept], baseline_key,
-                                                    noise=noise)) if kept else None
-            if again is None or not np.isfinite(again["estimate"]):
-                break
-            step = float(again["estimate"]) * to_nm
-            offset_nm += step
-            refit = fit_runs(baseline_key, offset_removed(train, offset_nm), target, relaxation, n_points,
-                             start=refit.params, taus_s=taus)
-            if abs(step) <= 0.05 * abs(offset_nm):
-                break
         corrected = curves_of_runs(offset_removed(held, offset_nm), relaxation, n_points)
         before.append(held_out_nrmse(model, raw.params, test_curves, target, test_curves, free_level))
         after.append(held_out_nrmse(model, refit.params, corrected, target, test_curves, free_level))
