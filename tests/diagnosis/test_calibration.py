@@ -552,3 +552,15 @@ def test_pipeline_path_names_the_injected_cause(effect, tmp_path, pipeline_confi
     assert row["error"] is None, row.get("trace", row["error"])
     assert row["named"], _what(row)
     assert [e for e in row["detected"] if e != NAMED_AS[effect]] == [], _what(row)
+
+
+def test_a_folder_named_like_a_yaml_boolean_keeps_its_name(tmp_path):
+    """dataset.yaml's name is written quoted: a folder named ``off`` (YAML 1.1 reads it as false) ingests under its
+    own name; unquoted, the ingest stopped at 'dataset.yaml, line 1, column 7: name: False is not of type
+    'string''."""
+    from tissuemech.io.ingest import ingest_dataset
+
+    ir.write_dataset_folder(70, tmp_path / "raw" / "off")
+    report = ingest_dataset(tmp_path / "raw" / "off", tmp_path / "runs", tmp_path / "report.csv")
+    assert (report["status"] == "ok").all(), report[report["status"] != "ok"].to_dict("records")
+    assert {r.attrs["dataset"] for r in _runs_by_key(tmp_path / "runs").values()} == {"off"}
