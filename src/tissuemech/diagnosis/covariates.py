@@ -146,11 +146,10 @@ LOG_SCALE_SPAN = 10.0
 def _log_scale_test(lv: pd.DataFrame, column: str, factors) -> dict | None:
     """The mixed-model test of ln(``column``) where every value is positive and they span :data:`LOG_SCALE_SPAN`."""
     x = pd.to_numeric(lv[column], errors="coerce")
-    x = x[x.notna()]
-    if x.empty or not (x > 0).all() or x.max() / x.min() < LOG_SCALE_SPAN:
+    known = x[x.notna()]
+    if known.empty or not (known > 0).all() or known.max() / known.min() < LOG_SCALE_SPAN:
         return None
-    return st.mixed_coefficient_test(lv.assign(**{column: np.log(pd.to_numeric(lv[column], errors="coerce"))}),
-                                     "log_scale", column, factors)
+    return st.mixed_coefficient_test(lv.assign(**{column: np.log(x)}), "log_scale", column, factors)
 
 
 def _effect_size(lv: pd.DataFrame, column: str, test: dict, categorical: bool, log_scale: bool = False) -> float:
@@ -189,7 +188,7 @@ def covariate_tests(lv: pd.DataFrame) -> list[dict]:
                               evidence=f"{column} does not vary over these curves ({n_levels} value)"
                               if n_levels else f"{column} is not recorded for these curves"))
             continue
-        variation = ""
+        variation, log_read = "", False
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             if kind == "session clock":
@@ -200,8 +199,7 @@ def covariate_tests(lv: pd.DataFrame) -> list[dict]:
                 t = st.mixed_coefficient_test(lv, "log_scale", column, factors, categorical=categorical)
                 logged = _log_scale_test(lv, column, factors) if not categorical else None
                 if logged is not None and (t is None or logged["log10_p"] < t["log10_p"]):
-                    t = logged
-                    variation = f"ln {column}"
+                    t, log_read = logged, True
                 if logged is not None and t is not None:
                     lp = min(0.0, t["log10_p"] + np.log10(2.0))
                     t = dict(t, p_value=10 ** lp, log10_p=lp)
@@ -213,17 +211,16 @@ def covariate_tests(lv: pd.DataFrame) -> list[dict]:
                    f"freedom (not separable from a misfit that differs by condition)")
             out.append(_entry(column, kind, source, n_levels, int(vals.notna().sum()), tested=False, evidence=why))
             continue
-        size = _effect_size(lv, column, t, categorical, log_scale=variation == f"ln {column}")
+        size = _effect_size(lv, column, t, categorical, log_scale=log_read)
         out.append(_entry(column, kind, source, n_levels, int(t["n"]), tested=True, statistic=t["statistic"],
                           statistic_name="F" if categorical else "t", p_value=t["p_value"], log10_p=t["log10_p"],
                           effect_size=size, slope=t.get("estimate", np.nan), df=t.get("df", t.get("df2", np.nan)),
-                          variation=(f"varies at the {t['level']} level; read on a log scale"
-                                     if variation == f"ln {column}" else variation
-                                     or f"varies at the {t['level']} level"),
+                          variation=(f"varies at the {t['level']} level; read on a log scale" if log_read
+                                     else variation or f"varies at the {t['level']} level"),
                           method=t["method"], practical=bool(abs(size) >= MIN_EFFECT),
                           evidence=(f"curve levels {describe_log_change(size)} over the range of {column} "
                                     + (f"(read on a log scale, Bonferroni x 2 with the linear scale; "
-                                       if variation == f"ln {column}" else "(")
+                                       if log_read else "(")
                                     + f"{'F' if categorical else 't'} = {t['statistic']:.2f}, p = {t['p_value']:.2g}; "
                                     f"{t['method']})")))
     return out

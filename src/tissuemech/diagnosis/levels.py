@@ -23,25 +23,17 @@ from .findings import (DiagnosisContext, curve_levels, demean_by, fix_record, ma
 #: within-sample |correlation| above which two curve-level covariates are reported as confounded
 CONFOUND_CORRELATION = 0.9
 
-def _within_corr(levels: pd.DataFrame, a: str, b: str) -> float:
-    """Correlation of two curve-level covariates after removing sample means (NaN when undefined)."""
+def _within_corr(levels: pd.DataFrame, a: str, b: str, between_samples: bool = False) -> float:
+    """Correlation of two curve-level covariates after removing sample means, or with ``between_samples`` of their
+    sample means after removing specimen means (the variation :func:`within_test` reads there); NaN when
+    undefined."""
     lv = levels[levels[a].notna() & levels[b].notna()]
+    if between_samples:
+        lv = lv.groupby("sample").agg(**{a: (a, "mean"), b: (b, "mean"), "specimen": ("specimen", "first")})
     if len(lv) < 3:
         return np.nan
-    x, y = demean_by(lv, a, "sample"), demean_by(lv, b, "sample")
-    if x.std() == 0 or y.std() == 0:
-        return np.nan
-    return float(np.corrcoef(x, y)[0, 1])
-
-
-def _between_samples_corr(levels: pd.DataFrame, a: str, b: str) -> float:
-    """Correlation of two curve-level covariates' sample means, each centred on its specimen's mean (the
-    variation :func:`within_test` reads between the samples of a specimen; NaN when undefined)."""
-    lv = levels[levels[a].notna() & levels[b].notna()]
-    means = lv.groupby("sample").agg(a=(a, "mean"), b=(b, "mean"), specimen=("specimen", "first"))
-    if len(means) < 3:
-        return np.nan
-    x, y = demean_by(means, "a", "specimen"), demean_by(means, "b", "specimen")
+    group = "specimen" if between_samples else "sample"
+    x, y = demean_by(lv, a, group), demean_by(lv, b, group)
     if x.std() == 0 or y.std() == 0:
         return np.nan
     return float(np.corrcoef(x, y)[0, 1])
@@ -78,8 +70,8 @@ def within_test(levels: pd.DataFrame, column: str, controls: Sequence[str] = (),
     specimen and sample as random effects (:func:`tissuemech.stats.mixed_coefficient_test`, between-within
     degrees of freedom). Within samples, the column and its ``controls`` are centred on their sample's mean; where
     that leaves nothing testable (one curve per sample, or, with ``confounded_within`` False, a fixed test order that
-    makes the column follow the condition: :func:`_condition_share` at least :data:`CONFOUND_CORRELATION` squared;
-    the drift detector reads it within and reports the confounding instead), each sample's mean, centred on its specimen's mean, is tested across the samples of a specimen. So a
+    makes the column follow the condition: :func:`_condition_share` at least :data:`CONFOUND_CORRELATION` squared),
+    each sample's mean, centred on its specimen's mean, is tested across the samples of a specimen. So a
     trend of the session clock is read inside a specimen, never from the specimens' differences (a block design
     measures the specimens one after the other). ``between_samples``: the read between the samples of a specimen
     only. Returns ``(test, design sentence)`` or None."""
@@ -165,11 +157,11 @@ def _level_tests(levels: pd.DataFrame, column: str):
     # the first load is position 1: only time and temperature can be confounded with it
     candidates = ("elapsed_h", "temperature_c") if column == "first_load" else (
         ("position", "first_load", "temperature_c") if time_recorded else ("first_load", "temperature_c"))
-    corr = _within_corr if design.startswith("within samples") else _between_samples_corr
+    within = design.startswith("within samples")
     for c in candidates:  # a control nearly collinear with the covariate still cannot be separated from it
-        if c in levels and abs(corr(levels, column, c)) >= CONFOUND_CORRELATION:
+        if c in levels and abs(_within_corr(levels, column, c, between_samples=not within)) >= CONFOUND_CORRELATION:
             confounded.append(c)
-    if design.startswith("within samples") and _condition_share(levels, column) >= CONFOUND_CORRELATION ** 2:
+    if within and _condition_share(levels, column) >= CONFOUND_CORRELATION ** 2:
         confounded.append("condition")
     return dict(t, confounded_with=confounded, separating_design=[separating_design(c) for c in confounded]), design
 

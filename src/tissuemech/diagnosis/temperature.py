@@ -61,6 +61,7 @@ from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
+import scipy.stats
 import xarray as xr
 
 from .. import tts
@@ -204,15 +205,6 @@ def shift_sensitivity(ctx: DiagnosisContext) -> pd.DataFrame | None:
     return rows.assign(shift_sensitivity=s)
 
 
-def fisher_log10_p(*log10_ps: float) -> float:
-    """log10 of Fisher's combined p-value of independent tests given by their log10 p (kept in logs so that
-    p-values below 1e-300 combine)."""
-    from scipy.stats import chi2
-
-    x = -2.0 * np.log(10.0) * float(np.sum(log10_ps))
-    return float(min(0.0, chi2.logsf(x, 2 * len(log10_ps)) / np.log(10.0)))
-
-
 def _demeaned(frame: pd.DataFrame, columns: Sequence[str], group: pd.Series) -> pd.DataFrame:
     return frame[list(columns)] - frame[list(columns)].groupby(group).transform("mean")
 
@@ -252,7 +244,7 @@ def shift_test(ctx: DiagnosisContext, temps: dict[str, float]) -> dict | None:
     keep = [c for c in cols if float(np.abs(X[c]).max()) > 0]
     Xk = X[keep]
     if np.linalg.matrix_rank(Xk.to_numpy(float)) < len(keep):
-        q, r = np.linalg.qr(Xk.to_numpy(float))
+        r = np.linalg.qr(Xk.to_numpy(float), mode="r")
         independent = np.abs(np.diag(r)) > 1e-10 * np.abs(np.diag(r)).max()
         keep = [c for c, ok in zip(keep, independent) if ok or c == "shift_x_temperature"]
     if "shift_x_temperature" not in keep:
@@ -311,7 +303,7 @@ def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
         return untested_finding(EFFECT, "not testable here: temperature is collinear with the test conditions of this "
                                         "design")
     if t is None:
-        return _shift_finding(ctx, shift, levels, distinct, tested_alone=True)
+        return _shift_finding(ctx, shift, levels, distinct)
     design = (f"curve levels, condition fixed effects, specimen and sample random effects"
               + (", elapsed-time control" if controls else "") + f"; {t['method']}")
     joint = _curved_test(levels, controls)
@@ -326,11 +318,13 @@ def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
         else:
             design += ", t of the slope, Bonferroni x 2 with the joint F of T and T^2"
         t = dict(t, p_value=10 ** lp, log10_p=lp)
-    if shift is not None and shift["log10_p"] < t["log10_p"]:
-        return _shift_finding(ctx, shift, levels, distinct, tested_alone=False, level_test=t)
     if shift is not None:
-        lp = fisher_log10_p(t["log10_p"], shift["log10_p"])
-        t = dict(t, p_value=10 ** lp, log10_p=lp)
+        # the shift test reads within curves and the level test between them: independent under the null
+        p = float(scipy.stats.combine_pvalues([t["p_value"], shift["p_value"]], method="fisher").pvalue)
+        combined = {"p_value": p, "log10_p": float(np.log10(max(p, np.finfo(float).tiny)))}
+        if shift["log10_p"] < t["log10_p"]:
+            return _shift_finding(ctx, dict(shift, **combined), levels, distinct, level_test=t)
+        t = dict(t, **combined)
         design += (f"; combined with the shift read from the curves' shapes (t = {shift['statistic']:.2f}) by "
                    "Fisher's method")
     lo, hi = np.nanquantile(levels["temperature_c"], [0.05, 0.95])
@@ -389,13 +383,12 @@ def detect_temperature_dependence(ctx: DiagnosisContext) -> dict:
                    abs(size) >= MIN_EFFECT, evidence, fix, **extra)
 
 
-def _shift_finding(ctx: DiagnosisContext, shift: dict, levels: pd.DataFrame, distinct, tested_alone: bool,
+def _shift_finding(ctx: DiagnosisContext, shift: dict, levels: pd.DataFrame, distinct,
                    level_test: dict | None = None) -> dict:
-    """The finding when the shift test (:func:`shift_test`) is the stronger of the two (or the only one)."""
-    t = dict(shift)
-    if not tested_alone:
-        lp = fisher_log10_p(t["log10_p"], level_test["log10_p"])
-        t = dict(t, p_value=10 ** lp, log10_p=lp)
+    """The finding when the shift test (:func:`shift_test`) is the stronger of the two (its p-value then already
+    combined with ``level_test``'s) or the only one."""
+    t = shift
+    tested_alone = level_test is None
     lo, hi = np.nanquantile(levels["temperature_c"], [0.05, 0.95])
     decades = float(t["per_k"] * (hi - lo) / np.log(10.0))
     moved = float(shift["sensitivity_q90"] * abs(t["per_k"]) * (hi - lo))
