@@ -294,6 +294,32 @@ def test_drift_in_a_fixed_test_order_is_reported_as_confounded_with_the_conditio
     assert "condition" not in shuffled_f["confounded_with"]
 
 
+def test_the_covariates_table_reads_the_session_clock_as_the_drift_detector_does():
+    """One question, one read: on the fixed order with regular pauses (three samples per specimen) the covariates
+    table's elapsed-time row is the drift detector's read between the samples of each specimen, with the same slope
+    and p-value (before, the table read it with a rule of its own and kept the within-sample read of the pauses'
+    jitter wherever the condition did not explain the clock); with one sample per specimen in a fixed order both
+    report the same within-sample slope as confounded with the condition and name the design that would separate
+    them, and the table leaves it out of the scan for unnamed structure (its t can be infinite on a null design)."""
+    from tissuemech.diagnosis.covariates import covariate_tests, curve_frame
+
+    ctx = make_runs([[0, 1, 2, 3]] * 6, drift_per_h=0.10, pause_s=900.0, pause_jitter_s=5.0, samples_per_specimen=3,
+                    sample_sd=0.02, seed=21)
+    f = detect_elapsed_time_drift(ctx)
+    row = next(e for e in covariate_tests(curve_frame(ctx)) if e["covariate"] == "elapsed_time")
+    assert f["design"].startswith("between the samples of each specimen")
+    assert row["tested"] and row["variation"].startswith("between the samples of each specimen"), row
+    assert row["slope"] == pytest.approx(np.log1p(f["effect_size"]), rel=1e-6)   # the detector reports e^slope - 1
+    assert row["p_value"] == pytest.approx(f["p_value"], rel=1e-6)
+    fixed = make_runs([[0, 1, 2, 3]] * 4, drift_per_h=0.10, seed=12)
+    row = next(e for e in covariate_tests(curve_frame(fixed)) if e["covariate"] == "elapsed_time")
+    drift = detect_elapsed_time_drift(fixed)
+    assert "condition" in drift["confounded_with"]
+    assert not row["tested"] and "confounded with the test condition" in row["variation"]
+    assert "randomise the test order" in row["evidence"]
+    assert row["slope"] == pytest.approx(np.log1p(drift["effect_size"]), rel=1e-6)
+
+
 def test_outlier_not_testable_when_specimens_share_no_test():
     f = detect_outlier_specimen(make_runs([[0], [1], [2], [3]], outlier=3.0))
     assert not f["tested"] and "confounded" in f["evidence"] and "common test condition" in f["evidence"]

@@ -10,9 +10,11 @@ in which the specimens are measured one after the other, cannot turn the specime
 covariate that follows them.
 
 * the session clock -- elapsed time (``elapsed_time``, hours) and the position in each sample's sequence
-  (``test_order``) -- is tested *within* samples (the covariate centred on its sample mean; within specimens, on
-  the specimen mean, where every sample has one curve, or where the test condition explains the clock within
-  samples, a fixed test order): a drift follows the clock inside a sample, the specimens' differences do not;
+  (``test_order``) -- is read as the drift detector reads it (:func:`tissuemech.diagnosis.levels.clock_test`):
+  within samples (the covariate centred on its sample mean) unless the test condition explains the clock there (a
+  fixed test order), and between the samples of each specimen (sample means centred on the specimen's mean), the
+  read with the smaller standard error kept: a drift follows the clock inside a specimen, the specimens'
+  differences do not;
 * the logged channels (``channel_temperature``, ``channel_gap``: the curve's mean; ``channel_normal_force``: the
   force at the curve's smallest strains, the preload, since the thrust during a test is a response), the
   run temperature (``temperature_c``, from the channel or the sample sheet), the gap and plate radius of the sample
@@ -51,7 +53,7 @@ from ..tts import run_temperature_c
 from .evidence import run_id
 from .findings import DiagnosisContext, curve_levels, describe_log_change, separating_design
 from .generic import MIN_EFFECT, RESPONSE_CHANNELS
-from .levels import specimen_levels, within_test
+from .levels import clock_test, specimen_levels
 
 #: channels of the residual table tested as covariates (their curve mean); response channels are not
 CHANNELS = ("channel_temperature", "channel_gap", "channel_normal_force")
@@ -192,9 +194,21 @@ def covariate_tests(lv: pd.DataFrame) -> list[dict]:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             if kind == "session clock":
-                got = within_test(lv[lv[column].notna()], column, confounded_within=False)
+                got = clock_test(lv[lv[column].notna()], column)
                 t = got[0] if got else None
                 variation = got[1].split(" (")[0] if got else ""
+                if t is not None and t.get("confounded_with_condition"):
+                    # the drift detector's read, reported with its confounding; not in the scan: within samples the
+                    # clock is the condition up to the pauses' jitter, and its t can be infinite on a null design
+                    out.append(_entry(column, kind, source, n_levels, int(t["n"]), tested=False,
+                                      slope=t.get("estimate", np.nan), variation=variation + ", confounded with the "
+                                      "test condition",
+                                      evidence=f"{column} is read only within samples, where the test condition "
+                                               f"explains it (slope {t.get('estimate', np.nan):.3g} in log level per "
+                                               f"{'hour' if column == 'elapsed_time' else 'unit'}, not "
+                                               f"tested: a misfit that differs by condition would pass for it); a "
+                                               f"design that would separate them: {separating_design('condition')}"))
+                    continue
             else:
                 t = st.mixed_coefficient_test(lv, "log_scale", column, factors, categorical=categorical)
                 logged = _log_scale_test(lv, column, factors) if not categorical else None

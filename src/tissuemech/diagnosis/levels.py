@@ -99,6 +99,26 @@ def within_test(levels: pd.DataFrame, column: str, controls: Sequence[str] = (),
                                                                  if controls else "") + f"; {t['method']})")
 
 
+def clock_test(levels: pd.DataFrame, column: str, controls: Sequence[str] = ()) -> tuple[dict, str] | None:
+    """The one read of a session clock (elapsed time, or the position in the sequence where no time was recorded)
+    on the curve levels, for the drift detector and the covariates table alike: within samples where the condition
+    does not explain the clock there (``confounded_within`` False of :func:`within_test`), and between the samples of
+    each specimen; the read with the smaller standard error is kept (a choice that does not depend on the slope).
+    With a fixed test order and regular pauses the within-sample read has only the jitter of the pauses to go on,
+    and a misfit that differs by condition would pass for a trend; between the samples of a specimen the clock
+    moves by a whole sample's sequence. Where neither read exists (one sample per specimen in a fixed order), the
+    within-sample read is returned with ``confounded_with_condition`` True: its slope cannot be told from a misfit
+    that differs by condition, and the reader says so. Returns ``(test, design sentence)`` or None."""
+    reads = [within_test(levels, column, controls, confounded_within=False),
+             within_test(levels, column, controls, between_samples=True)]
+    reads = [r for r in reads if r is not None and np.isfinite(r[0].get("std_error", np.nan))] or [
+        r for r in reads if r is not None]
+    if reads:
+        return min(reads, key=lambda r: r[0].get("std_error", np.inf))
+    confounded = within_test(levels, column, controls)
+    return None if confounded is None else (dict(confounded[0], confounded_with_condition=True), confounded[1])
+
+
 def _level_tests(levels: pd.DataFrame, column: str):
     """Curve-level test of ``column`` (elapsed time or first load) within samples, else within specimens
     (:func:`within_test`), controlled for the other and for the logged temperature where the design allows (the
@@ -109,10 +129,12 @@ def _level_tests(levels: pd.DataFrame, column: str):
     Elapsed time is read with the first-load control when the first loads are known and not absorbed by the
     condition effects (a within-sample trend needs two curves after the first load; otherwise the slope is the
     first-load contrast). Elapsed time falls back to the position in the sequence when no time was recorded.
-    A covariate collinear with the condition within samples (a fixed test order) is reported as confounded with
-    the condition when it is read within samples. Elapsed time is also read between the samples of each specimen,
-    and the read with the smaller standard error is kept: with a fixed order and regular pauses the within-sample
-    read has only the jitter of the pauses to go on (a slope of hundreds per hour with a standard error to match).
+    The first load, collinear with the condition within samples in a fixed test order, is reported as confounded
+    with the condition when it is read within samples. Elapsed time is read by :func:`clock_test` (the read the
+    covariates table makes too): within samples only where the condition does not explain the clock there, and
+    between the samples of each specimen, the read with the smaller standard error kept; with a fixed order and
+    regular pauses the within-sample read had only the jitter of the pauses to go on (a slope of hundreds per hour
+    with a standard error to match).
     Measured on generated null level tables the between-samples read keeps its level (1.1 % at p < 0.01), where
     reading the specimens' differences through their random effect does not (3.5 %; docs/calibration.md)."""
     time_recorded = _usable(levels, "elapsed_h")
@@ -138,16 +160,8 @@ def _level_tests(levels: pd.DataFrame, column: str):
         combos = [c for c in combos if "first_load" in c]
     found = None
     for cols in combos:
-        reads = [within_test(levels, column, cols[1:])]
-        if column == "elapsed_h":
-            # where a fixed test order makes the clock follow the condition within samples, the within-sample read
-            # has only the jitter of the pauses to go on; the read between the samples of a specimen is then the
-            # more precise one. The read is chosen by its standard error, which does not depend on the slope
-            reads.append(within_test(levels, column, cols[1:], between_samples=True))
-        reads = [r for r in reads if r is not None and np.isfinite(r[0].get("std_error", np.nan))] or [
-            r for r in reads if r is not None]
-        if reads:
-            got = min(reads, key=lambda r: r[0].get("std_error", np.inf))
+        got = clock_test(levels, column, cols[1:]) if column == "elapsed_h" else within_test(levels, column, cols[1:])
+        if got is not None:
             found = (dict(got[0], controls=cols[1:]), got[1])
             break
     if found is None:
