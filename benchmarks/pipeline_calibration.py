@@ -80,6 +80,7 @@ DEVELOPMENT_SEEDS = (
     (20261123, 20472200),          # the runs-only studies of docs/calibration.md (null, power, examined alarms)
     (32000000, 32199999),          # development runs of this benchmark (docs/calibration.md, "Pipeline path")
     (32500000, 32799999),          # the CI subset (tests/diagnosis/test_calibration.py)
+    (41000000, 41199999),          # a full study begun and stopped after its first dataset (docs/calibration.md)
 )
 POWER_OFFSET = 100000
 
