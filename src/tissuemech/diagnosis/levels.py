@@ -109,14 +109,16 @@ def clock_test(levels: pd.DataFrame, column: str, controls: Sequence[str] = ()) 
     moves by a whole sample's sequence. Where neither read exists (one sample per specimen in a fixed order), the
     within-sample read is returned with ``confounded_with_condition`` True: its slope cannot be told from a misfit
     that differs by condition, and the reader says so. Returns ``(test, design sentence)`` or None."""
-    reads = [within_test(levels, column, controls, confounded_within=False),
-             within_test(levels, column, controls, between_samples=True)]
-    reads = [r for r in reads if r is not None and np.isfinite(r[0].get("std_error", np.nan))] or [
-        r for r in reads if r is not None]
-    if reads:
-        return min(reads, key=lambda r: r[0].get("std_error", np.inf))
-    confounded = within_test(levels, column, controls)
-    return None if confounded is None else (dict(confounded[0], confounded_with_condition=True), confounded[1])
+    first = within_test(levels, column, controls, confounded_within=False)
+    if first is None:
+        # within_test already fell back to the between-samples read: none exists, only the confounded one may
+        confounded = within_test(levels, column, controls)
+        return None if confounded is None else (dict(confounded[0], confounded_with_condition=True), confounded[1])
+    if not first[1].startswith("within samples"):
+        return first
+    reads = [r for r in (first, within_test(levels, column, controls, between_samples=True)) if r is not None]
+    finite = [r for r in reads if np.isfinite(r[0].get("std_error", np.nan))] or reads
+    return min(finite, key=lambda r: r[0].get("std_error", np.inf))
 
 
 def _level_tests(levels: pd.DataFrame, column: str):
