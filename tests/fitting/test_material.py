@@ -14,6 +14,7 @@ The truth is written out here in closed form, independent of the package's model
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -319,3 +320,27 @@ def test_an_amplitude_sweep_without_a_frequency_is_left_out_and_said(caplog):
     given = average_runs([sweep("a", frequency_hz=1.0), sweep("b", frequency_hz=1.0)])
     kept = F.curves_from_averages(given, tests=["amplitude_sweep"], amplitude="full")
     assert len(kept) == 1 and kept[0].nominal["frequency_hz"] == 1.0
+
+
+@pytest.mark.parametrize("key", ["qlv_rp2_prony2", "pr_rp2_prony2"])
+def test_a_fit_predicts_its_sweeps_and_creep_tests_together_as_it_does_one_at_a_time(key):
+    """The fit problem predicts its frequency sweeps, its amplitude sweeps at one frequency and its QLV creep tests
+    on plates in one call each (one G*(omega), one harmonic analysis, one inversion of the apparent elastic law);
+    each curve must get what :func:`tissuemech.fitting.predict` gives it alone."""
+    from tissuemech.models.registry import model_on_times
+    rng = np.random.default_rng(3)
+    model = model_on_times(key, TRUTH["tau"])
+    curves = [frequency_curve(rng), frequency_curve(rng, {**TRUTH, "C10": 80.0}),
+              amplitude_curve(rng), amplitude_curve(rng, f_hz=2.0),
+              *creep_curves(rng, TRUTH, stresses=(20.0, 40.0, 5.0))]
+    stronger = amplitude_curve(rng)
+    curves.insert(3, dataclasses.replace(stronger, inputs={"shear_strain": 1.5 * stronger.inputs["shear_strain"]}))
+    problem = F.FitProblem(model=model, curves=curves, target="apparent_stress")
+    p = {"C10": 100.0, "C20": 150.0, "beta_1": 1.2, "beta_2": 0.6, "kappa": 0.5, "gamma_s": 0.2}
+    p = {k: v for k, v in p.items() if k in model.param_names}
+    together = problem.curve_terms(p)
+    for curve, terms in zip(curves, together):
+        alone = F.predict(model, p, curve, "apparent_stress")
+        assert set(terms) == set(alone)
+        for k, (_, predicted, _) in terms.items():
+            np.testing.assert_allclose(predicted, alone[k], rtol=1e-9, atol=0, err_msg=f"{curve.label} {k}")

@@ -10,7 +10,8 @@ import lazy_loader
 import numpy as np
 
 from ..models.base import ConstitutiveModel, ParamSpec, ResponseNotSupported
-from ..models.plate import (PlateHistories, creep_rim_strain, forward_plate, forward_plate_batch, oscillation_moduli,
+from ..models.plate import (PlateHistories, creep_rim_strain, creep_rim_strains, forward_plate, forward_plate_batch,
+                            oscillation_moduli,
                             rabinowitsch_rim_stress)
 from ._data import Curve
 
@@ -231,6 +232,13 @@ class NoiseModel:
         return np.maximum(sd, floor)
 
 
+def _log_residual_scale(observed: np.ndarray, sd: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """``(tiny, log observed, relative SD)`` of a log-residual observable: the parts of
+    :meth:`FitProblem.curve_terms`'s log residual that do not depend on the parameters."""
+    tiny = 1e-12 * max(float(np.max(np.abs(observed))), 1e-300)
+    return tiny, np.log(np.maximum(observed, tiny)), sd / np.maximum(np.abs(observed), tiny)
+
+
 @dataclass
 class FitProblem:
     """A model and the curves it is fitted to jointly.
@@ -265,8 +273,10 @@ class FitProblem:
             raise ValueError("a fit needs at least one curve")
         if not self.model_key:
             self.model_key = self.model.name
+        self._parameter_names = [(s.name, self.internal_name(s), self.is_log(s)) for s in self.model.param_specs]
         self.observations = []
         self._near_noise = []
+        self._log_observed = []
         for c in self.curves:
             if not describes(self.model, c.response):
                 raise ValueError(f"model {self.model_key!r} ({self.model.family}) cannot describe {c.label} "
@@ -276,11 +286,32 @@ class FitProblem:
             self.observations.append((obs, sig))
             self._near_noise.append({k: ~(v > LOG_RESIDUAL_MIN_SNR * sig[k]) for k, v in obs.items()}
                                     if c.response in LOG_RESPONSES else {})
+            self._log_observed.append({k: _log_residual_scale(v, sig[k]) for k, v in obs.items()}
+                                      if c.response in LOG_RESPONSES else {})
         # the plate-torsion histories are predicted in one compiled pass when the model takes concatenated
         # histories: per curve, the Python layers around the kernels cost more than the kernels (issue 17)
         self._plate_curves = [i for i, c in enumerate(self.curves)
                               if c.response == "shear_history" and c.is_plate and self.target in ("torque", "apparent_stress")]
         self._plate_histories = None
+        # the frequency sweeps in one call of the model's G*(omega): each call pays the model's Python layers and
+        # its G0 (a compiled law's slope), whatever the number of frequencies
+        self._oscillation_curves = [i for i, c in enumerate(self.curves) if c.response == "oscillation"]
+        self._oscillation_frequencies = None
+        if len(self._oscillation_curves) > 1:
+            self._oscillation_frequencies = [self.curves[i].obs_inputs("angular_frequency")
+                                             for i in self._oscillation_curves]
+        # amplitude sweeps at one frequency on one plate in one call; QLV creep tests on plates in one inversion
+        self._amplitude_sweep_groups: dict[tuple, list[int]] = {}
+        for i, c in enumerate(self.curves):
+            if c.response == "amplitude_sweep":
+                key = (float(c.nominal["frequency_hz"]), float(c.radius_m) if c.is_plate else None, c.is_plate)
+                self._amplitude_sweep_groups.setdefault(key, []).append(i)
+        self._amplitude_sweep_groups = {k: v for k, v in self._amplitude_sweep_groups.items() if len(v) > 1}
+        self._plate_creep_curves = [i for i, c in enumerate(self.curves)
+                                    if c.response == "creep" and c.is_plate and getattr(self.model, "separable", False)
+                                    and self.target in ("torque", "apparent_stress")]
+        if len(self._plate_creep_curves) < 2:
+            self._plate_creep_curves = []
         if self.model.concatenated_histories and len(self._plate_curves) > 1:
             self._plate_histories = PlateHistories.of(
                 [(self.curves[i].inputs["time"], self.curves[i].inputs["shear_strain"], self.curves[i].radius_m)
@@ -323,10 +354,10 @@ class FitProblem:
     def natural(self, pars: lmfit.Parameters | Mapping[str, float]) -> dict[str, float]:
         """Natural-unit parameter values from internal ones."""
         out = {}
-        for s in self.model.param_specs:
-            v = pars[self.internal_name(s)]
+        for name, internal, log in self._parameter_names:
+            v = pars[internal]
             v = float(v.value if isinstance(v, lmfit.Parameter) else v)
-            out[s.name] = 10.0 ** v if self.is_log(s) else v
+            out[name] = 10.0 ** v if log else v
         return out
 
     # --- residuals --------------------------------------------------------------------------------
@@ -339,16 +370,42 @@ class FitProblem:
             for i, f in zip(self._plate_curves, full):
                 idx = self.curves[i].obs_index
                 batched[i] = {key: f if idx is None else f[idx]}
+        if self._oscillation_frequencies is not None:
+            gstar = self.model.complex_modulus(p, np.concatenate(self._oscillation_frequencies))
+            ends = np.cumsum([w.size for w in self._oscillation_frequencies])[:-1]
+            for i, g in zip(self._oscillation_curves, np.split(gstar, ends)):
+                batched[i] = {"storage_modulus": g.real, "loss_modulus": g.imag}
+        for (frequency_hz, radius_m, is_plate), members in self._amplitude_sweep_groups.items():
+            amplitudes = [self.curves[i].obs_inputs("shear_strain") for i in members]
+            n_cycles, n_analysed, per_cycle = AMPLITUDE_SWEEP_CYCLES
+            g1, g2 = oscillation_moduli(self.model, p, frequency_hz, np.concatenate(amplitudes),
+                                        self.curves[members[0]].radius_m,
+                                        n_cycles=n_cycles, n_analysed=n_analysed, points_per_cycle=per_cycle,
+                                        target="apparent_stress" if is_plate else "corrected_stress")
+            ends = np.cumsum([a.size for a in amplitudes])[:-1]
+            for i, a, b in zip(members, np.split(g1, ends), np.split(g2, ends)):
+                batched[i] = {"storage_modulus": a, "loss_modulus": b}
+        if self._plate_creep_curves:
+            try:
+                strains = creep_rim_strains(self.model, p, [(self.curves[i].inputs["time"],
+                                                             self.curves[i].inputs["shear_stress"])
+                                                            for i in self._plate_creep_curves])
+            except ValueError:
+                strains = None      # each test on its own: only those out of the law's reach lose their prediction
+            for i, full in zip(self._plate_creep_curves, strains or ()):
+                idx = self.curves[i].obs_index
+                batched[i] = {"shear_strain": full if idx is None else full[idx]}
         out = []
-        for i, (c, (obs, sig), near) in enumerate(zip(self.curves, self.observations, self._near_noise)):
+        for i, (c, (obs, sig), near, logs) in enumerate(zip(self.curves, self.observations, self._near_noise,
+                                                             self._log_observed)):
             pred = batched[i] if i in batched else predict(self.model, p, c, self.target)
             terms = {}
             for k, y in obs.items():
                 f = np.asarray(pred[k], float)
                 if c.response in LOG_RESPONSES:
                     # log residual with the relative SD as its scale; linear near the noise (LOG_RESIDUAL_MIN_SNR)
-                    tiny = 1e-12 * max(np.max(np.abs(y)), 1e-300)
-                    w = (np.log(np.maximum(f, tiny)) - np.log(np.maximum(y, tiny))) / (sig[k] / np.maximum(np.abs(y), tiny))
+                    tiny, log_y, scale = logs[k]
+                    w = (np.log(np.maximum(f, tiny)) - log_y) / scale
                     w = np.where(near[k], (f - y) / sig[k], w)
                 else:
                     w = (f - y) / sig[k]

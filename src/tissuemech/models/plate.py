@@ -224,6 +224,19 @@ def creep_rim_strain(model: ConstitutiveModel, p: Params, time_s: np.ndarray, ap
     return stress_controlled_strain_by_history(apparent_at_end, time_s, apparent_stress_pa)
 
 
+def creep_rim_strains(model: ConstitutiveModel, p: Params,
+                      histories: Sequence[tuple[np.ndarray, np.ndarray]], n_gauss: int = 8) -> list[np.ndarray]:
+    """:func:`creep_rim_strain` of several torque-controlled tests ``(time_s, apparent_stress_pa)`` of a
+    ``separable`` (QLV) model, with one inversion of the apparent elastic law for all of them (the law and the
+    plate are the same in every test; the inversion's cost is per call, not per point). Raises ValueError as
+    :func:`invert_increasing` does when any test's stress is out of the law's reach."""
+    if not getattr(model, "separable", False):
+        raise ValueError(f"model {model.name!r} is not separable: invert its creep tests one at a time")
+    elastic = [np.asarray(model.elastic_stress_for(p, t, s), float) for t, s in histories]
+    rim = invert_increasing(lambda x: apparent_elastic_stress(model, p, x, n_gauss), np.concatenate(elastic))
+    return np.split(rim, np.cumsum([e.size for e in elastic])[:-1])
+
+
 # ----------------------------------------------------------------------------------------------------------
 # normal force
 # ----------------------------------------------------------------------------------------------------------
