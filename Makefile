@@ -60,15 +60,20 @@ run: install
 		-print -quit 2>/dev/null)" ]; then $(VENV)/bin/snakemake --report results/report.html; \
 	else echo "results/report.html is up to date"; fi
 
+# each test process runs the jobs' code as Snakemake runs a one-thread job: one BLAS/OpenMP thread (Snakemake sets
+# these to the job's threads). With the library default (a thread per core) the pytest workers' BLAS threads spin
+# against each other on small matrices: the brain's diagnosis took 119 CPU s against 48 on the 2-core VM
+ONE_THREAD := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
+
 test: install-test
-	$(PY) -m pytest -q -n 2 --dist loadgroup --durations=25 -m "not calibration"
+	$(ONE_THREAD) $(PY) -m pytest -q -n 2 --dist loadgroup --durations=25 -m "not calibration"
 
 # the pipeline-path calibration subset (docs/calibration.md): fresh seeds through analyse_dataset, ~20 min on 2 cores
 calibration-ci: install-test
-	$(PY) -m pytest -q -n 2 -m calibration tests/diagnosis/test_calibration.py
+	$(ONE_THREAD) $(PY) -m pytest -q -n 2 -m calibration tests/diagnosis/test_calibration.py
 
 test-fast: install-test
-	$(PY) -m pytest -q -m "not slow"
+	$(ONE_THREAD) $(PY) -m pytest -q -m "not slow"
 
 lint: install-test
 	$(VENV)/bin/snakefmt --check Snakefile workflow/
