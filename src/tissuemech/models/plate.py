@@ -95,9 +95,14 @@ def apparent_elastic_stress(model: ConstitutiveModel, p: Params, rim_strain: np.
     return (4.0 * (w * x * x) @ s.reshape(x.size, rim.size)).reshape(rim.shape)
 
 
+#: relative Newton step of :func:`invert_increasing` after which the inversion stops (the next step would be ~1e-12)
+NEWTON_SETTLED = 1e-6
+
+
 def invert_increasing(fun, target: np.ndarray, n_table: int = 128, n_newton: int = 4) -> np.ndarray:
     """Solve ``fun(x) = target`` for an increasing odd ``fun`` of strain: a monotone table inverted by
-    interpolation, then Newton steps on the exact function with central-difference slopes. The table spans the
+    interpolation, then Newton steps on the exact function with central-difference slopes (at most ``n_newton``; they
+stop once a step is below :data:`NEWTON_SETTLED` of the strain). The table spans the
     strains the targets need (the first of 2^-10 ... 512 whose stress holds them; beyond: ValueError). A law that
     softens beyond some strain (a fitted Ogden or Lopez-Pamies law with negative exponents, at strains far beyond
     the data) is inverted on its rising branch from zero strain when that branch holds every target; only a law
@@ -128,6 +133,10 @@ def invert_increasing(fun, target: np.ndarray, n_table: int = 128, n_newton: int
         slope = (f_up - f_down) / (2.0 * h)
         step = np.where(slope > 0, (f0 - target) / np.where(slope > 0, slope, 1.0), 0.0)
         x = x - step
+        # Newton converges quadratically: after a step below NEWTON_SETTLED of the strain the next would be of the
+        # order of its square, below the rounding of the law
+        if not np.any(np.abs(step) > NEWTON_SETTLED * np.maximum(np.abs(x), 1e-9 * top)):
+            break
     return x
 
 
