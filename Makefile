@@ -68,7 +68,7 @@ ONE_THREAD := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 test: install-test
 	$(ONE_THREAD) $(PY) -m pytest -q -n 2 --dist loadgroup --durations=25 -m "not calibration"
 
-# the pipeline-path calibration subset (docs/calibration.md): fresh seeds through analyse_dataset, ~20 min on 2 cores
+# the pipeline-path calibration subset (docs/calibration.md): fresh seeds through analyse_dataset, 12-30 min on 2 cores
 calibration-ci: install-test
 	$(ONE_THREAD) $(PY) -m pytest -q -n 2 -m calibration tests/diagnosis/test_calibration.py
 
