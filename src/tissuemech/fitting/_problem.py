@@ -303,7 +303,7 @@ class FitProblem:
         # amplitude sweeps at one frequency on one plate in one call; QLV creep tests on plates in one inversion
         self._amplitude_sweep_groups: dict[tuple, list[int]] = {}
         for i, c in enumerate(self.curves):
-            if c.response == "amplitude_sweep":
+            if c.response == "amplitude_sweep" and np.isfinite(c.nominal.get("frequency_hz", np.nan)):
                 key = (float(c.nominal["frequency_hz"]), float(c.radius_m) if c.is_plate else None, c.is_plate)
                 self._amplitude_sweep_groups.setdefault(key, []).append(i)
         self._amplitude_sweep_groups = {k: v for k, v in self._amplitude_sweep_groups.items() if len(v) > 1}
