@@ -11,8 +11,7 @@ import numpy as np
 
 from ..models.base import ConstitutiveModel, ParamSpec, ResponseNotSupported
 from ..models.plate import (PlateHistories, creep_rim_strain, creep_rim_strains, forward_plate, forward_plate_batch,
-                            oscillation_moduli,
-                            rabinowitsch_rim_stress)
+                            oscillation_moduli, rabinowitsch_rim_stress)
 from ._data import Curve
 
 # loaded on first use: jobs that read fit records without fitting skip lmfit's import (~0.5 CPU s with
@@ -149,17 +148,24 @@ def predict(model: ConstitutiveModel, p: Mapping[str, float], curve: Curve, targ
             full = np.full(t.size, np.nan)
         return {"shear_strain": full if idx is None else full[idx]}
     if r == "amplitude_sweep":
-        n_cycles, n_analysed, per_cycle = AMPLITUDE_SWEEP_CYCLES
-        g1, g2 = oscillation_moduli(model, p, curve.nominal["frequency_hz"], curve.obs_inputs("shear_strain"),
-                                    curve.radius_m, n_cycles=n_cycles,
-                                    n_analysed=n_analysed, points_per_cycle=per_cycle,
-                                    target="apparent_stress" if curve.is_plate else "corrected_stress")
+        g1, g2 = amplitude_sweep_moduli(model, p, curve, curve.obs_inputs("shear_strain"))
         return {"storage_modulus": g1, "loss_modulus": g2}
     if r == "elastic_shear":
         return {"shear_stress": model.elastic_shear_stress(p, curve.obs_inputs("shear_strain"))}
     if r == "uniaxial":
         return {"nominal_stress": model.uniaxial_nominal_stress(p, curve.obs_inputs("stretch"))}
     raise ValueError(f"unknown response kind {r!r}")
+
+
+def amplitude_sweep_moduli(model: ConstitutiveModel, p: Mapping[str, float], curve: Curve,
+                           amplitudes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """G', G'' (Pa) of an amplitude sweep at rim-strain ``amplitudes``, at ``curve``'s frequency and on its plate,
+    analysed as the instrument does (:data:`AMPLITUDE_SWEEP_CYCLES`; apparent stress on a plate, else the true
+    stress); ``amplitudes`` may hold those of several sweeps sharing that frequency and plate."""
+    n_cycles, n_analysed, per_cycle = AMPLITUDE_SWEEP_CYCLES
+    return oscillation_moduli(model, p, curve.nominal["frequency_hz"], amplitudes, curve.radius_m, n_cycles=n_cycles,
+                              n_analysed=n_analysed, points_per_cycle=per_cycle,
+                              target="apparent_stress" if curve.is_plate else "corrected_stress")
 
 
 def oscillation_window_bounds(model: ConstitutiveModel, curves: Sequence[Curve],
@@ -301,12 +307,12 @@ class FitProblem:
             self._oscillation_frequencies = [self.curves[i].obs_inputs("angular_frequency")
                                              for i in self._oscillation_curves]
         # amplitude sweeps at one frequency on one plate in one call; QLV creep tests on plates in one inversion
-        self._amplitude_sweep_groups: dict[tuple, list[int]] = {}
+        groups: dict[tuple, list[int]] = {}
         for i, c in enumerate(self.curves):
             if c.response == "amplitude_sweep" and np.isfinite(c.nominal.get("frequency_hz", np.nan)):
                 key = (float(c.nominal["frequency_hz"]), float(c.radius_m) if c.is_plate else None, c.is_plate)
-                self._amplitude_sweep_groups.setdefault(key, []).append(i)
-        self._amplitude_sweep_groups = {k: v for k, v in self._amplitude_sweep_groups.items() if len(v) > 1}
+                groups.setdefault(key, []).append(i)
+        self._amplitude_sweep_groups = [members for members in groups.values() if len(members) > 1]
         self._plate_creep_curves = [i for i, c in enumerate(self.curves)
                                     if c.response == "creep" and c.is_plate and getattr(self.model, "separable", False)
                                     and self.target in ("torque", "apparent_stress")]
@@ -375,13 +381,9 @@ class FitProblem:
             ends = np.cumsum([w.size for w in self._oscillation_frequencies])[:-1]
             for i, g in zip(self._oscillation_curves, np.split(gstar, ends)):
                 batched[i] = {"storage_modulus": g.real, "loss_modulus": g.imag}
-        for (frequency_hz, radius_m, is_plate), members in self._amplitude_sweep_groups.items():
+        for members in self._amplitude_sweep_groups:
             amplitudes = [self.curves[i].obs_inputs("shear_strain") for i in members]
-            n_cycles, n_analysed, per_cycle = AMPLITUDE_SWEEP_CYCLES
-            g1, g2 = oscillation_moduli(self.model, p, frequency_hz, np.concatenate(amplitudes),
-                                        self.curves[members[0]].radius_m,
-                                        n_cycles=n_cycles, n_analysed=n_analysed, points_per_cycle=per_cycle,
-                                        target="apparent_stress" if is_plate else "corrected_stress")
+            g1, g2 = amplitude_sweep_moduli(self.model, p, self.curves[members[0]], np.concatenate(amplitudes))
             ends = np.cumsum([a.size for a in amplitudes])[:-1]
             for i, a, b in zip(members, np.split(g1, ends), np.split(g2, ends)):
                 batched[i] = {"storage_modulus": a, "loss_modulus": b}

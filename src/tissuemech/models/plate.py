@@ -101,9 +101,8 @@ NEWTON_SETTLED = 1e-6
 
 def invert_increasing(fun, target: np.ndarray, n_table: int = 128, n_newton: int = 4) -> np.ndarray:
     """Solve ``fun(x) = target`` for an increasing odd ``fun`` of strain: a monotone table inverted by
-    interpolation, then Newton steps on the exact function with central-difference slopes (at most ``n_newton``; they
-stop once a step is below :data:`NEWTON_SETTLED` of the strain). The table spans the
-    strains the targets need (the first of 2^-10 ... 512 whose stress holds them; beyond: ValueError). A law that
+    interpolation, then Newton steps on the exact function with central-difference slopes (at most ``n_newton``;
+    they stop once a step is below :data:`NEWTON_SETTLED` of the strain). The table spans the strains the targets need (the first of 2^-10 ... 512 whose stress holds them; beyond: ValueError). A law that
     softens beyond some strain (a fitted Ogden or Lopez-Pamies law with negative exponents, at strains far beyond
     the data) is inverted on its rising branch from zero strain when that branch holds every target; only a law
     that is not increasing below the targets goes to bisection (:func:`tissuemech.models.qlv.invert_monotone`).
@@ -219,8 +218,7 @@ def creep_rim_strain(model: ConstitutiveModel, p: Params, time_s: np.ndarray, ap
     if getattr(model, "separable", False):
         # QLV: M(t) = int G_r(t - s) dM_e(gamma_R(s)), M_e the elastic torque, so the apparent stress is the QLV
         # response of the apparent elastic stress; its history is one pass, the rim strain one monotone inversion
-        elastic = model.elastic_stress_for(p, time_s, apparent_stress_pa)
-        return invert_increasing(lambda rim: apparent_elastic_stress(model, p, rim, n_gauss), elastic)
+        return creep_rim_strains(model, p, [(time_s, apparent_stress_pa)], n_gauss)[0]
     r, w = gauss_radii(n_gauss, radius_m)
     if hasattr(model, "branch_drives"):
         drives, taus = model.branch_drives(p)
@@ -237,7 +235,9 @@ def creep_rim_strains(model: ConstitutiveModel, p: Params,
                       histories: Sequence[tuple[np.ndarray, np.ndarray]], n_gauss: int = 8) -> list[np.ndarray]:
     """:func:`creep_rim_strain` of several torque-controlled tests ``(time_s, apparent_stress_pa)`` of a
     ``separable`` (QLV) model, with one inversion of the apparent elastic law for all of them (the law and the
-    plate are the same in every test; the inversion's cost is per call, not per point). Raises ValueError as
+    plate are the same in every test; the inversion's cost is per call, not per point). QLV: ``M(t) = int G_r(t - s)
+    dM_e(gamma_R(s))``, ``M_e`` the elastic torque, so the apparent stress is the QLV response of the apparent
+    elastic stress; its history is one pass, the rim strain one monotone inversion. Raises ValueError as
     :func:`invert_increasing` does when any test's stress is out of the law's reach."""
     if not getattr(model, "separable", False):
         raise ValueError(f"model {model.name!r} is not separable: invert its creep tests one at a time")
